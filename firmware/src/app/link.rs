@@ -1,0 +1,71 @@
+//! Serves the host link: reads frames, answers every request (or names what was wrong).
+//!
+//! Garbage never stops the loop: a bad frame costs one error response, and the reader
+//! resynchronises at the next delimiter.
+
+use chladni_shared::link::{
+    self, Board, DeviceInfo, Envelope, FrameReader, MAX_FRAME, PROTOCOL_VERSION, Request, Response,
+};
+use embedded_io_async::{Read, Write};
+
+/// What the link needs to know about the device to answer requests.
+#[derive(Debug, Clone, Copy)]
+pub struct Identity {
+    /// The board this image runs on.
+    pub board: Board,
+}
+
+/// Answers one request.
+pub fn handle(identity: &Identity, request: &Request) -> Response {
+    match request {
+        Request::Ping { nonce } => Response::Pong { nonce: *nonce },
+        Request::GetInfo => Response::Info(DeviceInfo {
+            firmware_version: heapless::String::try_from(crate::FIRMWARE_VERSION)
+                .unwrap_or_default(),
+            board: identity.board,
+            protocol_version: PROTOCOL_VERSION,
+            build_id: crate::BUILD_ID,
+        }),
+    }
+}
+
+/// Runs the link forever on `port`.
+pub async fn serve<P: Read + Write>(identity: Identity, port: &mut P) -> ! {
+    let mut reader = FrameReader::<MAX_FRAME>::new();
+    let mut rx = [0u8; 64];
+    let mut tx = [0u8; MAX_FRAME + 2];
+    loop {
+        let n = match port.read(&mut rx).await {
+            Ok(n) => n,
+            Err(_) => {
+                defmt::warn!("link: read error");
+                continue;
+            }
+        };
+        for &byte in &rx[..n] {
+            let Some(frame) = reader.push(byte) else { continue };
+            let (id, response) = match frame {
+                Ok(frame) => match link::decode::<Request>(frame) {
+                    Ok(env) => {
+                        defmt::debug!("link: request {} {}", env.id, env.body);
+                        (env.id, handle(&identity, &env.body))
+                    }
+                    Err(e) => (e.id, Response::Error(e.error)),
+                },
+                Err(error) => (0, Response::Error(error)),
+            };
+            if let Response::Error(e) = &response {
+                defmt::warn!("link: refused frame (id {}): {}", id, e);
+            }
+            let envelope = Envelope { version: PROTOCOL_VERSION, id, body: response };
+            match link::encode(&envelope, &mut tx) {
+                Ok(bytes) => {
+                    if port.write_all(bytes).await.is_err() {
+                        defmt::warn!("link: write error");
+                    }
+                }
+                Err(_) => defmt::error!("link: response {} does not fit a frame", id),
+            }
+        }
+    }
+}

@@ -1,0 +1,4 @@
+//! The application, board-independent: it only sees the link as an async byte stream.
+#![deny(unsafe_code)]
+
+pub mod link;

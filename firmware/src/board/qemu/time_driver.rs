@@ -1,0 +1,75 @@
+//! embassy-time driver on SysTick, for QEMU where no TIM/LPTIM ticks.
+//!
+//! SysTick interrupts at 1 kHz (embassy-time is built with `tick-hz-1_000` for this board).
+//! The core clock is left at its reset value, MSI 4 MHz, which QEMU's RCC model honours, so
+//! the reload is 4000 cycles. QEMU's virtual clock follows the host clock, so time slips under
+//! load: tests count samples, not milliseconds.
+
+use core::cell::{Cell, RefCell};
+use core::task::Waker;
+
+use cortex_m::peripheral::SYST;
+use cortex_m::peripheral::syst::SystClkSource;
+use critical_section::Mutex;
+use embassy_time_driver::Driver;
+use embassy_time_queue_utils::Queue;
+
+/// Core clock after reset (MSI range 6).
+const CORE_CLOCK_HZ: u32 = 4_000_000;
+/// embassy-time ticks per second (the `tick-hz-1_000` feature).
+const TICK_HZ: u32 = 1_000;
+
+struct SysTickDriver {
+    ticks: Mutex<Cell<u64>>,
+    next_alarm: Mutex<Cell<u64>>,
+    queue: Mutex<RefCell<Queue>>,
+}
+
+embassy_time_driver::time_driver_impl!(static DRIVER: SysTickDriver = SysTickDriver {
+    ticks: Mutex::new(Cell::new(0)),
+    next_alarm: Mutex::new(Cell::new(u64::MAX)),
+    queue: Mutex::new(RefCell::new(Queue::new())),
+});
+
+impl Driver for SysTickDriver {
+    fn now(&self) -> u64 {
+        critical_section::with(|cs| self.ticks.borrow(cs).get())
+    }
+
+    fn schedule_wake(&self, at: u64, waker: &Waker) {
+        critical_section::with(|cs| {
+            let mut queue = self.queue.borrow(cs).borrow_mut();
+            if queue.schedule_wake(at, waker) {
+                let now = self.ticks.borrow(cs).get();
+                self.next_alarm.borrow(cs).set(queue.next_expiration(now));
+            }
+        })
+    }
+}
+
+impl SysTickDriver {
+    fn on_tick(&self) {
+        critical_section::with(|cs| {
+            let now = self.ticks.borrow(cs).get() + 1;
+            self.ticks.borrow(cs).set(now);
+            if now >= self.next_alarm.borrow(cs).get() {
+                let next = self.queue.borrow(cs).borrow_mut().next_expiration(now);
+                self.next_alarm.borrow(cs).set(next);
+            }
+        })
+    }
+}
+
+/// Starts SysTick; call once, before anything waits on time.
+pub fn start(mut syst: SYST) {
+    syst.set_clock_source(SystClkSource::Core);
+    syst.set_reload(CORE_CLOCK_HZ / TICK_HZ - 1);
+    syst.clear_current();
+    syst.enable_interrupt();
+    syst.enable_counter();
+}
+
+#[cortex_m_rt::exception]
+fn SysTick() {
+    DRIVER.on_tick();
+}

@@ -1,0 +1,91 @@
+//! USART1 for QEMU's STM32L4x5 USART model.
+//!
+//! Why not embassy-stm32's driver: QEMU's USART accepts only 32-bit register accesses (the
+//! embassy driver writes TDR as a byte and faults), writing status bits to ICR also clears TXE,
+//! and IDLE is never raised. This driver uses 32-bit accesses only and never touches ICR.
+//!
+//! RX is interrupt-driven into a pipe. When the pipe is full the interrupt masks itself and
+//! leaves the byte in RDR; QEMU then holds further input back (it only delivers while RXNE is
+//! clear), so no byte is ever lost, and reading re-enables the interrupt. TX polls TXE, which
+//! QEMU sets again as soon as a byte is written.
+
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::pipe::Pipe;
+use stm32_metapac::{self as pac, interrupt};
+
+const RX_CAPACITY: usize = 512;
+static RX: Pipe<CriticalSectionRawMutex, RX_CAPACITY> = Pipe::new();
+
+/// The USART1 link (PB6 TX, PB7 RX on the board; a host chardev in QEMU).
+pub struct Usart1 {
+    _owned: (),
+}
+
+impl Usart1 {
+    /// Clocks and configures USART1 at 115200 8N1 with the RX interrupt on.
+    pub(super) fn new() -> Self {
+        pac::RCC.apb2enr().modify(|w| w.set_usart1en(true));
+        pac::RCC.ahb2enr().modify(|w| w.set_gpioben(true));
+        // PB6/PB7 to alternate function 7 (USART1), as on the real board.
+        let gpiob = pac::GPIOB;
+        for pin in [6, 7] {
+            gpiob.moder().modify(|w| w.set_moder(pin, pac::gpio::vals::Moder::ALTERNATE));
+            gpiob.afr(0).modify(|w| w.set_afr(pin, 7));
+        }
+        let usart = pac::USART1;
+        usart.brr().write(|w| w.set_brr((4_000_000u32 / 115_200) as u16));
+        usart.cr1().write(|w| {
+            w.set_ue(true);
+            w.set_te(true);
+            w.set_re(true);
+            w.set_rxneie(true);
+        });
+        // SAFETY: the handler below only touches USART1 registers and the RX pipe.
+        unsafe { cortex_m::peripheral::NVIC::unmask(pac::Interrupt::USART1) };
+        Self { _owned: () }
+    }
+}
+
+#[interrupt]
+fn USART1() {
+    let usart = pac::USART1;
+    let isr = usart.isr().read();
+    if isr.rxne() {
+        if RX.is_full() {
+            // Back-pressure: leave the byte in RDR; `read` unmasks us once there is room.
+            usart.cr1().modify(|w| w.set_rxneie(false));
+        } else {
+            let byte = usart.rdr().read().dr() as u8;
+            let _ = RX.try_write(&[byte]);
+        }
+    }
+}
+
+/// Never fails: QEMU's USART has no line errors.
+impl embedded_io_async::ErrorType for Usart1 {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_io_async::Read for Usart1 {
+    async fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+        let n = RX.read(buf).await;
+        pac::USART1.cr1().modify(|w| w.set_rxneie(true));
+        Ok(n)
+    }
+}
+
+impl embedded_io_async::Write for Usart1 {
+    async fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        let usart = pac::USART1;
+        for &byte in buf {
+            while !usart.isr().read().txe() {}
+            usart.tdr().write(|w| w.set_dr(byte as u16));
+        }
+        Ok(buf.len())
+    }
+
+    /// Bytes leave as they are written: nothing is buffered.
+    async fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}

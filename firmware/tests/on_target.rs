@@ -1,0 +1,48 @@
+//! On-target tests, run on Cortex-M in QEMU by `scripts/firmware.sh test qemu`
+//! (defmt-test; the verdict leaves QEMU through semihosting's exit code).
+//!
+//! `shared_vectors` prints `vector <name> <digest>` for every `chladni_shared::vectors`
+//! entry; the host test `tests/on_target.rs` compares those digests with its own, which proves
+//! the shared code gives the same bits on both sides.
+#![no_std]
+#![no_main]
+
+use chladni_firmware as _; // board support: defmt logger, panic handler, exit
+
+#[defmt_test::tests]
+mod tests {
+    use chladni_firmware::app::link::{Identity, handle};
+    use chladni_shared::link::{Board, PROTOCOL_VERSION, Request, Response};
+
+    #[test]
+    fn shared_vectors() {
+        for (name, vector) in chladni_shared::vectors::ALL {
+            match vector() {
+                Ok(digest) => defmt::println!("vector {=str} {=u64:016x}", name, digest),
+                Err(why) => defmt::panic!("vector {=str} failed: {=str}", name, why),
+            }
+        }
+    }
+
+    #[test]
+    fn ping_echoes_nonce() {
+        let id = Identity { board: Board::Qemu };
+        assert_eq!(
+            handle(&id, &Request::Ping { nonce: 0x5eed }),
+            Response::Pong { nonce: 0x5eed }
+        );
+    }
+
+    #[test]
+    fn info_names_board_and_protocol() {
+        let id = Identity { board: Board::Qemu };
+        match handle(&id, &Request::GetInfo) {
+            Response::Info(info) => {
+                assert_eq!(info.board, Board::Qemu);
+                assert_eq!(info.protocol_version, PROTOCOL_VERSION);
+                assert_eq!(info.firmware_version.as_str(), chladni_firmware::FIRMWARE_VERSION);
+            }
+            other => defmt::panic!("unexpected {}", other),
+        }
+    }
+}

@@ -1,0 +1,10 @@
+//! # chladni (host library)
+//!
+//! Everything the `chladni` command does, as a library the CLI and the end-to-end tests share:
+//! - [`device`]: the client for the controller's link (serial port or QEMU's TCP socket).
+//! - [`emulator`]: builds the QEMU firmware and runs it as a controller on a TCP port.
+//! - [`firmware`]: locates and builds firmware images.
+
+pub mod device;
+pub mod emulator;
+pub mod firmware;

@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Builds, checks or tests the firmware for one board, always in target/firmware so that the
+# host-side `cargo test` (which may build the QEMU image itself) never waits on its lock.
+#   scripts/firmware.sh build  qemu|stm32l475   -> prints the ELF path
+#   scripts/firmware.sh clippy qemu|stm32l475
+#   scripts/firmware.sh test   qemu             -> on-target tests in QEMU
+#   scripts/firmware.sh size   qemu|stm32l475
+set -euo pipefail
+cd "$(dirname "$0")/.."
+cmd=${1:?usage: firmware.sh build|clippy|test|size BOARD}
+board=${2:?usage: firmware.sh build|clippy|test|size BOARD}
+case "$board" in qemu|stm32l475) ;; *) echo "unknown board '$board' (qemu or stm32l475)" >&2; exit 2 ;; esac
+args=(-p chladni-firmware --target thumbv7em-none-eabihf --profile firmware
+      --features "board-$board" --target-dir target/firmware)
+elf=target/firmware/thumbv7em-none-eabihf/firmware/chladni-firmware
+case "$cmd" in
+  build) cargo build "${args[@]}" --bin chladni-firmware >&2 && echo "$elf" ;;
+  clippy) cargo clippy "${args[@]}" --all-targets -- -D warnings ;;
+  test) cargo test "${args[@]}" ;;
+  size) cargo build "${args[@]}" --bin chladni-firmware >&2 && arm-none-eabi-size -A "$elf" | awk -v b="$board" '
+          $1 ~ /^\.(vector_table|text|rodata)$/ {flash += $2}
+          $1 ~ /^\.data$/ {flash += $2; ram += $2}
+          $1 ~ /^\.(bss|uninit)$/ {ram += $2}
+          END {printf "firmware %s: flash %d B, static RAM %d B\n", b, flash, ram}' ;;
+  *) echo "unknown command '$cmd'" >&2; exit 2 ;;
+esac

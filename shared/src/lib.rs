@@ -1,0 +1,15 @@
+//! # chladni-shared
+//!
+//! The `no_std` core of Chladni, shared bit for bit by the host tool (`chladni`) and the
+//! controller firmware. If something can be computed without touching a register, it lives
+//! here and is tested on the host; the same test vectors also run on Cortex-M in QEMU.
+//!
+//! Modules:
+//! - [`link`]: the wire protocol (postcard messages in COBS frames), versioned, with typed errors.
+//! - [`vectors`]: deterministic test vectors whose digests must match on host and target.
+#![no_std]
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+pub mod link;
+pub mod vectors;
