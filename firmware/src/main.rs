@@ -3,15 +3,14 @@
 #![no_main]
 
 use chladni_firmware::{app, board};
-use embassy_executor::Spawner;
 
 #[embassy_executor::task]
 async fn link_task(mut link: board::Link) -> ! {
     app::link::serve(app::link::Identity { board: board::BOARD }, &mut link).await
 }
 
-#[embassy_executor::main]
-async fn main(spawner: Spawner) {
+#[cortex_m_rt::entry]
+fn main() -> ! {
     let board = board::init();
     defmt::info!(
         "chladni firmware {} ({}) build {=u32:08x}",
@@ -19,5 +18,7 @@ async fn main(spawner: Spawner) {
         board::BOARD.name(),
         chladni_firmware::BUILD_ID
     );
-    spawner.spawn(link_task(board.link).expect("link task"));
+    board::run(|spawner| {
+        spawner.spawn(link_task(board.link).expect("link task: spawn pool exhausted"));
+    })
 }

@@ -27,10 +27,7 @@ mod tests {
     #[test]
     fn ping_echoes_nonce() {
         let id = Identity { board: Board::Qemu };
-        assert_eq!(
-            handle(&id, &Request::Ping { nonce: 0x5eed }),
-            Response::Pong { nonce: 0x5eed }
-        );
+        assert_eq!(handle(&id, &Request::Ping { nonce: 0x5eed }), Response::Pong { nonce: 0x5eed });
     }
 
     #[test]

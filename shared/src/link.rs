@@ -297,8 +297,8 @@ mod tests {
             decode::<Request>(&mut frame),
             Err(FrameError { id: 5, error: LinkError::Malformed })
         );
-        let mut raw = postcard::to_stdvec(&Envelope { version: 1, id: 6, body: Request::GetInfo })
-            .unwrap();
+        let mut raw =
+            postcard::to_stdvec(&Envelope { version: 1, id: 6, body: Request::GetInfo }).unwrap();
         raw.push(0x55);
         let mut frame = cobs::encode_vec(&raw);
         assert_eq!(

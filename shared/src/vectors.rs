@@ -57,7 +57,8 @@ pub const ALL: &[(&str, Vector)] = &[("link_frames", link_frames)];
 fn link_frames() -> Result<u64, &'static str> {
     let mut d = Digest::new();
     let mut buf = [0u8; 64];
-    let requests = [Request::Ping { nonce: 0 }, Request::Ping { nonce: u32::MAX }, Request::GetInfo];
+    let requests =
+        [Request::Ping { nonce: 0 }, Request::Ping { nonce: u32::MAX }, Request::GetInfo];
     for (i, body) in requests.into_iter().enumerate() {
         let env = Envelope { version: link::PROTOCOL_VERSION, id: i as u32 * 1000, body };
         let wire = link::encode(&env, &mut buf).map_err(|_| "encode failed")?;

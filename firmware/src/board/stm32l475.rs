@@ -43,6 +43,12 @@ pub fn init() -> Board {
     Board { link }
 }
 
+/// Runs embassy's thread-mode executor forever; `init` spawns the first tasks.
+pub fn run(init: impl FnOnce(embassy_executor::Spawner)) -> ! {
+    static EXECUTOR: StaticCell<embassy_executor::Executor> = StaticCell::new();
+    EXECUTOR.init(embassy_executor::Executor::new()).run(init)
+}
+
 /// A panic resets the MCU into its safe idle state (drive off) after logging.
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {

@@ -5,8 +5,10 @@
 //! `embassy_stm32::init` (it would spin forever on a PWR bit) and brings its own drivers:
 //! - [`time_driver`]: embassy-time on SysTick (1 kHz), because no TIM ever ticks in QEMU;
 //! - [`usart`]: USART1 with 32-bit register accesses and an RX interrupt;
+//! - [`executor`]: embassy's executor sleeping with WFI instead of WFE (which QEMU spins on);
 //! - defmt over semihosting, and [`exit`] to end QEMU with a status code.
 
+pub mod executor;
 pub mod time_driver;
 pub mod usart;
 
@@ -30,6 +32,8 @@ pub fn init() -> Board {
     time_driver::start(core.SYST);
     Board { link: usart::Usart1::new() }
 }
+
+pub use executor::run;
 
 /// Ends the QEMU process with `code` (semihosting `SYS_EXIT_EXTENDED`).
 pub fn exit(code: i32) -> ! {

@@ -1,0 +1,54 @@
+//! `chladni emulator`: the controller in QEMU, in the foreground until Ctrl-C or SIGTERM.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::mpsc;
+
+use chladni::emulator::{Emulator, EmulatorConfig};
+use clap::Args;
+
+#[derive(Debug, Args)]
+pub struct EmulatorArgs {
+    /// TCP port for the controller's link (default: a free port, printed at start).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
+    tcp: Option<u16>,
+    /// Firmware image to run instead of building the QEMU board's image.
+    #[arg(long)]
+    firmware: Option<PathBuf>,
+    /// Write the firmware's decoded log here instead of stderr.
+    #[arg(long)]
+    log: Option<PathBuf>,
+    /// Stop after this many seconds (default: run until Ctrl-C / SIGTERM).
+    #[arg(long)]
+    time_limit_s: Option<u64>,
+}
+
+impl EmulatorArgs {
+    pub fn run(&self) -> anyhow::Result<ExitCode> {
+        let config = EmulatorConfig {
+            port: self.tcp,
+            firmware: self.firmware.clone(),
+            log_file: self.log.clone(),
+            time_limit: self.time_limit_s.map(std::time::Duration::from_secs),
+        };
+        let (stop_tx, stop_rx) = mpsc::channel();
+        ctrlc::set_handler(move || {
+            let _ = stop_tx.send(());
+        })?;
+        let mut emulator = Emulator::start(&config)?;
+        println!("controller ready on {}", emulator.address());
+        println!("try: chladni device info --port {}", emulator.address());
+        // Wait for a signal, or for QEMU to end on its own (time limit, firmware exit).
+        loop {
+            if stop_rx.recv_timeout(std::time::Duration::from_millis(200)).is_ok() {
+                eprintln!("stopping the emulator");
+                emulator.stop();
+                return Ok(ExitCode::SUCCESS);
+            }
+            if let Some(status) = emulator.try_exit_status()? {
+                eprintln!("QEMU exited: {status}");
+                return Ok(if status.success() { ExitCode::SUCCESS } else { ExitCode::FAILURE });
+            }
+        }
+    }
+}

@@ -1,0 +1,242 @@
+//! Runs the controller in QEMU: the QEMU-board firmware on `qemu-system-arm -M b-l475e-iot01a`,
+//! its USART1 on a TCP socket on 127.0.0.1 that [`crate::device::DeviceClient`] connects to.
+//!
+//! `chladni emulator`, the end-to-end tests and the demo all start the controller through
+//! [`Emulator::start`]. QEMU is stopped by PID when the [`Emulator`] is dropped; with
+//! [`EmulatorConfig::time_limit`] it also runs under coreutils `timeout`, so it cannot outlive a
+//! test process that was killed outright.
+
+use std::fs::File;
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+
+use crate::device::{DeviceClient, DeviceError};
+use crate::firmware::{self, BoardKind, FirmwareError};
+
+/// How to start the emulated controller.
+#[derive(Debug, Clone, Default)]
+pub struct EmulatorConfig {
+    /// TCP port for the link; `None` picks a free one.
+    pub port: Option<u16>,
+    /// Firmware image; `None` builds the QEMU board's image from the source tree.
+    pub firmware: Option<PathBuf>,
+    /// Where the decoded defmt log goes; `None` inherits stderr.
+    pub log_file: Option<PathBuf>,
+    /// Kill QEMU after this long whatever happens (tests set it).
+    pub time_limit: Option<Duration>,
+}
+
+/// Why the emulator could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum EmulatorError {
+    /// The firmware image could not be built or found.
+    #[error(transparent)]
+    Firmware(#[from] FirmwareError),
+    /// The image path does not exist.
+    #[error("firmware image {0} does not exist")]
+    NoImage(PathBuf),
+    /// QEMU (or defmt-print) could not be started.
+    #[error(
+        "cannot start {program}: {source} (run scripts/install-deps.sh to install QEMU 10 and defmt-print)"
+    )]
+    Spawn {
+        /// The program.
+        program: &'static str,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// Could not find or open the TCP port or log file.
+    #[error("emulator setup: {0}")]
+    Io(#[from] std::io::Error),
+    /// QEMU exited before the firmware answered.
+    #[error("QEMU exited during start-up ({0}); see its log")]
+    EarlyExit(String),
+    /// The firmware did not answer a ping in time.
+    #[error("the emulated controller did not answer within {0:?}: {1}")]
+    NotReady(Duration, DeviceError),
+}
+
+/// A running emulated controller. Dropping it stops QEMU.
+pub struct Emulator {
+    qemu: Child,
+    log_decoder: Option<Child>,
+    port: u16,
+}
+
+impl Emulator {
+    /// Builds the firmware if needed, starts QEMU, and waits until the firmware answers a ping.
+    pub fn start(config: &EmulatorConfig) -> Result<Self, EmulatorError> {
+        let elf = match &config.firmware {
+            Some(path) => path.clone(),
+            None => firmware::build(BoardKind::Qemu)?,
+        };
+        if !elf.is_file() {
+            return Err(EmulatorError::NoImage(elf));
+        }
+        let port = match config.port {
+            Some(port) => port,
+            None => free_port()?,
+        };
+        let mut emulator = Self::spawn(&elf, port, config)?;
+        emulator.wait_ready(Duration::from_secs(20))?;
+        Ok(emulator)
+    }
+
+    fn spawn(elf: &Path, port: u16, config: &EmulatorConfig) -> Result<Self, EmulatorError> {
+        let qemu_args = qemu_command_line(elf, port);
+        let mut command = match config.time_limit {
+            Some(limit) => {
+                let mut c = Command::new("timeout");
+                c.args(["--kill-after=5", &format!("{}", limit.as_secs().max(1))]);
+                c.arg("qemu-system-arm").args(&qemu_args);
+                c
+            }
+            None => {
+                let mut c = Command::new("qemu-system-arm");
+                c.args(&qemu_args);
+                c
+            }
+        };
+        let log: Stdio = match &config.log_file {
+            Some(path) => File::create(path)?.into(),
+            None => Stdio::inherit(),
+        };
+        let log_err: Stdio = match &config.log_file {
+            Some(path) => File::options().append(true).open(path)?.into(),
+            None => Stdio::inherit(),
+        };
+        command.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(log_err);
+        let mut qemu = command
+            .spawn()
+            .map_err(|source| EmulatorError::Spawn { program: "qemu-system-arm", source })?;
+        // The firmware's defmt log arrives on QEMU's stdout (semihosting); decode it.
+        let defmt = qemu.stdout.take().expect("piped stdout");
+        let log_decoder = Command::new("defmt-print")
+            .args(["-e"])
+            .arg(elf)
+            .arg("stdin")
+            .stdin(defmt)
+            .stdout(log)
+            .stderr(Stdio::null())
+            .spawn();
+        let log_decoder = match log_decoder {
+            Ok(child) => Some(child),
+            Err(source) => {
+                let _ = qemu.kill();
+                return Err(EmulatorError::Spawn { program: "defmt-print", source });
+            }
+        };
+        Ok(Self { qemu, log_decoder, port })
+    }
+
+    fn wait_ready(&mut self, within: Duration) -> Result<(), EmulatorError> {
+        let start = Instant::now();
+        loop {
+            if let Some(status) = self.qemu.try_wait()? {
+                return Err(EmulatorError::EarlyExit(status.to_string()));
+            }
+            let attempt = TcpStream::connect(("127.0.0.1", self.port))
+                .map_err(DeviceError::from)
+                .and_then(|stream| {
+                    let mut client = DeviceClient::from_transport(Box::new(stream));
+                    client.set_timeout(Duration::from_millis(500));
+                    client.ping()
+                });
+            match attempt {
+                Ok(_) => return Ok(()),
+                Err(e) if start.elapsed() > within => {
+                    return Err(EmulatorError::NotReady(within, e));
+                }
+                Err(_) => std::thread::sleep(Duration::from_millis(100)),
+            }
+        }
+    }
+
+    /// The TCP port of the controller's link.
+    pub fn port(&self) -> u16 {
+        self.port
+    }
+
+    /// The link address for [`DeviceClient::open`]: `tcp://127.0.0.1:PORT`.
+    pub fn address(&self) -> String {
+        format!("tcp://127.0.0.1:{}", self.port)
+    }
+
+    /// PID of the QEMU process (or of the `timeout` wrapping it).
+    pub fn pid(&self) -> u32 {
+        self.qemu.id()
+    }
+
+    /// Connects a client to the controller.
+    pub fn connect(&self) -> Result<DeviceClient, DeviceError> {
+        DeviceClient::open(&self.address())
+    }
+
+    /// Waits until QEMU exits by itself (the firmware exits, or a signal stops it).
+    pub fn wait(&mut self) -> std::io::Result<std::process::ExitStatus> {
+        self.qemu.wait()
+    }
+
+    /// QEMU's exit status if it has ended.
+    pub fn try_exit_status(&mut self) -> std::io::Result<Option<std::process::ExitStatus>> {
+        self.qemu.try_wait()
+    }
+
+    /// Stops QEMU: SIGTERM (forwarded by `timeout` when present), then SIGKILL after 3 s.
+    pub fn stop(&mut self) {
+        if matches!(self.qemu.try_wait(), Ok(None)) {
+            let _ = kill(Pid::from_raw(self.qemu.id() as i32), Signal::SIGTERM);
+            let deadline = Instant::now() + Duration::from_secs(3);
+            while matches!(self.qemu.try_wait(), Ok(None)) && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            let _ = self.qemu.kill();
+            let _ = self.qemu.wait();
+        }
+        if let Some(mut decoder) = self.log_decoder.take() {
+            // It ends by itself at EOF on QEMU's stdout; don't hang if it doesn't.
+            let deadline = Instant::now() + Duration::from_secs(2);
+            while matches!(decoder.try_wait(), Ok(None)) && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            let _ = decoder.kill();
+            let _ = decoder.wait();
+        }
+    }
+}
+
+impl Drop for Emulator {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+/// QEMU's arguments: the board, the image, USART1 on a TCP server socket, semihosting on.
+pub fn qemu_command_line(elf: &Path, port: u16) -> Vec<String> {
+    vec![
+        "-M".into(),
+        "b-l475e-iot01a".into(),
+        "-display".into(),
+        "none".into(),
+        "-monitor".into(),
+        "none".into(),
+        "-chardev".into(),
+        format!("socket,id=s0,host=127.0.0.1,port={port},server=on,wait=off,nodelay=on"),
+        "-serial".into(),
+        "chardev:s0".into(),
+        "-semihosting-config".into(),
+        "enable=on,target=native".into(),
+        "-kernel".into(),
+        elf.display().to_string(),
+    ]
+}
+
+/// A TCP port that was free a moment ago (the OS picks it).
+fn free_port() -> std::io::Result<u16> {
+    Ok(TcpListener::bind(("127.0.0.1", 0))?.local_addr()?.port())
+}
