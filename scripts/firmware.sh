@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Builds, checks or tests the firmware for one board, always in target/firmware so that the
 # host-side `cargo test` (which may build the QEMU image itself) never waits on its lock.
-#   scripts/firmware.sh build  qemu|stm32l475   -> prints the ELF path
+#   scripts/firmware.sh build  qemu|stm32l475   -> prints the ELF path (one per board)
 #   scripts/firmware.sh clippy qemu|stm32l475
 #   scripts/firmware.sh test   qemu             -> on-target tests in QEMU
 #   scripts/firmware.sh size   qemu|stm32l475
@@ -14,7 +14,11 @@ args=(-p chladni-firmware --target thumbv7em-none-eabihf --profile firmware
       --features "board-$board" --target-dir target/firmware)
 elf=target/firmware/thumbv7em-none-eabihf/firmware/chladni-firmware
 case "$cmd" in
-  build) cargo build "${args[@]}" --bin chladni-firmware >&2 && echo "$elf" ;;
+  build)
+    cargo build "${args[@]}" --bin chladni-firmware >&2
+    # Both boards link to the same path; keep one copy per board.
+    cp "$elf" "target/firmware/chladni-firmware-$board.elf"
+    echo "target/firmware/chladni-firmware-$board.elf" ;;
   clippy) cargo clippy "${args[@]}" --all-targets -- -D warnings ;;
   test) cargo test "${args[@]}" ;;
   size) cargo build "${args[@]}" --bin chladni-firmware >&2 && arm-none-eabi-size -A "$elf" | awk -v b="$board" '

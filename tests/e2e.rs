@@ -1,1 +1,74 @@
+//! End to end: the host client against the firmware running in QEMU over USART1 ↔ TCP.
+//! One QEMU boot for the whole sequence (boots cost seconds on a 2-core CI machine).
 
+use std::time::Duration;
+
+use chladni::device::DeviceError;
+use chladni_e2e::{pseudo_random_bytes, start_emulator};
+use chladni_shared::link::{Board, LinkError, MAX_FRAME, PROTOCOL_VERSION, Request};
+
+#[test]
+fn link_survives_everything_the_host_can_throw_at_it() {
+    let mut emulator = start_emulator("link");
+    let pid = emulator.pid();
+    let mut client = emulator.connect().expect("connect to emulator");
+    client.set_timeout(Duration::from_secs(10));
+
+    // Ping and GetInfo.
+    client.ping().expect("first ping");
+    let info = client.info().expect("GetInfo");
+    assert_eq!(info.board, Board::Qemu);
+    assert_eq!(info.protocol_version, PROTOCOL_VERSION);
+    assert_eq!(info.firmware_version.as_str(), env!("CARGO_PKG_VERSION"));
+
+    // 1 KiB of garbage, then the next valid ping still gets its answer.
+    for seed in [1u64, 0xdead_beef, 42] {
+        client.send_raw(&pseudo_random_bytes(seed, 1024)).unwrap();
+        client.ping().unwrap_or_else(|e| panic!("ping after garbage (seed {seed}): {e}"));
+    }
+
+    // Garbage with no delimiter at all, longer than any frame: dropped, the link recovers.
+    client.send_raw(&vec![0x5a; 3 * MAX_FRAME]).unwrap();
+    client.ping().expect("ping after an endless frame");
+
+    // A frame of another protocol version is refused with a typed error naming both versions,
+    // answered with the frame's own id; the link carries on.
+    match client.request_with_version(PROTOCOL_VERSION + 1, Request::GetInfo) {
+        Err(DeviceError::Refused { error, .. }) => assert_eq!(
+            error,
+            LinkError::UnsupportedVersion {
+                got: PROTOCOL_VERSION + 1,
+                supported: PROTOCOL_VERSION
+            }
+        ),
+        other => panic!("expected UnsupportedVersion, got {other:?}"),
+    }
+    client.ping().expect("ping after a foreign-version frame");
+
+    // A frame that is valid COBS but no known request: Malformed, with its id.
+    let mut raw = Vec::new();
+    raw.extend(postcard::to_stdvec(&(PROTOCOL_VERSION, 31337u32)).unwrap());
+    raw.push(0xee); // no such Request variant
+    let mut frame = vec![0u8];
+    frame.extend(cobs::encode_vec(&raw));
+    frame.push(0);
+    client.send_raw(&frame).unwrap();
+    client.ping().expect("ping after a malformed request");
+
+    // Requests keep their ids straight across many round trips.
+    for _ in 0..50 {
+        client.ping().expect("ping in a burst");
+    }
+
+    // A second client after the first disconnects (QEMU's socket accepts the next one).
+    drop(client);
+    let mut second = emulator.connect().expect("reconnect");
+    second.set_timeout(Duration::from_secs(10));
+    second.ping().expect("ping from a second connection");
+
+    emulator.stop();
+    assert!(
+        std::fs::metadata(format!("/proc/{pid}")).is_err(),
+        "QEMU (pid {pid}) still running after stop"
+    );
+}

@@ -122,10 +122,19 @@ impl DeviceClient {
     /// Sends `body` and waits for the response with the same id.
     /// A [`Response::Error`] for our id becomes [`DeviceError::Refused`].
     pub fn request(&mut self, body: Request) -> Result<Response, DeviceError> {
+        self.request_with_version(PROTOCOL_VERSION, body)
+    }
+
+    /// Like [`Self::request`] but claims protocol `version` (to test how peers refuse others).
+    pub fn request_with_version(
+        &mut self,
+        version: u16,
+        body: Request,
+    ) -> Result<Response, DeviceError> {
         let id = self.next_id;
         self.next_id = self.next_id.wrapping_add(1).max(1);
         let mut buf = vec![0u8; MAX_FRAME + 2];
-        let bytes = link::encode(&Envelope { version: PROTOCOL_VERSION, id, body }, &mut buf)
+        let bytes = link::encode(&Envelope { version, id, body }, &mut buf)
             .map_err(|_| DeviceError::Io(std::io::Error::other("request does not fit a frame")))?;
         self.send_raw(bytes)?;
         match self.receive(id)? {
