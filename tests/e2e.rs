@@ -9,6 +9,7 @@ use chladni_shared::link::{Board, LinkError, MAX_FRAME, PROTOCOL_VERSION, Reques
 
 #[test]
 fn link_survives_everything_the_host_can_throw_at_it() {
+    let _ = std::fs::remove_file(chladni_e2e::flash_path("link"));
     let mut emulator = start_emulator("link");
     let pid = emulator.pid();
     let mut client = emulator.connect().expect("connect to emulator");
@@ -67,6 +68,8 @@ fn link_survives_everything_the_host_can_throw_at_it() {
     second.ping().expect("ping from a second connection");
 
     emulator.stop();
+    let log = chladni_e2e::read_log(&chladni_e2e::log_path("link"));
+    assert!(log.contains("flash bank 2 backed by"), "flash file not in use:\n{log}");
     assert!(
         std::fs::metadata(format!("/proc/{pid}")).is_err(),
         "QEMU (pid {pid}) still running after stop"

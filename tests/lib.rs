@@ -21,12 +21,18 @@ pub fn log_path(name: &str) -> PathBuf {
     dir.join(format!("{name}.log"))
 }
 
+/// The flash file of test `name`'s controller.
+pub fn flash_path(name: &str) -> PathBuf {
+    log_path(name).with_extension("flash")
+}
+
 /// Builds the QEMU firmware if needed and starts it; panics with the log's tail on failure.
 pub fn start_emulator(name: &str) -> Emulator {
     let log = log_path(name);
     let config = EmulatorConfig {
         log_file: Some(log.clone()),
         time_limit: Some(EMULATOR_TIME_LIMIT),
+        flash_file: Some(flash_path(name)),
         ..Default::default()
     };
     match Emulator::start(&config) {

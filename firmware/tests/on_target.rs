@@ -7,12 +7,52 @@
 #![no_std]
 #![no_main]
 
-use chladni_firmware as _; // board support: defmt logger, panic handler, exit
+use chladni_firmware::board::qemu::flash::{self, FileFlash};
+
+/// Flash bank 2 in the erased temporary file that scripts/qemu-run.sh passes.
+fn open_flash() -> FileFlash {
+    let mut arg = [0u8; 256];
+    let path = flash::cmdline_arg("flash", &mut arg).expect("no flash= on the command line");
+    FileFlash::open(path).expect("open the flash file")
+}
 
 #[defmt_test::tests]
 mod tests {
     use chladni_firmware::app::link::{Identity, handle};
     use chladni_shared::link::{Board, PROTOCOL_VERSION, Request, Response};
+
+    use chladni_firmware::board::qemu::flash::{self, FileFlashError};
+    use embedded_storage::nor_flash::{NorFlash, NorFlashErrorKind, ReadNorFlash};
+
+    #[test]
+    fn file_flash_behaves_like_nor_flash() {
+        let mut f = super::open_flash();
+        assert_eq!(f.capacity(), 512 * 1024);
+        let last_page = (flash::CAPACITY - flash::PAGE_SIZE) as u32;
+        let mut buf = [0u8; 16];
+        f.read(last_page, &mut buf).unwrap();
+        assert_eq!(buf, [0xff; 16], "a fresh bank reads erased");
+
+        f.write(last_page, &[0x12, 0x34, 0x56, 0x78, 0x9a, 0xbc, 0xde, 0xf0]).unwrap();
+        f.read(last_page, &mut buf[..8]).unwrap();
+        assert_eq!(buf[..8], [0x12, 0x34, 0x56, 0x78, 0x9a, 0xbc, 0xde, 0xf0]);
+
+        // Programming only clears bits: writing 0xff changes nothing, 0x0f masks.
+        f.write(last_page, &[0xff; 8]).unwrap();
+        f.write(last_page, &[0x0f; 8]).unwrap();
+        f.read(last_page, &mut buf[..8]).unwrap();
+        assert_eq!(buf[..8], [0x02, 0x04, 0x06, 0x08, 0x0a, 0x0c, 0x0e, 0x00]);
+
+        f.erase(last_page, last_page + flash::PAGE_SIZE as u32).unwrap();
+        f.read(last_page, &mut buf).unwrap();
+        assert_eq!(buf, [0xff; 16], "erase restores 0xff");
+
+        let not_aligned = FileFlashError::Request(NorFlashErrorKind::NotAligned);
+        assert_eq!(f.write(3, &[0; 8]), Err(not_aligned));
+        assert_eq!(f.erase(100, 2048), Err(not_aligned));
+        let out = FileFlashError::Request(NorFlashErrorKind::OutOfBounds);
+        assert_eq!(f.write(flash::CAPACITY as u32, &[0; 8]), Err(out));
+    }
 
     #[test]
     fn shared_vectors() {

@@ -29,7 +29,13 @@ pub struct EmulatorConfig {
     pub log_file: Option<PathBuf>,
     /// Kill QEMU after this long whatever happens (tests set it).
     pub time_limit: Option<Duration>,
+    /// Host file holding the controller's flash bank 2 across restarts; created erased
+    /// (512 KiB of 0xFF) if missing. `None`: the bank does not persist.
+    pub flash_file: Option<PathBuf>,
 }
+
+/// Size of the flash bank the QEMU board keeps in [`EmulatorConfig::flash_file`].
+pub const FLASH_FILE_SIZE: u64 = 512 * 1024;
 
 /// Why the emulator could not start.
 #[derive(Debug, thiserror::Error)]
@@ -53,6 +59,14 @@ pub enum EmulatorError {
     /// Could not find or open the TCP port or log file.
     #[error("emulator setup: {0}")]
     Io(#[from] std::io::Error),
+    /// The flash file cannot serve as the controller's flash bank.
+    #[error("flash file {path}: {reason}")]
+    FlashFile {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, and what to do.
+        reason: String,
+    },
     /// QEMU exited before the firmware answered.
     #[error("QEMU exited during start-up ({0}); see its log")]
     EarlyExit(String),
@@ -82,13 +96,19 @@ impl Emulator {
             Some(port) => port,
             None => free_port()?,
         };
-        let mut emulator = Self::spawn(&elf, port, config)?;
+        let flash = config.flash_file.as_deref().map(prepare_flash_file).transpose()?;
+        let mut emulator = Self::spawn(&elf, port, flash.as_deref(), config)?;
         emulator.wait_ready(Duration::from_secs(20))?;
         Ok(emulator)
     }
 
-    fn spawn(elf: &Path, port: u16, config: &EmulatorConfig) -> Result<Self, EmulatorError> {
-        let qemu_args = qemu_command_line(elf, port);
+    fn spawn(
+        elf: &Path,
+        port: u16,
+        flash: Option<&Path>,
+        config: &EmulatorConfig,
+    ) -> Result<Self, EmulatorError> {
+        let qemu_args = qemu_command_line(elf, port, flash);
         let mut command = match config.time_limit {
             Some(limit) => {
                 let mut c = Command::new("timeout");
@@ -216,8 +236,13 @@ impl Drop for Emulator {
     }
 }
 
-/// QEMU's arguments: the board, the image, USART1 on a TCP server socket, semihosting on.
-pub fn qemu_command_line(elf: &Path, port: u16) -> Vec<String> {
+/// QEMU's arguments: the board, the image, USART1 on a TCP server socket, semihosting on
+/// (its command line tells the firmware where its flash file is).
+pub fn qemu_command_line(elf: &Path, port: u16, flash: Option<&Path>) -> Vec<String> {
+    let mut semihosting = String::from("enable=on,target=native,arg=chladni-firmware");
+    if let Some(flash) = flash {
+        semihosting.push_str(&format!(",arg=flash={}", flash.display()));
+    }
     vec![
         "-M".into(),
         "b-l475e-iot01a".into(),
@@ -230,13 +255,75 @@ pub fn qemu_command_line(elf: &Path, port: u16) -> Vec<String> {
         "-serial".into(),
         "chardev:s0".into(),
         "-semihosting-config".into(),
-        "enable=on,target=native".into(),
+        semihosting,
         "-kernel".into(),
         elf.display().to_string(),
     ]
 }
 
+/// Checks the flash file (creating it erased if missing) and returns its absolute path.
+pub fn prepare_flash_file(path: &Path) -> Result<PathBuf, EmulatorError> {
+    let fail = |reason: String| EmulatorError::FlashFile { path: path.to_path_buf(), reason };
+    if !path.exists() {
+        std::fs::write(path, vec![0xffu8; FLASH_FILE_SIZE as usize])
+            .map_err(|e| fail(format!("cannot create it: {e}")))?;
+    }
+    let len = std::fs::metadata(path).map_err(|e| fail(e.to_string()))?.len();
+    if len != FLASH_FILE_SIZE {
+        return Err(fail(format!(
+            "is {len} bytes, a flash bank is {FLASH_FILE_SIZE}: pass another path, or delete it \
+             to start with an erased bank"
+        )));
+    }
+    let abs = path.canonicalize().map_err(|e| fail(e.to_string()))?;
+    let text = abs.to_str().ok_or_else(|| fail("path is not UTF-8".into()))?;
+    if text.contains([',', ' ', '\t', '\n']) || text.len() > 250 {
+        return Err(fail(
+            "QEMU's semihosting command line cannot carry a path with commas or spaces, or \
+             longer than 250 bytes: use a simpler path"
+                .into(),
+        ));
+    }
+    Ok(abs)
+}
+
 /// A TCP port that was free a moment ago (the OS picks it).
 fn free_port() -> std::io::Result<u16> {
     Ok(TcpListener::bind(("127.0.0.1", 0))?.local_addr()?.port())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flash_file_is_created_erased_and_checked() {
+        let dir = std::env::temp_dir().join(format!("chladni-flash-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("bank.bin");
+        let _ = std::fs::remove_file(&path);
+        let abs = prepare_flash_file(&path).unwrap();
+        assert!(abs.is_absolute());
+        let bytes = std::fs::read(&path).unwrap();
+        assert_eq!(bytes.len() as u64, FLASH_FILE_SIZE);
+        assert!(bytes.iter().all(|&b| b == 0xff));
+
+        std::fs::write(&path, [0u8; 100]).unwrap();
+        let err = prepare_flash_file(&path).unwrap_err().to_string();
+        assert!(err.contains("is 100 bytes"), "{err}");
+
+        let odd = dir.join("a,b.bin");
+        let err = prepare_flash_file(&odd).unwrap_err().to_string();
+        assert!(err.contains("commas"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn command_line_passes_the_flash_file_to_the_firmware() {
+        let args = qemu_command_line(Path::new("/fw.elf"), 4000, Some(Path::new("/tmp/f.bin")));
+        let joined = args.join(" ");
+        assert!(joined.contains("arg=flash=/tmp/f.bin"), "{joined}");
+        assert!(joined.contains("port=4000,server=on,wait=off,nodelay=on"), "{joined}");
+        assert!(joined.contains("-kernel /fw.elf"), "{joined}");
+    }
 }

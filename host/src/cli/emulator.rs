@@ -4,7 +4,9 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::mpsc;
 
-use chladni::emulator::{Emulator, EmulatorConfig};
+use chladni::emulator::{Emulator, EmulatorConfig, EmulatorError};
+
+use super::InputError;
 use clap::Args;
 
 #[derive(Debug, Args)]
@@ -15,6 +17,10 @@ pub struct EmulatorArgs {
     /// Firmware image to run instead of building the QEMU board's image.
     #[arg(long)]
     firmware: Option<PathBuf>,
+    /// Keep the controller's flash (plans, configuration) in this file across restarts;
+    /// created erased (512 KiB of 0xFF) if missing.
+    #[arg(long)]
+    flash_file: Option<PathBuf>,
     /// Write the firmware's decoded log here instead of stderr.
     #[arg(long)]
     log: Option<PathBuf>,
@@ -30,12 +36,16 @@ impl EmulatorArgs {
             firmware: self.firmware.clone(),
             log_file: self.log.clone(),
             time_limit: self.time_limit_s.map(std::time::Duration::from_secs),
+            flash_file: self.flash_file.clone(),
         };
         let (stop_tx, stop_rx) = mpsc::channel();
         ctrlc::set_handler(move || {
             let _ = stop_tx.send(());
         })?;
-        let mut emulator = Emulator::start(&config)?;
+        let mut emulator = Emulator::start(&config).map_err(|e| match e {
+            EmulatorError::FlashFile { .. } => anyhow::Error::new(InputError(e.to_string())),
+            e => e.into(),
+        })?;
         println!("controller ready on {}", emulator.address());
         println!("try: chladni device info --port {}", emulator.address());
         // Wait for a signal, or for QEMU to end on its own (time limit, firmware exit).

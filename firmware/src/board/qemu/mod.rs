@@ -6,9 +6,11 @@
 //! - [`time_driver`]: embassy-time on SysTick (1 kHz), because no TIM ever ticks in QEMU;
 //! - [`usart`]: USART1 with 32-bit register accesses and an RX interrupt;
 //! - [`executor`]: embassy's executor sleeping with WFI instead of WFE (which QEMU spins on);
+//! - [`flash`]: flash bank 2 kept in a host file through semihosting (QEMU's flash is inert);
 //! - defmt over semihosting, and [`exit`] to end QEMU with a status code.
 
 pub mod executor;
+pub mod flash;
 pub mod time_driver;
 pub mod usart;
 
@@ -24,13 +26,25 @@ pub type Link = usart::Usart1;
 pub struct Board {
     /// Host link.
     pub link: Link,
+    /// Flash bank 2, when QEMU was given a backing file (`flash=PATH` on the semihosting
+    /// command line); without one, nothing survives a restart.
+    pub flash: Option<flash::FileFlash>,
 }
 
 /// Brings the board up: time driver first (everything else may wait on time), then the link.
 pub fn init() -> Board {
     let core = cortex_m::Peripherals::take().expect("board::init called twice");
     time_driver::start(core.SYST);
-    Board { link: usart::Usart1::new() }
+    let mut arg = [0u8; 256];
+    let flash = flash::cmdline_arg("flash", &mut arg).and_then(|path| {
+        let opened = flash::FileFlash::open(path);
+        match &opened {
+            Ok(_) => defmt::info!("flash bank 2 backed by {=str}", path),
+            Err(e) => defmt::error!("cannot use {=str} as flash: {}", path, e),
+        }
+        opened.ok()
+    });
+    Board { link: usart::Usart1::new(), flash }
 }
 
 pub use executor::run;
