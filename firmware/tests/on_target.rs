@@ -16,6 +16,49 @@ fn open_flash() -> FileFlash {
     FileFlash::open(path).expect("open the flash file")
 }
 
+/// Outcome of [`timer_task`]: 0 running, 1 passed, 2 failed.
+static TIMER_RESULT: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8::new(0);
+
+/// Timers through the SysTick driver's queue: a single one, then two in deadline order.
+#[embassy_executor::task]
+async fn timer_task() {
+    use embassy_time::{Duration, Instant, Timer};
+    let start = Instant::now();
+    Timer::after(Duration::from_millis(20)).await;
+    let waited = start.elapsed();
+    let t0 = Instant::now();
+    let (late, early) = embassy_futures::join::join(
+        async {
+            Timer::after(Duration::from_millis(30)).await;
+            Instant::now()
+        },
+        async {
+            Timer::after(Duration::from_millis(10)).await;
+            Instant::now()
+        },
+    )
+    .await;
+    // The tick rate matches the host's clock: a wrong core-clock assumption would be off by a
+    // factor (20x for 80 MHz vs 4 MHz), far outside this band, which leaves room for QEMU's
+    // time slipping under load.
+    let h0 = chladni_firmware::board::qemu::host_time_s();
+    Timer::after(Duration::from_millis(3000)).await;
+    let host_s = chladni_firmware::board::qemu::host_time_s() - h0;
+    defmt::println!("3 s of embassy time took {} s of host time", host_s);
+    let ok = (2..=8).contains(&host_s)
+        && waited >= Duration::from_millis(20)
+        && early < late
+        && early - t0 >= Duration::from_millis(10)
+        && late - t0 >= Duration::from_millis(30);
+    defmt::println!(
+        "timers: waited {} ms for 20 ms; 10 ms timer at {} ms, 30 ms timer at {} ms",
+        waited.as_millis(),
+        (early - t0).as_millis(),
+        (late - t0).as_millis()
+    );
+    TIMER_RESULT.store(if ok { 1 } else { 2 }, core::sync::atomic::Ordering::Release);
+}
+
 #[defmt_test::tests]
 mod tests {
     use chladni_firmware::app::link::{Identity, handle};
@@ -23,6 +66,22 @@ mod tests {
 
     use chladni_firmware::board::qemu::flash::{self, FileFlashError};
     use embedded_storage::nor_flash::{NorFlash, NorFlashErrorKind, ReadNorFlash};
+
+    #[init]
+    fn init() {
+        // SysTick time driver, USART1 and flash, as the application brings them up.
+        let _board = chladni_firmware::board::init();
+    }
+
+    #[test]
+    fn time_driver_ticks_and_fires_timers() {
+        use core::sync::atomic::Ordering;
+        chladni_firmware::board::qemu::executor::run_until(
+            |spawner| spawner.spawn(super::timer_task().unwrap()),
+            || super::TIMER_RESULT.load(Ordering::Acquire) != 0,
+        );
+        assert_eq!(super::TIMER_RESULT.load(Ordering::Acquire), 1, "see the log above");
+    }
 
     #[test]
     fn file_flash_behaves_like_nor_flash() {

@@ -21,10 +21,17 @@ fn pender(_context: *mut ()) {
 
 /// Runs the executor forever; `init` spawns the first tasks.
 pub fn run(init: impl FnOnce(Spawner)) -> ! {
+    run_until(init, || false);
+    unreachable!("run_until returned although `done` never holds")
+}
+
+/// Runs the executor until `done()` holds after a poll (on-target tests use it).
+/// Only one executor may ever be started: a second call panics.
+pub fn run_until(init: impl FnOnce(Spawner), done: impl Fn() -> bool) {
     static EXECUTOR: StaticCell<raw::Executor> = StaticCell::new();
     let executor: &'static raw::Executor = EXECUTOR.init(raw::Executor::new(core::ptr::null_mut()));
     init(executor.spawner());
-    loop {
+    while !done() {
         if WORK_PENDING.swap(false, Ordering::AcqRel) {
             // SAFETY: `poll` is only ever called from this loop, never re-entrantly.
             unsafe { executor.poll() };

@@ -49,6 +49,15 @@ pub fn init() -> Board {
 
 pub use executor::run;
 
+/// Host wall-clock time in seconds since the epoch (semihosting `SYS_TIME`), so tests can
+/// compare the firmware's sense of time with the host's. (`SYS_CLOCK` would be QEMU's CPU time,
+/// which stands still while the core sleeps in WFI, and QEMU 10 does not implement
+/// `SYS_ELAPSED`.)
+pub fn host_time_s() -> u32 {
+    // SAFETY: SYS_TIME takes no argument and only returns a value.
+    unsafe { cortex_m_semihosting::syscall1(cortex_m_semihosting::nr::TIME, 0) as u32 }
+}
+
 /// Ends the QEMU process with `code` (semihosting `SYS_EXIT_EXTENDED`).
 pub fn exit(code: i32) -> ! {
     loop {
