@@ -159,7 +159,8 @@ impl NorFlash for FileFlash {
 pub fn cmdline_arg<'a>(key: &str, out: &'a mut [u8; 256]) -> Option<&'a str> {
     let mut block = [out.as_mut_ptr() as usize, out.len()];
     // SAFETY: GET_CMDLINE writes at most `block[1]` bytes into `out` and the length into block.
-    if unsafe { cortex_m_semihosting::syscall(nr::GET_CMDLINE, &mut block) } != 0 {
+    if unsafe { cortex_m_semihosting::syscall1(nr::GET_CMDLINE, block.as_mut_ptr() as usize) } != 0
+    {
         return None;
     }
     let line = core::str::from_utf8(&out[..block[1].min(out.len())]).ok()?;
