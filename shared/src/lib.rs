@@ -11,5 +11,6 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+pub mod dds;
 pub mod link;
 pub mod vectors;
