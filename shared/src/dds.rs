@@ -288,7 +288,9 @@ mod tests {
             let quantised: Vec<f64> = codes.iter().map(|&c| c as f64).collect();
             let f = freq_mhz as f64 / 1000.0;
             let (before, after) = (sfdr_db(&ideal, f), sfdr_db(&quantised, f));
-            std::println!("sfdr {f:>9.3} Hz: {before:6.1} dBc before, {after:5.1} dBc after 12-bit");
+            std::println!(
+                "sfdr {f:>9.3} Hz: {before:6.1} dBc before, {after:5.1} dBc after 12-bit"
+            );
             assert!(before >= 100.0, "{f} Hz: SFDR before quantisation {before:.1} dB");
             assert!(after >= 70.0, "{f} Hz: SFDR after quantisation {after:.1} dB");
         }
