@@ -11,6 +11,7 @@ use chladni_firmware as _; // board support: defmt logger, panic handler, exit
 
 #[defmt_test::tests]
 mod tests {
+    use chladni_firmware::app::drive::DriveShared;
     use chladni_firmware::app::link::{Identity, handle};
     use chladni_shared::link::{Board, PROTOCOL_VERSION, Request, Response};
 
@@ -27,13 +28,16 @@ mod tests {
     #[test]
     fn ping_echoes_nonce() {
         let id = Identity { board: Board::Qemu };
-        assert_eq!(handle(&id, &Request::Ping { nonce: 0x5eed }), Response::Pong { nonce: 0x5eed });
+        assert_eq!(
+            handle(&id, &DriveShared::new(), &Request::Ping { nonce: 0x5eed }),
+            Response::Pong { nonce: 0x5eed }
+        );
     }
 
     #[test]
     fn info_names_board_and_protocol() {
         let id = Identity { board: Board::Qemu };
-        match handle(&id, &Request::GetInfo) {
+        match handle(&id, &DriveShared::new(), &Request::GetInfo) {
             Response::Info(info) => {
                 assert_eq!(info.board, Board::Qemu);
                 assert_eq!(info.protocol_version, PROTOCOL_VERSION);

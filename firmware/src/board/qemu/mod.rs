@@ -20,17 +20,23 @@ pub const BOARD: chladni_shared::link::Board = chladni_shared::link::Board::Qemu
 /// The host link: USART1, reached by the host through QEMU's `-serial` chardev.
 pub type Link = usart::Usart1;
 
+/// The drive output: no DAC in QEMU, so a simulated one paced by the time driver, feeding the
+/// simulated shaker + plate.
+pub type DriveOutput = crate::app::drive::SimulatedDac;
+
 /// The initialised board.
 pub struct Board {
     /// Host link.
     pub link: Link,
+    /// Drive output.
+    pub drive: DriveOutput,
 }
 
 /// Brings the board up: time driver first (everything else may wait on time), then the link.
 pub fn init() -> Board {
     let core = cortex_m::Peripherals::take().expect("board::init called twice");
     time_driver::start(core.SYST);
-    Board { link: usart::Usart1::new() }
+    Board { link: usart::Usart1::new(), drive: DriveOutput::new() }
 }
 
 pub use executor::run;
