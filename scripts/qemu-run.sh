@@ -3,13 +3,14 @@
 # defmt log (semihosting on stdout) with defmt-print. Exits with the firmware's semihosting exit
 # code; QEMU always runs under a timeout (QEMU_TIMEOUT seconds, default 120).
 # USART1 goes nowhere unless QEMU_SERIAL names a chardev spec (e.g. socket,...).
+# QEMU_EXTRA adds options (e.g. "-icount shift=0" for the instruction-counting benchmark).
 set -uo pipefail
 elf=${1:?usage: qemu-run.sh ELF}
 serial=(-serial null)
 if [ -n "${QEMU_SERIAL:-}" ]; then serial=(-chardev "$QEMU_SERIAL,id=s0" -serial chardev:s0); fi
 timeout --kill-after=5 "${QEMU_TIMEOUT:-120}" \
   qemu-system-arm -M b-l475e-iot01a -display none -monitor none "${serial[@]}" \
-    -semihosting-config enable=on,target=native -kernel "$elf" |
+    -semihosting-config enable=on,target=native ${QEMU_EXTRA:-} -kernel "$elf" |
   defmt-print --show-skipped-frames -e "$elf" stdin
 status=${PIPESTATUS[0]}
 if [ "$status" = 124 ] || [ "$status" = 137 ]; then
