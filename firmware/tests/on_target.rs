@@ -46,4 +46,37 @@ mod tests {
             other => defmt::panic!("unexpected {}", other),
         }
     }
+
+    #[test]
+    fn drive_core_runs_a_plan_to_idle() {
+        use chladni_firmware::app::drive::{Command, DriveCore};
+        use chladni_shared::plan::{Plan, Step};
+        use chladni_shared::runner::{BLOCK_LEN, DriveState};
+        let shared = DriveShared::new();
+        let mut plan =
+            Plan { name: heapless::String::new(), repeat: 1, steps: heapless::Vec::new() };
+        for (f, d) in [(100_000, 12), (200_000, 8)] {
+            let s = Step { freq_mhz: f, amplitude_q15: 10_000, duration_ms: d, ramp_ms: 2 };
+            plan.steps.push(s).unwrap();
+        }
+        shared.submit(Command::RunPlan(plan)).unwrap();
+        let mut core = DriveCore::new(&shared);
+        let mut block = [0u16; BLOCK_LEN];
+        let mut steps_seen = [false; 2];
+        for _ in 0..100 {
+            core.refill(&mut block);
+            let s = shared.status();
+            if let Some(i) = s.step {
+                steps_seen[i as usize] = true;
+            }
+            if s.state == DriveState::Idle {
+                break;
+            }
+        }
+        let s = shared.status();
+        assert_eq!(s.state, DriveState::Idle);
+        assert_eq!(steps_seen, [true, true]);
+        // 20 ms of steps + the 20 ms ramp to zero at 50 samples/ms.
+        assert_eq!(s.elapsed_samples, 40 * 50);
+    }
 }

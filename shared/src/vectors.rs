@@ -189,6 +189,16 @@ mod tests {
         }
     }
 
+    /// `cargo test -p chladni-shared print_digests -- --nocapture` prints the host's digests in
+    /// the on-target format, to compare by eye with `scripts/firmware.sh test qemu`.
+    #[test]
+    fn print_digests() {
+        extern crate std;
+        for (name, vector) in ALL {
+            std::println!("vector {name} {:016x}", vector().unwrap());
+        }
+    }
+
     #[test]
     fn digest_is_fnv1a() {
         // Published FNV-1a 64 test value for "a".

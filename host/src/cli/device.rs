@@ -199,3 +199,51 @@ impl DeviceCommand {
         Ok(ExitCode::SUCCESS)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chladni_shared::runner::DriveState;
+
+    #[test]
+    fn status_json_has_exactly_the_documented_fields() {
+        let s = StatusReport {
+            state: DriveState::RampUp,
+            step: Some(2),
+            run: 0,
+            elapsed_samples: 12_345,
+            sample_rate: 50_000,
+            freq_mhz: 181_500,
+            amplitude_q15: 32767,
+            underruns: 3,
+            commands: 9,
+        };
+        let v = status_json(&s);
+        let keys: Vec<&str> = v.as_object().unwrap().keys().map(|k| k.as_str()).collect();
+        assert_eq!(keys, ["amplitude", "elapsed_ms", "freq_hz", "state", "step", "underruns"]);
+        assert_eq!(v["state"], "ramp_up");
+        assert_eq!(v["step"], 2);
+        assert_eq!(v["elapsed_ms"], 246.9);
+        assert_eq!(v["freq_hz"], 181.5);
+        assert_eq!(v["amplitude"], 1.0);
+        assert_eq!(v["underruns"], 3);
+        let idle = StatusReport { state: DriveState::Idle, step: None, ..s };
+        assert!(status_json(&idle)["step"].is_null());
+    }
+
+    #[test]
+    fn bad_input_is_named() {
+        assert!(amplitude_q15(1.5).unwrap_err().0.contains("amplitude 1.5"));
+        assert_eq!(amplitude_q15(1.0).unwrap(), 32767);
+        assert!(freq_mhz(f64::NAN).is_err());
+        assert_eq!(freq_mhz(440.125).unwrap(), 440_125);
+        let dir = std::env::temp_dir().join(format!("chladni-plan-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("p.json");
+        std::fs::write(&path, r#"{"name":"x","repeat":1,"steps":[{"freq_mhz":500,"amplitude_q15":1,"duration_ms":5,"ramp_ms":0}]}"#).unwrap();
+        assert!(read_plan(&path).unwrap_err().0.contains("step 0: frequency 0.500 Hz"));
+        std::fs::write(&path, "{").unwrap();
+        assert!(read_plan(&path).unwrap_err().0.contains("not a valid plan"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
