@@ -5,9 +5,9 @@
 //! The drive is DAC1 channel 1 on PA4, converting on every TIM6 TRGO (update event at the
 //! sample rate). DMA1 channel 3 (request 6) moves samples from a circular buffer of two
 //! blocks into DHR12R1; its half-transfer and transfer-complete interrupts wake the drive task,
-//! which refills the half just played (embassy-stm32's `WritableRingBuffer`). If the DMA
-//! catches up with the writer (a refill missed its half period) the ring reports an overrun:
-//! it is counted as an underrun, and the ring restarts.
+//! which refills the half just played (embassy-stm32's `WritableRingBuffer`, which starts full
+//! of the mid-scale codes it was given). If the DMA catches up with the writer (a refill missed
+//! its half period) the ring reports an overrun and resets itself: counted as an underrun.
 
 use chladni_shared::dds::SAMPLE_RATE;
 use chladni_shared::runner::BLOCK_LEN;
@@ -107,10 +107,9 @@ impl SampleOutput for DacOutput {
         match self.ring.write_exact(block).await {
             Ok(_) => Ok(()),
             Err(_) => {
-                // The DMA overtook the writer: some samples repeated. Restart the ring from
-                // here with this block.
-                self.ring.clear();
-                let _ = self.ring.write(block);
+                // The DMA overtook the writer (some old samples were played again). The ring
+                // has reset itself to a full buffer's lead; queue this block behind it.
+                let _ = self.ring.write_exact(block).await;
                 Err(Underrun)
             }
         }
