@@ -57,10 +57,11 @@ fn poll_until(
 fn plan_runs_step_by_step_to_idle() {
     let (_emulator, mut client) = start("plan");
     let steps = [
-        Step { freq_mhz: 120_000, amplitude_q15: 16_000, duration_ms: 300, ramp_ms: 20 },
-        Step { freq_mhz: 181_500, amplitude_q15: 24_000, duration_ms: 350, ramp_ms: 10 },
-        Step { freq_mhz: 1_234_567, amplitude_q15: 8_000, duration_ms: 300, ramp_ms: 30 },
+        Step { freq_mhz: 120_000, amplitude_q15: 16_000, duration_ms: 600, ramp_ms: 20 },
+        Step { freq_mhz: 181_500, amplitude_q15: 24_000, duration_ms: 700, ramp_ms: 10 },
+        Step { freq_mhz: 1_234_567, amplitude_q15: 8_000, duration_ms: 600, ramp_ms: 30 },
     ];
+    // Steps last ≥ 600 ms so that a poller stalled by a loaded host still sees each of them.
     let before = client.status().expect("status");
     assert_eq!(before.state, DriveState::Idle);
     client.run_plan(plan("e2e", &steps, 1)).expect("plan accepted");
