@@ -5,6 +5,7 @@
 #   scripts/firmware.sh clippy qemu|stm32l475
 #   scripts/firmware.sh test   qemu             -> on-target tests in QEMU
 #   scripts/firmware.sh size   qemu|stm32l475
+#   scripts/firmware.sh bench  qemu             -> per-sample cost of the drive (QEMU -icount)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cmd=${1:?usage: firmware.sh build|clippy|test|size BOARD}
@@ -26,5 +27,9 @@ case "$cmd" in
           $1 ~ /^\.data$/ {flash += $2; ram += $2}
           $1 ~ /^\.(bss|uninit)$/ {ram += $2}
           END {printf "firmware %s: flash %d B, static RAM %d B\n", b, flash, ram}' ;;
+  bench) [ "$board" = qemu ] || { echo "bench runs on the qemu board only" >&2; exit 2; }
+         cargo build "${args[@]}" --bin bench_drive >&2 &&
+         QEMU_EXTRA="-icount shift=0" scripts/qemu-run.sh \
+           target/firmware/thumbv7em-none-eabihf/firmware/bench_drive ;;
   *) echo "unknown command '$cmd'" >&2; exit 2 ;;
 esac

@@ -4,9 +4,17 @@
 
 use chladni_firmware::{app, board};
 
+/// Shared by the link task (commands in, status out) and the drive task.
+static DRIVE: app::drive::DriveShared = app::drive::DriveShared::new();
+
 #[embassy_executor::task]
 async fn link_task(mut link: board::Link) -> ! {
-    app::link::serve(app::link::Identity { board: board::BOARD }, &mut link).await
+    app::link::serve(app::link::Identity { board: board::BOARD }, &DRIVE, &mut link).await
+}
+
+#[embassy_executor::task]
+async fn drive_task(mut output: board::DriveOutput) -> ! {
+    app::drive::run(&DRIVE, &mut output).await
 }
 
 #[cortex_m_rt::entry]
@@ -20,5 +28,6 @@ fn main() -> ! {
     );
     board::run(|spawner| {
         spawner.spawn(link_task(board.link).expect("link task: spawn pool exhausted"));
+        spawner.spawn(drive_task(board.drive).expect("drive task: spawn pool exhausted"));
     })
 }

@@ -8,8 +8,8 @@ use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
 use chladni_shared::link::{
-    self, DeviceInfo, Envelope, FrameReader, LinkError, MAX_FRAME, PROTOCOL_VERSION, Request,
-    Response,
+    self, DeviceInfo, DriveError, Envelope, FrameReader, LinkError, MAX_FRAME, PROTOCOL_VERSION,
+    Plan, Request, Response, StatusReport,
 };
 
 /// Default time to wait for one response.
@@ -56,6 +56,14 @@ pub enum DeviceError {
     /// The controller's response frame could not be decoded (a firmware of another version?).
     #[error("undecodable response frame: {0}")]
     BadFrame(LinkError),
+    /// The drive refused a command (invalid plan or setpoint, faulted, busy).
+    #[error("drive refused request {id}: {error}")]
+    Rejected {
+        /// The request id.
+        id: u32,
+        /// Why.
+        error: DriveError,
+    },
 }
 
 /// A byte stream with a read timeout: the two transports implement it.
@@ -139,6 +147,7 @@ impl DeviceClient {
         self.send_raw(bytes)?;
         match self.receive(id)? {
             Response::Error(error) => Err(DeviceError::Refused { id, error }),
+            Response::Rejected(error) => Err(DeviceError::Rejected { id, error }),
             response => Ok(response),
         }
     }
@@ -195,6 +204,38 @@ impl DeviceClient {
         match self.request(Request::GetInfo)? {
             Response::Info(info) => Ok(info),
             other => Err(DeviceError::Unexpected { request: "GetInfo", response: Box::new(other) }),
+        }
+    }
+}
+
+impl DeviceClient {
+    fn expect_ack(&mut self, request: Request, name: &'static str) -> Result<(), DeviceError> {
+        match self.request(request)? {
+            Response::Ack => Ok(()),
+            other => Err(DeviceError::Unexpected { request: name, response: Box::new(other) }),
+        }
+    }
+
+    /// Manual drive: a steady sine at `freq_mhz` with amplitude `amplitude_q15`.
+    pub fn drive(&mut self, freq_mhz: u32, amplitude_q15: u16) -> Result<(), DeviceError> {
+        self.expect_ack(Request::Drive { freq_mhz, amplitude_q15 }, "Drive")
+    }
+
+    /// Sends `plan` and starts it.
+    pub fn run_plan(&mut self, plan: Plan) -> Result<(), DeviceError> {
+        self.expect_ack(Request::RunPlan(plan), "RunPlan")
+    }
+
+    /// Ramps the drive to zero (and clears a fault).
+    pub fn stop(&mut self) -> Result<(), DeviceError> {
+        self.expect_ack(Request::Stop, "Stop")
+    }
+
+    /// The drive's status.
+    pub fn status(&mut self) -> Result<StatusReport, DeviceError> {
+        match self.request(Request::Status)? {
+            Response::Status(s) => Ok(s),
+            other => Err(DeviceError::Unexpected { request: "Status", response: Box::new(other) }),
         }
     }
 }

@@ -6,10 +6,18 @@
 //!
 //! Modules:
 //! - [`link`]: the wire protocol (postcard messages in COBS frames), versioned, with typed errors.
+//! - [`dds`]: the drive's sine synthesis (phase accumulator, interpolated table, DAC codes).
+//! - [`plan`]: drive plans and their validation against device limits.
+//! - [`runner`]: the plan runner filling sample blocks, step boundaries exact to the sample.
+//! - [`plant`]: a simulated shaker + plate (resonant second-order system) for the QEMU board.
 //! - [`vectors`]: deterministic test vectors whose digests must match on host and target.
 #![no_std]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+pub mod dds;
 pub mod link;
+pub mod plan;
+pub mod plant;
+pub mod runner;
 pub mod vectors;

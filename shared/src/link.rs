@@ -11,6 +11,9 @@
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::plan::{Plan, PlanError};
+pub use crate::runner::{DriveError, DriveState, StatusReport};
+
 /// Version of this protocol; bumped on any incompatible change of [`Request`] or [`Response`].
 pub const PROTOCOL_VERSION: u16 = 1;
 
@@ -29,6 +32,9 @@ pub struct Envelope<T> {
 }
 
 /// Requests from the host to the controller.
+// No allocator on the controller: a plan travels inline (≈ 570 bytes); requests are decoded
+// once per frame, so the size costs stack, not copies.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Request {
@@ -39,6 +45,20 @@ pub enum Request {
     },
     /// Asks for [`DeviceInfo`].
     GetInfo,
+    /// Manual drive: a steady sine at `freq_mhz`, amplitude ramped to `amplitude_q15`.
+    /// Answered by [`Response::Ack`] or [`Response::Rejected`].
+    Drive {
+        /// Frequency, millihertz.
+        freq_mhz: u32,
+        /// Amplitude, Q15 fraction of the DAC's full scale.
+        amplitude_q15: u16,
+    },
+    /// Runs a plan sent inline. Answered by [`Response::Ack`] or [`Response::Rejected`].
+    RunPlan(Plan),
+    /// Ramps the drive to zero and idles (clears a fault). Answered by [`Response::Ack`].
+    Stop,
+    /// Asks for the drive's [`StatusReport`] ([`Response::Status`]).
+    Status,
 }
 
 /// Responses from the controller to the host.
@@ -54,6 +74,12 @@ pub enum Response {
     Info(DeviceInfo),
     /// The request could not be carried out.
     Error(LinkError),
+    /// The drive's state (answer to [`Request::Status`]).
+    Status(StatusReport),
+    /// The command was accepted and queued for the drive.
+    Ack,
+    /// The drive refused the command (invalid plan or setpoint, faulted, busy).
+    Rejected(DriveError),
 }
 
 /// Which hardware the firmware was built for.

@@ -9,6 +9,9 @@
 //! both sides.
 
 use crate::link::{self, Envelope, Request, Response};
+use crate::plan::{DeviceLimits, Plan, Step};
+use crate::plant::{Plant, PlantParams};
+use crate::runner::{BLOCK_LEN, DriveState, Runner};
 
 /// FNV-1a, 64-bit: small, dependency-free, and plenty to tell two bit patterns apart.
 #[derive(Debug, Clone, Copy)]
@@ -51,7 +54,12 @@ impl Digest {
 pub type Vector = fn() -> Result<u64, &'static str>;
 
 /// Every vector, in a fixed order. Add new ones at the end.
-pub const ALL: &[(&str, Vector)] = &[("link_frames", link_frames)];
+pub const ALL: &[(&str, Vector)] = &[
+    ("link_frames", link_frames),
+    ("drive_plan_stream", drive_plan_stream),
+    ("drive_link_frames", drive_link_frames),
+    ("plant_response", plant_response),
+];
 
 /// Encodes and decodes a fixed set of requests and responses; digests the wire bytes.
 fn link_frames() -> Result<u64, &'static str> {
@@ -84,6 +92,92 @@ fn link_frames() -> Result<u64, &'static str> {
     Ok(d.value())
 }
 
+/// A three-step plan, run twice: every DAC code and the status after every block.
+fn drive_plan_stream() -> Result<u64, &'static str> {
+    let mut d = Digest::new();
+    let mut runner = Runner::new(DeviceLimits::DEFAULT);
+    runner.start_plan(vector_plan()).map_err(|_| "plan refused")?;
+    let mut block = [0u16; BLOCK_LEN];
+    let mut blocks = 0u32;
+    while runner.state() != DriveState::Idle {
+        runner.fill(&mut block);
+        for &c in &block {
+            d.u64(c as u64);
+        }
+        let s = runner.status();
+        d.u64(s.step.map_or(u64::MAX, |s| s as u64))
+            .u64(s.elapsed_samples)
+            .u64(s.amplitude_q15 as u64);
+        blocks += 1;
+        if blocks > 10_000 {
+            return Err("plan never ended");
+        }
+    }
+    // 2 × 130 ms of steps + a 20 ms ramp to zero, at 50 samples/ms.
+    if runner.status().elapsed_samples != 2 * 130 * 50 + 20 * 50 {
+        return Err("plan ran for the wrong number of samples");
+    }
+    Ok(d.value())
+}
+
+/// The drive requests and responses on the wire.
+fn drive_link_frames() -> Result<u64, &'static str> {
+    let mut d = Digest::new();
+    let mut buf = [0u8; link::MAX_FRAME + 2];
+    let requests = [
+        Request::Drive { freq_mhz: 123_456, amplitude_q15: 20_000 },
+        Request::RunPlan(vector_plan()),
+        Request::Stop,
+        Request::Status,
+    ];
+    for (i, body) in requests.into_iter().enumerate() {
+        let env = Envelope { version: link::PROTOCOL_VERSION, id: i as u32 + 1, body };
+        d.bytes(link::encode(&env, &mut buf).map_err(|_| "encode failed")?);
+    }
+    let mut runner = Runner::new(DeviceLimits::DEFAULT);
+    runner.drive(55_000, 1000).map_err(|_| "drive refused")?;
+    let responses = [
+        Response::Status(runner.status()),
+        Response::Ack,
+        Response::Rejected(crate::runner::DriveError::Plan(crate::plan::PlanError::Empty)),
+        Response::Rejected(crate::runner::DriveError::Busy),
+    ];
+    for body in responses {
+        let env = Envelope { version: link::PROTOCOL_VERSION, id: 9, body };
+        d.bytes(link::encode(&env, &mut buf).map_err(|_| "encode failed")?);
+    }
+    Ok(d.value())
+}
+
+/// The simulated plant's acceleration (f32 bits) under a 180 Hz drive.
+fn plant_response() -> Result<u64, &'static str> {
+    let mut d = Digest::new();
+    let mut plant = Plant::new(PlantParams::DEFAULT);
+    let mut dds = crate::dds::Dds::new(crate::dds::tuning_word(180_000));
+    let mut block = [0u16; BLOCK_LEN];
+    for _ in 0..40 {
+        dds.fill_steady(&mut block, crate::dds::gain_of_q15(16384));
+        for &c in &block {
+            d.u64(plant.step(c).to_bits() as u64);
+        }
+    }
+    Ok(d.value())
+}
+
+fn vector_plan() -> Plan {
+    let steps = [
+        Step { freq_mhz: 100_000, amplitude_q15: 16384, duration_ms: 40, ramp_ms: 10 },
+        Step { freq_mhz: 250_500, amplitude_q15: 26000, duration_ms: 60, ramp_ms: 5 },
+        Step { freq_mhz: 1_234_567, amplitude_q15: 8000, duration_ms: 30, ramp_ms: 3 },
+    ];
+    let mut plan = Plan { name: heapless::String::new(), repeat: 2, steps: heapless::Vec::new() };
+    let _ = plan.name.push_str("vector");
+    for s in steps {
+        let _ = plan.steps.push(s);
+    }
+    plan
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -92,6 +186,16 @@ mod tests {
     fn every_vector_passes_its_self_checks() {
         for (name, vector) in ALL {
             assert!(vector().is_ok(), "vector {name} failed: {:?}", vector());
+        }
+    }
+
+    /// `cargo test -p chladni-shared print_digests -- --nocapture` prints the host's digests in
+    /// the on-target format, to compare by eye with `scripts/firmware.sh test qemu`.
+    #[test]
+    fn print_digests() {
+        extern crate std;
+        for (name, vector) in ALL {
+            std::println!("vector {name} {:016x}", vector().unwrap());
         }
     }
 

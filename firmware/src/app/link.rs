@@ -8,6 +8,8 @@ use chladni_shared::link::{
 };
 use embedded_io_async::{Read, Write};
 
+use super::drive::{Command, DriveShared};
+
 /// What the link needs to know about the device to answer requests.
 #[derive(Debug, Clone, Copy)]
 pub struct Identity {
@@ -15,8 +17,12 @@ pub struct Identity {
     pub board: Board,
 }
 
-/// Answers one request.
-pub fn handle(identity: &Identity, request: &Request) -> Response {
+/// Answers one request; drive commands are queued for the drive task.
+pub fn handle(identity: &Identity, drive: &DriveShared, request: &Request) -> Response {
+    let submit = |command| match drive.submit(command) {
+        Ok(()) => Response::Ack,
+        Err(e) => Response::Rejected(e),
+    };
     match request {
         Request::Ping { nonce } => Response::Pong { nonce: *nonce },
         Request::GetInfo => Response::Info(DeviceInfo {
@@ -26,11 +32,17 @@ pub fn handle(identity: &Identity, request: &Request) -> Response {
             protocol_version: PROTOCOL_VERSION,
             build_id: crate::BUILD_ID,
         }),
+        Request::Drive { freq_mhz, amplitude_q15 } => {
+            submit(Command::Drive { freq_mhz: *freq_mhz, amplitude_q15: *amplitude_q15 })
+        }
+        Request::RunPlan(plan) => submit(Command::RunPlan(plan.clone())),
+        Request::Stop => submit(Command::Stop),
+        Request::Status => Response::Status(drive.status()),
     }
 }
 
 /// Runs the link forever on `port`.
-pub async fn serve<P: Read + Write>(identity: Identity, port: &mut P) -> ! {
+pub async fn serve<P: Read + Write>(identity: Identity, drive: &DriveShared, port: &mut P) -> ! {
     let mut reader = FrameReader::<MAX_FRAME>::new();
     let mut rx = [0u8; 64];
     let mut tx = [0u8; MAX_FRAME + 2];
@@ -48,7 +60,7 @@ pub async fn serve<P: Read + Write>(identity: Identity, port: &mut P) -> ! {
                 Ok(frame) => match link::decode::<Request>(frame) {
                     Ok(env) => {
                         defmt::debug!("link: request {} {}", env.id, env.body);
-                        (env.id, handle(&identity, &env.body))
+                        (env.id, handle(&identity, drive, &env.body))
                     }
                     Err(e) => (e.id, Response::Error(e.error)),
                 },

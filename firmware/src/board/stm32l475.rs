@@ -1,11 +1,28 @@
 //! The B-L475E-IOT01A: embassy-stm32 drivers, flashed with probe-rs.
 //!
 //! The host link is USART1 on the ST-LINK virtual COM port (PB6 TX / PB7 RX), 115200 8N1.
+//!
+//! The drive is DAC1 channel 1 on PA4, converting on every TIM6 TRGO (update event at the
+//! sample rate). DMA1 channel 3 (request 6) moves samples from a circular buffer of two
+//! blocks into DHR12R1; its half-transfer and transfer-complete interrupts wake the drive task,
+//! which refills the half just played (embassy-stm32's `WritableRingBuffer`, which starts full
+//! of the mid-scale codes it was given). If the DMA catches up with the writer (a refill missed
+//! its half period) the ring reports an overrun and resets itself: counted as an underrun.
 
+use chladni_shared::dds::SAMPLE_RATE;
+use chladni_shared::runner::BLOCK_LEN;
 use defmt_rtt as _;
+use embassy_stm32::dac::{self, DacChannel};
+use embassy_stm32::dma::{self, TransferOptions, WritableRingBuffer};
+use embassy_stm32::mode::Blocking;
+use embassy_stm32::time::Hertz;
+use embassy_stm32::timer::low_level::{MasterMode, RoundTo, Timer};
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::{bind_interrupts, peripherals};
 use static_cell::StaticCell;
+use stm32_metapac as pac;
+
+use crate::app::drive::{SampleOutput, Underrun};
 
 /// This board's identity on the link.
 pub const BOARD: chladni_shared::link::Board = chladni_shared::link::Board::Stm32l475;
@@ -13,19 +30,112 @@ pub const BOARD: chladni_shared::link::Board = chladni_shared::link::Board::Stm3
 /// The host link: USART1 through the ST-LINK virtual COM port.
 pub type Link = BufferedUart<'static>;
 
+/// The drive output: DAC1 ch1 fed by circular DMA, paced by TIM6.
+pub type DriveOutput = DacOutput;
+
 /// The initialised board.
 pub struct Board {
     /// Host link.
     pub link: Link,
+    /// Drive output.
+    pub drive: DriveOutput,
 }
 
 bind_interrupts!(struct Irqs {
     USART1 => usart::BufferedInterruptHandler<peripherals::USART1>;
+    DMA1_CHANNEL3 => dma::InterruptHandler<peripherals::DMA1_CH3>;
 });
 
-/// Brings the board up with embassy-stm32's defaults (MSI 4 MHz; the drive issue raises it).
+/// DAC1 channel 1 on PA4, triggered by TIM6 TRGO, fed by circular DMA over two blocks.
+pub struct DacOutput {
+    ring: WritableRingBuffer<'static, u16>,
+    _dac: DacChannel<'static, Blocking>,
+    _timer: Timer<'static, peripherals::TIM6>,
+}
+
+impl DacOutput {
+    fn new(
+        dac1: embassy_stm32::Peri<'static, peripherals::DAC1>,
+        pa4: embassy_stm32::Peri<'static, peripherals::PA4>,
+        dma_ch: embassy_stm32::Peri<'static, peripherals::DMA1_CH3>,
+        tim6: embassy_stm32::Peri<'static, peripherals::TIM6>,
+    ) -> Self {
+        static BUF: StaticCell<[u16; 2 * BLOCK_LEN]> = StaticCell::new();
+        let buf = BUF.init([chladni_shared::dds::DAC_MID; 2 * BLOCK_LEN]);
+
+        // The DAC channel (clock, analog pin); then trigger and DMA request by register, since
+        // the ring buffer owns the DMA channel rather than the DAC driver.
+        let dac_ch = DacChannel::new_blocking(dac1, pa4);
+        let trigger = <embassy_stm32::triggers::TIM6_TRGO as dac::ChannelTrigger<
+            peripherals::DAC1,
+        >>::signal(&embassy_stm32::triggers::TIM6_TRGO);
+        pac::DAC1.cr().modify(|w| {
+            w.set_en(0, false);
+            w.set_tsel(0, trigger);
+            w.set_ten(0, true);
+            w.set_dmaen(0, true);
+        });
+        pac::DAC1.cr().modify(|w| w.set_en(0, true));
+
+        let request =
+            <peripherals::DMA1_CH3 as dac::Dma<peripherals::DAC1, dac::Ch1>>::request(&dma_ch);
+        let channel = dma::Channel::new(dma_ch, Irqs);
+        let dhr = pac::DAC1.dhr12r(0).as_ptr() as *mut u16;
+        // SAFETY: `dhr` is DAC1's 12-bit right-aligned data register for channel 1, which
+        // accepts half-word writes; `buf` is 'static and owned by the ring from here on.
+        let mut ring = unsafe {
+            WritableRingBuffer::new(channel, request, dhr, buf, TransferOptions::default())
+        };
+        ring.start();
+
+        // TIM6: update event at the sample rate (80 MHz / 1600 = 50 kHz), TRGO = update.
+        let timer = Timer::new(tim6);
+        timer.set_frequency(Hertz(SAMPLE_RATE), RoundTo::Slower);
+        timer.regs_basic().cr2().modify(|w| w.set_mms(MasterMode::UPDATE));
+        timer.start();
+        defmt::info!(
+            "drive: DAC1 ch1 at {} S/s (TIM6 {} Hz)",
+            SAMPLE_RATE,
+            timer.get_frequency().0
+        );
+        Self { ring, _dac: dac_ch, _timer: timer }
+    }
+}
+
+impl SampleOutput for DacOutput {
+    async fn write_block(&mut self, block: &[u16]) -> Result<(), Underrun> {
+        match self.ring.write_exact(block).await {
+            Ok(_) => Ok(()),
+            Err(_) => {
+                // The DMA overtook the writer (some old samples were played again). The ring
+                // has reset itself to a full buffer's lead; queue this block behind it.
+                let _ = self.ring.write_exact(block).await;
+                Err(Underrun)
+            }
+        }
+    }
+}
+
+/// 80 MHz from MSI 4 MHz through PLL1 (×40 /2): TIM6 then divides exactly to 50 kS/s.
+fn clocks() -> embassy_stm32::Config {
+    use embassy_stm32::rcc::*;
+    let mut config = embassy_stm32::Config::default();
+    config.rcc.msi = Some(MSIRange::RANGE4M);
+    config.rcc.pll = Some(Pll {
+        source: PllSource::MSI,
+        prediv: PllPreDiv::DIV1,
+        mul: PllMul::MUL40,
+        divp: None,
+        divq: None,
+        divr: Some(PllRDiv::DIV2),
+    });
+    config.rcc.sys = Sysclk::PLL1_R;
+    config
+}
+
+/// Brings the board up: 80 MHz system clock, the link, the drive output.
 pub fn init() -> Board {
-    let p = embassy_stm32::init(embassy_stm32::Config::default());
+    let p = embassy_stm32::init(clocks());
     static TX: StaticCell<[u8; 1024]> = StaticCell::new();
     static RX: StaticCell<[u8; 1024]> = StaticCell::new();
     let mut config = usart::Config::default();
@@ -40,7 +150,8 @@ pub fn init() -> Board {
         config,
     )
     .expect("USART1 config");
-    Board { link }
+    let drive = DacOutput::new(p.DAC1, p.PA4, p.DMA1_CH3, p.TIM6);
+    Board { link, drive }
 }
 
 /// Runs embassy's thread-mode executor forever; `init` spawns the first tasks.

@@ -1,10 +1,15 @@
 //! `chladni device …`: requests to a running controller.
 
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
 use chladni::device::DeviceClient;
+use chladni_shared::plan::{DeviceLimits, Plan};
+use chladni_shared::runner::StatusReport;
 use clap::{Args, Subcommand};
+
+use super::InputError;
 
 /// Where the controller is.
 #[derive(Debug, Args)]
@@ -41,6 +46,78 @@ pub enum DeviceCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Drive a steady sine (manual mode) until `stop` or another command.
+    Drive {
+        #[command(flatten)]
+        port: PortArg,
+        /// Frequency, Hz (1–2000, resolved to 1 mHz).
+        #[arg(long)]
+        freq: f64,
+        /// Amplitude, fraction of the DAC's full scale (0–1).
+        #[arg(long)]
+        amplitude: f64,
+    },
+    /// Send a plan (JSON file) and run it.
+    RunFile {
+        #[command(flatten)]
+        port: PortArg,
+        /// Plan file: {"name", "repeat", "steps": [{"freq_mhz", "amplitude_q15", "duration_ms", "ramp_ms"}]}.
+        plan: PathBuf,
+    },
+    /// Ramp the drive to zero and idle (also clears a fault).
+    Stop {
+        #[command(flatten)]
+        port: PortArg,
+    },
+    /// The drive's state, step, elapsed time, frequency, amplitude and underruns.
+    Status {
+        #[command(flatten)]
+        port: PortArg,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Q15 amplitude of a fraction of full scale (1.0 ↦ 32767).
+fn amplitude_q15(amplitude: f64) -> Result<u16, InputError> {
+    if !(0.0..=1.0).contains(&amplitude) {
+        return Err(InputError(format!(
+            "amplitude {amplitude} outside 0..=1 (fraction of full scale)"
+        )));
+    }
+    Ok((amplitude * 32767.0).round() as u16)
+}
+
+/// Millihertz of a frequency in Hz.
+fn freq_mhz(freq: f64) -> Result<u32, InputError> {
+    if !freq.is_finite() || freq <= 0.0 || freq * 1000.0 > u32::MAX as f64 {
+        return Err(InputError(format!("frequency {freq} Hz is not a valid drive frequency")));
+    }
+    Ok((freq * 1000.0).round() as u32)
+}
+
+/// Reads and validates a plan file; every problem is bad input (exit code 2).
+pub fn read_plan(path: &std::path::Path) -> Result<Plan, InputError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| InputError(format!("cannot read plan {}: {e}", path.display())))?;
+    let plan: Plan = serde_json::from_str(&text)
+        .map_err(|e| InputError(format!("plan {} is not a valid plan: {e}", path.display())))?;
+    plan.validate(&DeviceLimits::DEFAULT)
+        .map_err(|e| InputError(format!("plan {} refused: {e}", path.display())))?;
+    Ok(plan)
+}
+
+/// The `status --json` object.
+pub fn status_json(s: &StatusReport) -> serde_json::Value {
+    serde_json::json!({
+        "state": s.state.name(),
+        "step": s.step,
+        "elapsed_ms": s.elapsed_ms(),
+        "freq_hz": s.freq_mhz as f64 / 1000.0,
+        "amplitude": s.amplitude_q15 as f64 / 32767.0,
+        "underruns": s.underruns,
+    })
 }
 
 impl DeviceCommand {
@@ -80,7 +157,93 @@ impl DeviceCommand {
                     println!("{count} ping(s): mean {mean:.3} ms, max {max:.3} ms");
                 }
             }
+            DeviceCommand::Drive { port, freq, amplitude } => {
+                let (f, a) = (freq_mhz(*freq)?, amplitude_q15(*amplitude)?);
+                DeviceLimits::DEFAULT
+                    .check_setpoint(f, a)
+                    .map_err(|e| InputError(format!("drive refused: {e}")))?;
+                port.open()?.drive(f, a)?;
+                println!(
+                    "driving {:.3} Hz at amplitude {:.4}",
+                    f as f64 / 1000.0,
+                    a as f64 / 32767.0
+                );
+            }
+            DeviceCommand::RunFile { port, plan } => {
+                let plan = read_plan(plan)?;
+                let (name, steps, ms) = (plan.name.clone(), plan.steps.len(), plan.total_ms());
+                port.open()?.run_plan(plan)?;
+                println!("running plan '{name}': {steps} step(s), {ms} ms");
+            }
+            DeviceCommand::Stop { port } => {
+                port.open()?.stop()?;
+                println!("stopping");
+            }
+            DeviceCommand::Status { port, json } => {
+                let s = port.open()?.status()?;
+                if *json {
+                    println!("{}", status_json(&s));
+                } else {
+                    println!("state      {}", s.state.name());
+                    match s.step {
+                        Some(step) => println!("step       {step} (run {})", s.run),
+                        None => println!("step       -"),
+                    }
+                    println!("elapsed    {:.2} ms ({} samples)", s.elapsed_ms(), s.elapsed_samples);
+                    println!("frequency  {:.3} Hz", s.freq_mhz as f64 / 1000.0);
+                    println!("amplitude  {:.4}", s.amplitude_q15 as f64 / 32767.0);
+                    println!("underruns  {}", s.underruns);
+                }
+            }
         }
         Ok(ExitCode::SUCCESS)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chladni_shared::runner::DriveState;
+
+    #[test]
+    fn status_json_has_exactly_the_documented_fields() {
+        let s = StatusReport {
+            state: DriveState::RampUp,
+            step: Some(2),
+            run: 0,
+            elapsed_samples: 12_345,
+            sample_rate: 50_000,
+            freq_mhz: 181_500,
+            amplitude_q15: 32767,
+            underruns: 3,
+            commands: 9,
+        };
+        let v = status_json(&s);
+        let keys: Vec<&str> = v.as_object().unwrap().keys().map(|k| k.as_str()).collect();
+        assert_eq!(keys, ["amplitude", "elapsed_ms", "freq_hz", "state", "step", "underruns"]);
+        assert_eq!(v["state"], "ramp_up");
+        assert_eq!(v["step"], 2);
+        assert_eq!(v["elapsed_ms"], 246.9);
+        assert_eq!(v["freq_hz"], 181.5);
+        assert_eq!(v["amplitude"], 1.0);
+        assert_eq!(v["underruns"], 3);
+        let idle = StatusReport { state: DriveState::Idle, step: None, ..s };
+        assert!(status_json(&idle)["step"].is_null());
+    }
+
+    #[test]
+    fn bad_input_is_named() {
+        assert!(amplitude_q15(1.5).unwrap_err().0.contains("amplitude 1.5"));
+        assert_eq!(amplitude_q15(1.0).unwrap(), 32767);
+        assert!(freq_mhz(f64::NAN).is_err());
+        assert_eq!(freq_mhz(440.125).unwrap(), 440_125);
+        let dir = std::env::temp_dir().join(format!("chladni-plan-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("p.json");
+        std::fs::write(&path, r#"{"name":"x","repeat":1,"steps":[{"freq_mhz":500,"amplitude_q15":1,"duration_ms":5,"ramp_ms":0}]}"#).unwrap();
+        assert!(read_plan(&path).unwrap_err().0.contains("step 0: frequency 0.500 Hz"));
+        std::fs::write(&path, "{").unwrap();
+        assert!(read_plan(&path).unwrap_err().0.contains("not a valid plan"));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

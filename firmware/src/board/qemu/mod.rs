@@ -22,6 +22,10 @@ pub const BOARD: chladni_shared::link::Board = chladni_shared::link::Board::Qemu
 /// The host link: USART1, reached by the host through QEMU's `-serial` chardev.
 pub type Link = usart::Usart1;
 
+/// The drive output: no DAC in QEMU, so a simulated one paced by the time driver, feeding the
+/// simulated shaker + plate.
+pub type DriveOutput = crate::app::drive::SimulatedDac;
+
 /// The initialised board.
 pub struct Board {
     /// Host link.
@@ -29,6 +33,8 @@ pub struct Board {
     /// Flash bank 2, when QEMU was given a backing file (`flash=PATH` on the semihosting
     /// command line); without one, nothing survives a restart.
     pub flash: Option<flash::FileFlash>,
+    /// Drive output.
+    pub drive: DriveOutput,
 }
 
 /// Brings the board up: time driver first (everything else may wait on time), then the link.
@@ -44,7 +50,7 @@ pub fn init() -> Board {
         }
         opened.ok()
     });
-    Board { link: usart::Usart1::new(), flash }
+    Board { link: usart::Usart1::new(), flash, drive: DriveOutput::new() }
 }
 
 pub use executor::run;

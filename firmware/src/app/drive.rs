@@ -1,0 +1,235 @@
+//! The drive task: owns the plan runner and feeds its sample blocks to the board's output.
+//!
+//! The link task talks to it through [`DriveShared`]: commands go through an embassy-sync
+//! [`Channel`], and the drive publishes a [`StatusReport`] after every block into a
+//! blocking mutex the link reads. The runner itself is owned by the drive task alone.
+//!
+//! The output is anything that takes blocks of 12-bit DAC codes at the sample rate
+//! ([`SampleOutput`]): on the board, the DAC's circular DMA buffer; in QEMU,
+//! [`SimulatedDac`], which paces blocks with embassy-time and feeds the simulated plant.
+
+use core::cell::Cell;
+use core::future::Future;
+
+use chladni_shared::plan::{DeviceLimits, Plan};
+use chladni_shared::plant::{Plant, PlantParams};
+use chladni_shared::runner::{BLOCK_LEN, DriveError, DriveState, Runner, StatusReport};
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::channel::Channel;
+use embassy_time::{Duration, Instant, Timer};
+
+/// A command for the drive task.
+// A plan rides inline (no allocator); the queue holds two commands.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone, PartialEq)]
+pub enum Command {
+    /// Run a (validated) plan.
+    RunPlan(Plan),
+    /// Manual drive.
+    Drive {
+        /// Frequency, mHz.
+        freq_mhz: u32,
+        /// Amplitude, Q15.
+        amplitude_q15: u16,
+    },
+    /// Ramp to zero and idle.
+    Stop,
+    /// Ramp to zero and latch a fault.
+    Fault,
+}
+
+/// Status of a runner that has never run.
+const IDLE: StatusReport = StatusReport {
+    state: DriveState::Idle,
+    step: None,
+    run: 0,
+    elapsed_samples: 0,
+    sample_rate: chladni_shared::dds::SAMPLE_RATE,
+    freq_mhz: 0,
+    amplitude_q15: 0,
+    underruns: 0,
+    commands: 0,
+};
+
+/// What the link task and the drive task share.
+pub struct DriveShared {
+    commands: Channel<CriticalSectionRawMutex, Command, 2>,
+    status: Mutex<CriticalSectionRawMutex, Cell<StatusReport>>,
+    limits: DeviceLimits,
+}
+
+impl Default for DriveShared {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl DriveShared {
+    /// Empty queue, idle status, the default device limits.
+    pub const fn new() -> Self {
+        Self {
+            commands: Channel::new(),
+            status: Mutex::new(Cell::new(IDLE)),
+            limits: DeviceLimits::DEFAULT,
+        }
+    }
+
+    /// The device limits commands are checked against.
+    pub fn limits(&self) -> &DeviceLimits {
+        &self.limits
+    }
+
+    /// Queues `command` for the drive task (validating plans and setpoints first, so the
+    /// caller can answer with the precise error).
+    pub fn submit(&self, command: Command) -> Result<(), DriveError> {
+        match &command {
+            Command::RunPlan(plan) => plan.validate(&self.limits).map_err(DriveError::Plan)?,
+            Command::Drive { freq_mhz, amplitude_q15 } => self
+                .limits
+                .check_setpoint(*freq_mhz, *amplitude_q15)
+                .map_err(DriveError::Setpoint)?,
+            Command::Stop | Command::Fault => {}
+        }
+        if matches!(command, Command::RunPlan(_) | Command::Drive { .. })
+            && self.status().state == DriveState::Faulted
+        {
+            return Err(DriveError::Faulted);
+        }
+        self.commands.try_send(command).map_err(|_| DriveError::Busy)
+    }
+
+    /// The status published after the last block.
+    pub fn status(&self) -> StatusReport {
+        self.status.lock(|s| s.get())
+    }
+}
+
+/// The drive's half: the runner, and the commands and status it exchanges with the link.
+pub struct DriveCore<'a> {
+    shared: &'a DriveShared,
+    runner: Runner,
+}
+
+impl<'a> DriveCore<'a> {
+    /// An idle drive.
+    pub fn new(shared: &'a DriveShared) -> Self {
+        Self { shared, runner: Runner::new(shared.limits) }
+    }
+
+    /// Applies queued commands, fills `block`, publishes the status.
+    pub fn refill(&mut self, block: &mut [u16]) {
+        while let Ok(command) = self.shared.commands.try_receive() {
+            let result = match command {
+                Command::RunPlan(plan) => {
+                    defmt::info!(
+                        "drive: plan '{}', {} steps",
+                        plan.name.as_str(),
+                        plan.steps.len()
+                    );
+                    self.runner.start_plan(plan)
+                }
+                Command::Drive { freq_mhz, amplitude_q15 } => {
+                    self.runner.drive(freq_mhz, amplitude_q15)
+                }
+                Command::Stop => {
+                    self.runner.stop();
+                    Ok(())
+                }
+                Command::Fault => {
+                    self.runner.fault();
+                    Ok(())
+                }
+            };
+            if let Err(e) = result {
+                defmt::warn!("drive: command refused: {}", e);
+            }
+        }
+        self.runner.fill(block);
+        self.publish();
+    }
+
+    /// Counts a missed refill.
+    pub fn note_underrun(&mut self) {
+        self.runner.note_underrun();
+        self.publish();
+    }
+
+    fn publish(&self) {
+        let status = self.runner.status();
+        self.shared.status.lock(|s| s.set(status));
+    }
+}
+
+/// The output ran dry before the next block was ready.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
+pub struct Underrun;
+
+/// Where sample blocks go, one [`BLOCK_LEN`] block at a time, at the sample rate.
+pub trait SampleOutput {
+    /// Waits until the output has room for `block`, then takes it. `Err(Underrun)` when the
+    /// output had run dry before (the block is still taken).
+    fn write_block(&mut self, block: &[u16]) -> impl Future<Output = Result<(), Underrun>>;
+}
+
+/// Runs the drive forever: refill a block, hand it to `output`, repeat.
+pub async fn run<O: SampleOutput>(shared: &DriveShared, output: &mut O) -> ! {
+    let mut core = DriveCore::new(shared);
+    let mut block = [0u16; BLOCK_LEN];
+    loop {
+        core.refill(&mut block);
+        if output.write_block(&block).await.is_err() {
+            core.note_underrun();
+        }
+    }
+}
+
+/// Block period: [`BLOCK_LEN`] samples at the sample rate.
+pub const BLOCK_PERIOD: Duration =
+    Duration::from_micros(BLOCK_LEN as u64 * 1_000_000 / chladni_shared::dds::SAMPLE_RATE as u64);
+
+/// A DAC that exists only in time: it takes one block per [`BLOCK_PERIOD`] (paced by
+/// embassy-time) and drives the simulated shaker + plate with it. A block that arrives more
+/// than one block period after the previous one has played out counts as an underrun (one
+/// block of slack beyond the hardware's, because QEMU's clock follows the host's and slips
+/// under load), and the stream restarts from then.
+pub struct SimulatedDac {
+    plant: Plant,
+    next: Option<Instant>,
+    peak: f32,
+}
+
+impl Default for SimulatedDac {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl SimulatedDac {
+    /// A plant at rest with the default parameters.
+    pub fn new() -> Self {
+        Self { plant: Plant::new(PlantParams::DEFAULT), next: None, peak: 0.0 }
+    }
+
+    /// Largest |acceleration| of the simulated plate in the last block, m/s².
+    pub fn peak_acceleration(&self) -> f32 {
+        self.peak
+    }
+}
+
+impl SampleOutput for SimulatedDac {
+    async fn write_block(&mut self, block: &[u16]) -> Result<(), Underrun> {
+        let now = Instant::now();
+        // `next` is when the previous block has finished playing.
+        let (start, result) = match self.next {
+            None => (now, Ok(())),
+            Some(next) if now > next + BLOCK_PERIOD => (now, Err(Underrun)),
+            Some(next) => (next, Ok(())),
+        };
+        self.peak = self.plant.run(block);
+        self.next = Some(start + BLOCK_PERIOD);
+        // Double buffering: the block just handed over plays while the next one is filled.
+        Timer::at(start).await;
+        result
+    }
+}

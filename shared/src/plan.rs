@@ -1,0 +1,350 @@
+//! Drive plans: an ordered list of frequency steps, run `repeat` times, and their validation
+//! against the limits of a device.
+//!
+//! A plan is the same value on the host (written as JSON by the planner, read by
+//! `chladni device run-file`) and on the wire ([`crate::link::Request::RunPlan`]). Units are
+//! integers so that both sides compute the same sample counts: frequency in millihertz,
+//! amplitude in Q15 (32767 ≈ full scale of the DAC), times in milliseconds.
+//!
+//! JSON form:
+//! ```json
+//! {"name": "square-45", "repeat": 1,
+//!  "steps": [{"freq_mhz": 120000, "amplitude_q15": 16384, "duration_ms": 500, "ramp_ms": 20}]}
+//! ```
+
+use serde::{Deserialize, Serialize};
+
+use crate::dds::SAMPLES_PER_MS;
+
+/// Most steps a plan may hold (it must fit one link frame).
+pub const MAX_STEPS: usize = 32;
+/// Longest plan name, in bytes.
+pub const MAX_NAME: usize = 32;
+
+/// One step: drive at `freq_mhz` with `amplitude_q15` for `duration_ms`; the amplitude moves
+/// from its previous value to this step's over the first `ramp_ms` (linearly, per sample).
+/// The frequency switches at the step's first sample, keeping the phase.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Step {
+    /// Drive frequency, millihertz.
+    pub freq_mhz: u32,
+    /// Drive amplitude, Q15 fraction of the DAC's full scale (0..=32767).
+    pub amplitude_q15: u16,
+    /// Step length, milliseconds (ramp included).
+    pub duration_ms: u32,
+    /// Amplitude ramp at the start of the step, milliseconds (≤ `duration_ms`).
+    pub ramp_ms: u32,
+}
+
+impl Step {
+    /// Step length in samples.
+    pub const fn duration_samples(&self) -> u32 {
+        self.duration_ms.saturating_mul(SAMPLES_PER_MS)
+    }
+    /// Ramp length in samples.
+    pub const fn ramp_samples(&self) -> u32 {
+        self.ramp_ms.saturating_mul(SAMPLES_PER_MS)
+    }
+}
+
+/// A named sequence of steps, run `repeat` times (1 = once). At its end the drive ramps to zero
+/// over the last step's ramp (at least [`crate::runner::STOP_RAMP_MS`]) and goes idle.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Plan {
+    /// Name, for logs and status.
+    pub name: heapless::String<MAX_NAME>,
+    /// How many times the steps run (≥ 1).
+    pub repeat: u16,
+    /// The steps, in order.
+    pub steps: heapless::Vec<Step, MAX_STEPS>,
+}
+
+impl Plan {
+    /// Total length of all runs, milliseconds (without the final ramp to zero).
+    pub fn total_ms(&self) -> u64 {
+        self.steps.iter().map(|s| s.duration_ms as u64).sum::<u64>() * self.repeat as u64
+    }
+
+    /// Checks the plan against `limits`; the first problem found is returned.
+    pub fn validate(&self, limits: &DeviceLimits) -> Result<(), PlanError> {
+        if self.steps.is_empty() {
+            return Err(PlanError::Empty);
+        }
+        if self.steps.len() > limits.max_steps as usize {
+            return Err(PlanError::TooManySteps {
+                count: self.steps.len() as u16,
+                max: limits.max_steps,
+            });
+        }
+        if self.repeat == 0 {
+            return Err(PlanError::ZeroRepeat);
+        }
+        for (i, s) in self.steps.iter().enumerate() {
+            limits.check_setpoint(s.freq_mhz, s.amplitude_q15).map_err(|e| e.at_step(i as u16))?;
+            if s.duration_ms == 0 {
+                return Err(PlanError::ZeroDuration { step: i as u16 });
+            }
+            if s.ramp_ms > s.duration_ms {
+                return Err(PlanError::RampLongerThanStep {
+                    step: i as u16,
+                    ramp_ms: s.ramp_ms,
+                    duration_ms: s.duration_ms,
+                });
+            }
+        }
+        let total_ms = self.total_ms();
+        if total_ms > limits.max_total_ms {
+            return Err(PlanError::TooLong { total_ms, max_ms: limits.max_total_ms });
+        }
+        Ok(())
+    }
+}
+
+/// What a device can do; plans are validated against it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DeviceLimits {
+    /// Lowest drive frequency, millihertz.
+    pub min_freq_mhz: u32,
+    /// Highest drive frequency, millihertz.
+    pub max_freq_mhz: u32,
+    /// Highest amplitude, Q15.
+    pub max_amplitude_q15: u16,
+    /// Most steps per plan.
+    pub max_steps: u16,
+    /// Longest plan (all repeats), milliseconds.
+    pub max_total_ms: u64,
+}
+
+impl DeviceLimits {
+    /// The controller's limits: 1–2000 Hz, full DAC scale, [`MAX_STEPS`] steps, one hour.
+    pub const DEFAULT: DeviceLimits = DeviceLimits {
+        min_freq_mhz: 1_000,
+        max_freq_mhz: 2_000_000,
+        max_amplitude_q15: 32767,
+        max_steps: MAX_STEPS as u16,
+        max_total_ms: 3_600_000,
+    };
+
+    /// Checks a manual setpoint (frequency and amplitude). Errors name step 0.
+    pub fn check_setpoint(&self, freq_mhz: u32, amplitude_q15: u16) -> Result<(), PlanError> {
+        if freq_mhz < self.min_freq_mhz || freq_mhz > self.max_freq_mhz {
+            return Err(PlanError::FrequencyOutOfRange {
+                step: 0,
+                freq_mhz,
+                min_mhz: self.min_freq_mhz,
+                max_mhz: self.max_freq_mhz,
+            });
+        }
+        if amplitude_q15 > self.max_amplitude_q15 {
+            return Err(PlanError::AmplitudeTooHigh {
+                step: 0,
+                amplitude_q15,
+                max_q15: self.max_amplitude_q15,
+            });
+        }
+        Ok(())
+    }
+}
+
+impl Default for DeviceLimits {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Why a plan (or a manual setpoint) was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PlanError {
+    /// The plan has no steps.
+    Empty,
+    /// More steps than the device takes.
+    TooManySteps {
+        /// Steps in the plan.
+        count: u16,
+        /// The limit.
+        max: u16,
+    },
+    /// `repeat` is 0.
+    ZeroRepeat,
+    /// A step's frequency is outside the device's range.
+    FrequencyOutOfRange {
+        /// Step index (0 for a manual setpoint).
+        step: u16,
+        /// The frequency asked for, mHz.
+        freq_mhz: u32,
+        /// Lowest allowed, mHz.
+        min_mhz: u32,
+        /// Highest allowed, mHz.
+        max_mhz: u32,
+    },
+    /// A step's amplitude is above the device's maximum.
+    AmplitudeTooHigh {
+        /// Step index (0 for a manual setpoint).
+        step: u16,
+        /// The amplitude asked for, Q15.
+        amplitude_q15: u16,
+        /// Highest allowed, Q15.
+        max_q15: u16,
+    },
+    /// A step lasts 0 ms.
+    ZeroDuration {
+        /// Step index.
+        step: u16,
+    },
+    /// A step's ramp is longer than the step.
+    RampLongerThanStep {
+        /// Step index.
+        step: u16,
+        /// The ramp, ms.
+        ramp_ms: u32,
+        /// The step, ms.
+        duration_ms: u32,
+    },
+    /// All repeats together last longer than the device allows.
+    TooLong {
+        /// Plan length, ms.
+        total_ms: u64,
+        /// The limit, ms.
+        max_ms: u64,
+    },
+}
+
+impl PlanError {
+    fn at_step(self, i: u16) -> Self {
+        match self {
+            PlanError::FrequencyOutOfRange { freq_mhz, min_mhz, max_mhz, .. } => {
+                PlanError::FrequencyOutOfRange { step: i, freq_mhz, min_mhz, max_mhz }
+            }
+            PlanError::AmplitudeTooHigh { amplitude_q15, max_q15, .. } => {
+                PlanError::AmplitudeTooHigh { step: i, amplitude_q15, max_q15 }
+            }
+            other => other,
+        }
+    }
+}
+
+impl core::fmt::Display for PlanError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let hz = |mhz: u32| (mhz / 1000, mhz % 1000);
+        match *self {
+            PlanError::Empty => write!(f, "plan has no steps"),
+            PlanError::TooManySteps { count, max } => {
+                write!(f, "plan has {count} steps, the device takes at most {max}")
+            }
+            PlanError::ZeroRepeat => write!(f, "repeat must be at least 1"),
+            PlanError::FrequencyOutOfRange { step, freq_mhz, min_mhz, max_mhz } => {
+                let (a, b, c) = (hz(freq_mhz), hz(min_mhz), hz(max_mhz));
+                write!(
+                    f,
+                    "step {step}: frequency {}.{:03} Hz outside {}.{:03}..={}.{:03} Hz",
+                    a.0, a.1, b.0, b.1, c.0, c.1
+                )
+            }
+            PlanError::AmplitudeTooHigh { step, amplitude_q15, max_q15 } => write!(
+                f,
+                "step {step}: amplitude {amplitude_q15}/32768 above the maximum {max_q15}/32768"
+            ),
+            PlanError::ZeroDuration { step } => write!(f, "step {step}: duration is 0 ms"),
+            PlanError::RampLongerThanStep { step, ramp_ms, duration_ms } => {
+                write!(f, "step {step}: ramp {ramp_ms} ms longer than the step ({duration_ms} ms)")
+            }
+            PlanError::TooLong { total_ms, max_ms } => {
+                write!(f, "plan lasts {total_ms} ms, the device allows at most {max_ms} ms")
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn step(freq_mhz: u32, amplitude_q15: u16, duration_ms: u32, ramp_ms: u32) -> Step {
+        Step { freq_mhz, amplitude_q15, duration_ms, ramp_ms }
+    }
+
+    fn plan(steps: &[Step]) -> Plan {
+        Plan {
+            name: heapless::String::try_from("t").unwrap(),
+            repeat: 1,
+            steps: heapless::Vec::from_slice(steps).unwrap(),
+        }
+    }
+
+    #[test]
+    fn valid_plan_passes() {
+        let p = plan(&[step(1_000, 0, 1, 0), step(2_000_000, 32767, 100, 100)]);
+        assert_eq!(p.validate(&DeviceLimits::DEFAULT), Ok(()));
+        assert_eq!(p.total_ms(), 101);
+    }
+
+    #[test]
+    fn each_error_is_named() {
+        let l = DeviceLimits::DEFAULT;
+        assert_eq!(plan(&[]).validate(&l), Err(PlanError::Empty));
+        let mut p = plan(&[step(100_000, 100, 10, 0)]);
+        p.repeat = 0;
+        assert_eq!(p.validate(&l), Err(PlanError::ZeroRepeat));
+        assert_eq!(
+            plan(&[step(100_000, 1, 10, 0), step(999, 1, 10, 0)]).validate(&l),
+            Err(PlanError::FrequencyOutOfRange {
+                step: 1,
+                freq_mhz: 999,
+                min_mhz: 1_000,
+                max_mhz: 2_000_000
+            })
+        );
+        assert!(matches!(
+            plan(&[step(2_000_001, 1, 10, 0)]).validate(&l),
+            Err(PlanError::FrequencyOutOfRange { step: 0, .. })
+        ));
+        assert_eq!(
+            plan(&[step(100_000, 40_000, 10, 0)]).validate(&l),
+            Err(PlanError::AmplitudeTooHigh { step: 0, amplitude_q15: 40_000, max_q15: 32767 })
+        );
+        assert_eq!(
+            plan(&[step(100_000, 1, 0, 0)]).validate(&l),
+            Err(PlanError::ZeroDuration { step: 0 })
+        );
+        assert_eq!(
+            plan(&[step(100_000, 1, 10, 11)]).validate(&l),
+            Err(PlanError::RampLongerThanStep { step: 0, ramp_ms: 11, duration_ms: 10 })
+        );
+        let mut p = plan(&[step(100_000, 1, 3_600_000, 0)]);
+        assert_eq!(p.validate(&l), Ok(()));
+        p.repeat = 2;
+        assert_eq!(
+            p.validate(&l),
+            Err(PlanError::TooLong { total_ms: 7_200_000, max_ms: 3_600_000 })
+        );
+        let small = DeviceLimits { max_steps: 1, ..l };
+        assert_eq!(
+            plan(&[step(100_000, 1, 1, 0); 2]).validate(&small),
+            Err(PlanError::TooManySteps { count: 2, max: 1 })
+        );
+    }
+
+    #[test]
+    fn largest_plan_fits_a_link_frame() {
+        let s = step(u32::MAX, u16::MAX, u32::MAX, u32::MAX);
+        let p = Plan {
+            name: heapless::String::try_from("n".repeat(MAX_NAME).as_str()).unwrap(),
+            repeat: u16::MAX,
+            steps: heapless::Vec::from_slice(&[s; MAX_STEPS]).unwrap(),
+        };
+        let env = crate::link::Envelope {
+            version: crate::link::PROTOCOL_VERSION,
+            id: u32::MAX,
+            body: crate::link::Request::RunPlan(p),
+        };
+        let mut buf = [0u8; crate::link::MAX_FRAME + 2];
+        let n = crate::link::encode(&env, &mut buf).expect("largest plan must fit").len();
+        assert!(n <= crate::link::MAX_FRAME + 2);
+    }
+
+    extern crate std;
+}

@@ -1,0 +1,545 @@
+//! The plan runner: a state machine that fills blocks of DAC samples and advances plan steps
+//! by counting samples, so every step boundary falls on an exact sample index.
+//!
+//! The board calls [`Runner::fill`] with each free half of its sample buffer; commands
+//! ([`Runner::start_plan`], [`Runner::drive`], [`Runner::stop`], [`Runner::fault`]) take effect
+//! at the next sample filled. Stopping always ramps the amplitude to zero, never cuts it.
+//!
+//! A block is split into segments in which nothing changes but the phase (and, in a ramp, the
+//! gain); each segment is one call of the DDS's tight loop ([`Dds::fill_steady`] /
+//! [`Dds::fill_ramp`]), so the per-sample cost carries no state-machine branches.
+
+use serde::{Deserialize, Serialize};
+
+use crate::dds::{self, DAC_MID, Dds, SAMPLE_RATE, SAMPLES_PER_MS};
+use crate::plan::{DeviceLimits, Plan, PlanError};
+
+/// Samples per block: one DMA half-buffer on the board, one tick of the QEMU pacer (5 ms).
+pub const BLOCK_LEN: usize = 250;
+/// Ramp to zero on [`Runner::stop`] / [`Runner::fault`], and the least ramp at a plan's end.
+pub const STOP_RAMP_MS: u32 = 20;
+/// Ramp of the amplitude when a manual setpoint ([`Runner::drive`]) changes.
+pub const MANUAL_RAMP_MS: u32 = 20;
+
+/// What the drive is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DriveState {
+    /// No output (mid-scale).
+    Idle,
+    /// Amplitude rising towards the step's (or setpoint's) target.
+    RampUp,
+    /// Steady amplitude.
+    Running,
+    /// Amplitude falling towards a lower target within a plan or setpoint.
+    RampDown,
+    /// Ramping to zero after a stop request or the end of a plan; then idle.
+    Stopping,
+    /// Ramped to zero after a fault; stays silent until a stop request clears it.
+    Faulted,
+}
+
+impl DriveState {
+    /// Lowercase name as printed by the CLI (`stopping` is reported as `ramp_down`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            DriveState::Idle => "idle",
+            DriveState::RampUp => "ramp_up",
+            DriveState::Running => "running",
+            DriveState::RampDown | DriveState::Stopping => "ramp_down",
+            DriveState::Faulted => "faulted",
+        }
+    }
+}
+
+/// A snapshot of the drive, as answered to [`crate::link::Request::Status`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StatusReport {
+    /// What the drive is doing.
+    pub state: DriveState,
+    /// Index of the plan step being run; `None` outside a plan (idle, manual, final ramp).
+    pub step: Option<u16>,
+    /// Which repetition of the plan is running (0-based).
+    pub run: u16,
+    /// Samples output since the current plan or manual drive started (kept when idle).
+    pub elapsed_samples: u64,
+    /// Samples per second, to turn `elapsed_samples` into time.
+    pub sample_rate: u32,
+    /// Frequency being output, millihertz.
+    pub freq_mhz: u32,
+    /// Amplitude being output right now (ramps included), Q15.
+    pub amplitude_q15: u16,
+    /// Sample blocks the output needed before they were ready (missed refills).
+    pub underruns: u32,
+    /// Commands applied so far (start, drive, stop, fault).
+    pub commands: u32,
+}
+
+impl StatusReport {
+    /// `elapsed_samples` in milliseconds.
+    pub fn elapsed_ms(&self) -> f64 {
+        self.elapsed_samples as f64 * 1000.0 / self.sample_rate as f64
+    }
+}
+
+/// Why a command was not applied.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DriveError {
+    /// The plan does not fit the device's limits.
+    Plan(PlanError),
+    /// The manual setpoint does not fit the device's limits.
+    Setpoint(PlanError),
+    /// The drive is faulted; send a stop to clear it first.
+    Faulted,
+    /// The drive's command queue is full; try again.
+    Busy,
+}
+
+impl core::fmt::Display for DriveError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            DriveError::Plan(e) => write!(f, "invalid plan: {e}"),
+            DriveError::Setpoint(e) => write!(f, "invalid setpoint: {e}"),
+            DriveError::Faulted => write!(f, "drive is faulted (send stop to clear)"),
+            DriveError::Busy => write!(f, "drive command queue full"),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    Idle,
+    Plan { step: u16, run: u16, step_left: u32 },
+    Manual,
+    Stopping { fault: bool },
+    Faulted,
+}
+
+/// The plan runner. See the module docs.
+#[derive(Debug, Clone)]
+pub struct Runner {
+    limits: DeviceLimits,
+    plan: Plan,
+    mode: Mode,
+    dds: Dds,
+    freq_mhz: u32,
+    gain: i32,
+    target: i32,
+    inc: i32,
+    ramp_left: u32,
+    elapsed: u64,
+    underruns: u32,
+    commands: u32,
+}
+
+impl Runner {
+    /// An idle runner checking commands against `limits`.
+    pub const fn new(limits: DeviceLimits) -> Self {
+        Self {
+            limits,
+            plan: Plan { name: heapless::String::new(), repeat: 0, steps: heapless::Vec::new() },
+            mode: Mode::Idle,
+            dds: Dds::new(0),
+            freq_mhz: 0,
+            gain: 0,
+            target: 0,
+            inc: 0,
+            ramp_left: 0,
+            elapsed: 0,
+            underruns: 0,
+            commands: 0,
+        }
+    }
+
+    /// Phase of the next sample (one turn = 2³²).
+    pub fn phase(&self) -> u32 {
+        self.dds.phase
+    }
+
+    /// Current Q31 gain.
+    pub fn gain(&self) -> i32 {
+        self.gain
+    }
+
+    /// The plan loaded last.
+    pub fn plan(&self) -> &Plan {
+        &self.plan
+    }
+
+    /// Starts `plan` at the next sample (replacing whatever runs; the amplitude ramps from its
+    /// current value, the phase carries on).
+    pub fn start_plan(&mut self, plan: Plan) -> Result<(), DriveError> {
+        if self.mode == Mode::Faulted {
+            return Err(DriveError::Faulted);
+        }
+        plan.validate(&self.limits).map_err(DriveError::Plan)?;
+        self.plan = plan;
+        self.elapsed = 0;
+        self.commands = self.commands.wrapping_add(1);
+        self.begin_step(0, 0);
+        Ok(())
+    }
+
+    /// Drives a steady sine (manual mode): the frequency changes at the next sample (phase
+    /// kept), the amplitude ramps over [`MANUAL_RAMP_MS`].
+    pub fn drive(&mut self, freq_mhz: u32, amplitude_q15: u16) -> Result<(), DriveError> {
+        if self.mode == Mode::Faulted {
+            return Err(DriveError::Faulted);
+        }
+        self.limits.check_setpoint(freq_mhz, amplitude_q15).map_err(DriveError::Setpoint)?;
+        if self.mode != Mode::Manual {
+            self.elapsed = 0;
+        }
+        self.mode = Mode::Manual;
+        self.set_freq(freq_mhz);
+        self.ramp_to(dds::gain_of_q15(amplitude_q15), MANUAL_RAMP_MS * SAMPLES_PER_MS);
+        self.commands = self.commands.wrapping_add(1);
+        Ok(())
+    }
+
+    /// Ramps to zero over [`STOP_RAMP_MS`], then idles. Clears a latched fault.
+    pub fn stop(&mut self) {
+        self.commands = self.commands.wrapping_add(1);
+        match self.mode {
+            Mode::Idle => {}
+            Mode::Faulted => self.mode = Mode::Idle,
+            Mode::Stopping { .. } => self.mode = Mode::Stopping { fault: false },
+            Mode::Plan { .. } | Mode::Manual => {
+                self.mode = Mode::Stopping { fault: false };
+                self.ramp_to(0, STOP_RAMP_MS * SAMPLES_PER_MS);
+            }
+        }
+    }
+
+    /// Ramps to zero over [`STOP_RAMP_MS`] and latches [`DriveState::Faulted`].
+    pub fn fault(&mut self) {
+        self.commands = self.commands.wrapping_add(1);
+        match self.mode {
+            Mode::Faulted => {}
+            Mode::Idle => self.mode = Mode::Faulted,
+            Mode::Stopping { .. } => self.mode = Mode::Stopping { fault: true },
+            Mode::Plan { .. } | Mode::Manual => {
+                self.mode = Mode::Stopping { fault: true };
+                self.ramp_to(0, STOP_RAMP_MS * SAMPLES_PER_MS);
+            }
+        }
+    }
+
+    /// Counts one missed refill (the output ran ahead of the runner).
+    pub fn note_underrun(&mut self) {
+        self.underruns = self.underruns.wrapping_add(1);
+    }
+
+    /// The current state.
+    pub fn state(&self) -> DriveState {
+        match self.mode {
+            Mode::Idle => DriveState::Idle,
+            Mode::Faulted => DriveState::Faulted,
+            Mode::Stopping { .. } => DriveState::Stopping,
+            Mode::Plan { .. } | Mode::Manual => {
+                if self.ramp_left == 0 || self.inc == 0 {
+                    DriveState::Running
+                } else if self.inc > 0 {
+                    DriveState::RampUp
+                } else {
+                    DriveState::RampDown
+                }
+            }
+        }
+    }
+
+    /// A snapshot for [`crate::link::Request::Status`].
+    pub fn status(&self) -> StatusReport {
+        let (step, run) = match self.mode {
+            Mode::Plan { step, run, .. } => (Some(step), run),
+            _ => (None, 0),
+        };
+        let silent = matches!(self.mode, Mode::Idle | Mode::Faulted);
+        StatusReport {
+            state: self.state(),
+            step,
+            run,
+            elapsed_samples: self.elapsed,
+            sample_rate: SAMPLE_RATE,
+            freq_mhz: if silent { 0 } else { self.freq_mhz },
+            amplitude_q15: dds::q15_of_gain(self.gain),
+            underruns: self.underruns,
+            commands: self.commands,
+        }
+    }
+
+    fn set_freq(&mut self, freq_mhz: u32) {
+        self.freq_mhz = freq_mhz;
+        self.dds.tuning_word = dds::tuning_word(freq_mhz);
+    }
+
+    fn ramp_to(&mut self, target: i32, samples: u32) {
+        self.target = target;
+        if samples == 0 || target == self.gain {
+            self.gain = target;
+            self.inc = 0;
+            self.ramp_left = 0;
+        } else {
+            self.inc = (target - self.gain) / samples as i32;
+            self.ramp_left = samples;
+        }
+    }
+
+    fn begin_step(&mut self, step: u16, run: u16) {
+        let s = self.plan.steps[step as usize];
+        self.mode = Mode::Plan { step, run, step_left: s.duration_samples() };
+        self.set_freq(s.freq_mhz);
+        self.ramp_to(dds::gain_of_q15(s.amplitude_q15), s.ramp_samples());
+    }
+
+    fn end_of_step(&mut self, step: u16, run: u16) {
+        if (step as usize + 1) < self.plan.steps.len() {
+            self.begin_step(step + 1, run);
+        } else if run + 1 < self.plan.repeat {
+            self.begin_step(0, run + 1);
+        } else {
+            let ramp = self.plan.steps[step as usize].ramp_ms.max(STOP_RAMP_MS);
+            self.mode = Mode::Stopping { fault: false };
+            self.ramp_to(0, ramp * SAMPLES_PER_MS);
+        }
+    }
+
+    /// Fills `out` with the next samples (12-bit DAC codes) and advances the plan.
+    pub fn fill(&mut self, out: &mut [u16]) {
+        let mut pos = 0;
+        while pos < out.len() {
+            if let Mode::Stopping { fault } = self.mode
+                && self.ramp_left == 0
+            {
+                self.gain = 0;
+                self.mode = if fault { Mode::Faulted } else { Mode::Idle };
+            }
+            if matches!(self.mode, Mode::Idle | Mode::Faulted) {
+                out[pos..].fill(DAC_MID);
+                return;
+            }
+            let mut n = (out.len() - pos) as u32;
+            if let Mode::Plan { step_left, .. } = self.mode {
+                n = n.min(step_left);
+            }
+            if self.ramp_left > 0 {
+                n = n.min(self.ramp_left);
+            }
+            let seg = &mut out[pos..pos + n as usize];
+            if self.ramp_left > 0 {
+                self.dds.fill_ramp(seg, &mut self.gain, self.inc);
+                self.ramp_left -= n;
+                if self.ramp_left == 0 {
+                    self.gain = self.target;
+                }
+            } else {
+                self.dds.fill_steady(seg, self.gain);
+            }
+            pos += n as usize;
+            self.elapsed += n as u64;
+            match self.mode {
+                Mode::Plan { step, run, step_left } => {
+                    if step_left == n {
+                        self.end_of_step(step, run);
+                    } else {
+                        self.mode = Mode::Plan { step, run, step_left: step_left - n };
+                    }
+                }
+                Mode::Stopping { fault } if self.ramp_left == 0 => {
+                    self.gain = 0;
+                    self.mode = if fault { Mode::Faulted } else { Mode::Idle };
+                }
+                _ => {}
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use crate::plan::Step;
+    use std::vec::Vec;
+
+    fn plan(steps: &[Step], repeat: u16) -> Plan {
+        Plan {
+            name: heapless::String::try_from("test").unwrap(),
+            repeat,
+            steps: heapless::Vec::from_slice(steps).unwrap(),
+        }
+    }
+
+    const STEPS: [Step; 3] = [
+        Step { freq_mhz: 100_000, amplitude_q15: 16384, duration_ms: 40, ramp_ms: 10 },
+        Step { freq_mhz: 250_500, amplitude_q15: 26000, duration_ms: 60, ramp_ms: 5 },
+        Step { freq_mhz: 1_234_567, amplitude_q15: 8000, duration_ms: 30, ramp_ms: 3 },
+    ];
+
+    /// Runs `runner` block by block until idle; records codes, gains, phases and statuses per
+    /// sample (blocks of odd length, so boundaries fall inside blocks).
+    struct Trace {
+        codes: Vec<u16>,
+        step: Vec<Option<u16>>,
+        gain: Vec<i32>,
+        phase: Vec<u32>,
+    }
+
+    fn trace(runner: &mut Runner, block: usize) -> Trace {
+        let mut t =
+            Trace { codes: Vec::new(), step: Vec::new(), gain: Vec::new(), phase: Vec::new() };
+        let mut buf = std::vec![0u16; block];
+        // Single samples expose the state at every index; blocks check the same stream.
+        let mut single = runner.clone();
+        while single.state() != DriveState::Idle {
+            t.step.push(single.status().step);
+            t.phase.push(single.phase());
+            let mut one = [0u16; 1];
+            single.fill(&mut one);
+            t.gain.push(single.gain());
+            t.codes.push(one[0]);
+        }
+        let mut blocked = Vec::new();
+        while blocked.len() < t.codes.len() {
+            runner.fill(&mut buf);
+            blocked.extend_from_slice(&buf);
+        }
+        assert_eq!(&blocked[..t.codes.len()], &t.codes[..], "block size changes the stream");
+        assert!(blocked[t.codes.len()..].iter().all(|&c| c == DAC_MID));
+        t
+    }
+
+    #[test]
+    fn steps_switch_at_exact_sample_indices() {
+        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        r.start_plan(plan(&STEPS, 2)).unwrap();
+        let t = trace(&mut r, 97);
+        let per_run: u32 = STEPS.iter().map(|s| s.duration_samples()).sum();
+        let mut boundary = 0usize;
+        for run in 0..2 {
+            for (i, s) in STEPS.iter().enumerate() {
+                assert_eq!(
+                    t.step[boundary],
+                    Some(i as u16),
+                    "run {run} step {i} starts at {boundary}"
+                );
+                if boundary > 0 {
+                    assert_ne!(t.step[boundary - 1], Some(i as u16));
+                }
+                boundary += s.duration_samples() as usize;
+            }
+        }
+        assert_eq!(boundary, 2 * per_run as usize);
+        // Then the final ramp to zero (max(last ramp, STOP_RAMP_MS)), then idle.
+        assert_eq!(t.codes.len(), boundary + (STOP_RAMP_MS * SAMPLES_PER_MS) as usize);
+        assert!(t.step[boundary..].iter().all(|s| s.is_none()));
+        assert_eq!(r.status().elapsed_samples, t.codes.len() as u64);
+        assert_eq!(r.state(), DriveState::Idle);
+    }
+
+    #[test]
+    fn phase_is_continuous_across_steps() {
+        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        r.start_plan(plan(&STEPS, 1)).unwrap();
+        let t = trace(&mut r, 250);
+        // The phase advances by exactly the current step's tuning word: never reset or jumped.
+        let mut idx = 0usize;
+        for s in STEPS {
+            for _ in 0..s.duration_samples() {
+                let want = t.phase[idx].wrapping_add(dds::tuning_word(s.freq_mhz));
+                assert_eq!(t.phase[idx + 1], want, "phase jump at sample {idx}");
+                idx += 1;
+            }
+        }
+        // The waveform never moves more than one sample's phase step allows:
+        // |Δcode| ≤ 2047·2π·f/f_s + 1 LSB of rounding + the ramp's gain change.
+        let max_f = STEPS.iter().map(|s| s.freq_mhz).max().unwrap() as f64 / 1000.0;
+        let bound = 2047.0 * core::f64::consts::TAU * max_f / SAMPLE_RATE as f64 + 2.0;
+        for w in t.codes.windows(2) {
+            let d = (w[1] as f64 - w[0] as f64).abs();
+            assert!(d <= bound, "waveform jump of {d} LSB (bound {bound})");
+        }
+    }
+
+    #[test]
+    fn ramps_are_monotonic_and_reach_their_targets() {
+        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        r.start_plan(plan(&STEPS, 1)).unwrap();
+        let t = trace(&mut r, 64);
+        let mut idx = 0usize;
+        let mut prev_target = 0i32;
+        for s in STEPS {
+            let target = dds::gain_of_q15(s.amplitude_q15);
+            let ramp = s.ramp_samples() as usize;
+            let g = &t.gain[idx..idx + ramp];
+            if target > prev_target {
+                assert!(g.windows(2).all(|w| w[1] >= w[0]), "ramp up not monotonic");
+            } else {
+                assert!(g.windows(2).all(|w| w[1] <= w[0]), "ramp down not monotonic");
+            }
+            assert_eq!(t.gain[idx + ramp - 1], target, "ramp ends on its target");
+            let end = idx + s.duration_samples() as usize;
+            assert!(t.gain[idx + ramp..end].iter().all(|&x| x == target));
+            idx = end;
+            prev_target = target;
+        }
+        // Final ramp to zero: monotonic, ends at zero, never a cut.
+        let tail = &t.gain[idx..];
+        assert!(tail.windows(2).all(|w| w[1] <= w[0]));
+        assert_eq!(*tail.last().unwrap(), 0);
+        let max_drop = tail.windows(2).map(|w| w[0] - w[1]).max().unwrap();
+        assert!(max_drop <= prev_target / (STOP_RAMP_MS * SAMPLES_PER_MS) as i32 + 1);
+    }
+
+    #[test]
+    fn stop_ramps_to_zero_then_idles() {
+        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        r.drive(440_000, 30000).unwrap();
+        let mut buf = [0u16; 5000];
+        r.fill(&mut buf);
+        assert_eq!(r.state(), DriveState::Running);
+        assert_eq!(r.status().amplitude_q15, 30000);
+        assert_eq!(r.status().freq_mhz, 440_000);
+        r.stop();
+        assert_eq!(r.state(), DriveState::Stopping);
+        let mut gains = Vec::new();
+        for _ in 0..(STOP_RAMP_MS * SAMPLES_PER_MS) {
+            let mut one = [0u16; 1];
+            r.fill(&mut one);
+            gains.push(r.gain());
+        }
+        assert!(gains.windows(2).all(|w| w[1] <= w[0]));
+        assert_eq!(*gains.last().unwrap(), 0);
+        r.fill(&mut buf);
+        assert_eq!(r.state(), DriveState::Idle);
+        assert!(buf.iter().all(|&c| c == DAC_MID));
+        assert_eq!(r.status().commands, 2);
+    }
+
+    #[test]
+    fn fault_latches_until_stop() {
+        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        r.drive(100_000, 10000).unwrap();
+        let mut buf = [0u16; 2000];
+        r.fill(&mut buf);
+        r.fault();
+        r.fill(&mut buf);
+        assert_eq!(r.state(), DriveState::Faulted);
+        assert_eq!(r.drive(100_000, 1), Err(DriveError::Faulted));
+        assert_eq!(r.start_plan(plan(&STEPS, 1)), Err(DriveError::Faulted));
+        r.stop();
+        assert_eq!(r.state(), DriveState::Idle);
+        assert_eq!(r.drive(100_000, 1), Ok(()));
+    }
+
+    #[test]
+    fn invalid_commands_are_refused() {
+        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        assert!(matches!(r.drive(5_000_000, 1), Err(DriveError::Setpoint(_))));
+        assert!(matches!(r.start_plan(plan(&[], 1)), Err(DriveError::Plan(PlanError::Empty))));
+        assert_eq!(r.state(), DriveState::Idle);
+        assert_eq!(r.status().commands, 0);
+    }
+}

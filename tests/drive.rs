@@ -1,0 +1,154 @@
+//! End to end: plans and manual drive sent from the host over the link to the firmware in QEMU.
+//!
+//! Timing assertions are on sample counts reported by the firmware, never on wall time: QEMU's
+//! clock follows the host's and slips under load. Polling uses generous deadlines.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use chladni::device::{DeviceClient, DeviceError};
+use chladni::emulator::{Emulator, EmulatorConfig};
+use chladni_shared::dds::SAMPLES_PER_MS;
+use chladni_shared::link::{DriveError, DriveState, Plan, PlanError, StatusReport};
+use chladni_shared::plan::Step;
+use chladni_shared::runner::{BLOCK_LEN, MANUAL_RAMP_MS};
+
+fn start(name: &str) -> (Emulator, DeviceClient) {
+    let log = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("drive-{name}.log"));
+    let emulator = Emulator::start(&EmulatorConfig {
+        time_limit: Some(Duration::from_secs(240)),
+        log_file: Some(log),
+        ..Default::default()
+    })
+    .expect("emulator starts");
+    let mut client = emulator.connect().expect("connect");
+    client.set_timeout(Duration::from_secs(10));
+    (emulator, client)
+}
+
+fn plan(name: &str, steps: &[Step], repeat: u16) -> Plan {
+    Plan {
+        name: heapless::String::try_from(name).unwrap(),
+        repeat,
+        steps: heapless::Vec::from_slice(steps).unwrap(),
+    }
+}
+
+/// Polls status until `done` says so; returns every status seen.
+fn poll_until(
+    client: &mut DeviceClient,
+    limit: Duration,
+    mut done: impl FnMut(&StatusReport) -> bool,
+) -> Vec<StatusReport> {
+    let deadline = Instant::now() + limit;
+    let mut seen = Vec::new();
+    loop {
+        let s = client.status().expect("status");
+        seen.push(s);
+        if done(&s) {
+            return seen;
+        }
+        assert!(Instant::now() < deadline, "gave up waiting; last status {s:?}");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+#[test]
+fn plan_runs_step_by_step_to_idle() {
+    let (_emulator, mut client) = start("plan");
+    let steps = [
+        Step { freq_mhz: 120_000, amplitude_q15: 16_000, duration_ms: 600, ramp_ms: 20 },
+        Step { freq_mhz: 181_500, amplitude_q15: 24_000, duration_ms: 700, ramp_ms: 10 },
+        Step { freq_mhz: 1_234_567, amplitude_q15: 8_000, duration_ms: 600, ramp_ms: 30 },
+    ];
+    // Steps last ≥ 600 ms so that a poller stalled by a loaded host still sees each of them.
+    let before = client.status().expect("status");
+    assert_eq!(before.state, DriveState::Idle);
+    client.run_plan(plan("e2e", &steps, 1)).expect("plan accepted");
+
+    let seen = poll_until(&mut client, Duration::from_secs(90), |s| {
+        s.commands > before.commands && s.state == DriveState::Idle
+    });
+    let seen: Vec<_> = seen.into_iter().filter(|s| s.commands > before.commands).collect();
+
+    // Step windows in samples: step i covers [start_i, end_i).
+    let mut bounds = Vec::new();
+    let mut t = 0u64;
+    for s in &steps {
+        let n = (s.duration_ms * SAMPLES_PER_MS) as u64;
+        bounds.push((t, t + n));
+        t += n;
+    }
+    let mut last_step = 0u16;
+    let mut steps_seen = std::collections::BTreeSet::new();
+    for s in &seen {
+        // Status is published once per block, and the plan started on a block boundary.
+        assert_eq!(s.elapsed_samples % BLOCK_LEN as u64, 0, "{s:?}");
+        if let Some(i) = s.step {
+            let (lo, hi) = bounds[i as usize];
+            assert!(
+                (lo..hi).contains(&s.elapsed_samples),
+                "step {i} reported at sample {} outside [{lo}, {hi})",
+                s.elapsed_samples
+            );
+            assert!(i >= last_step, "steps went backwards: {seen:?}");
+            assert_eq!(s.freq_mhz, steps[i as usize].freq_mhz);
+            last_step = i;
+            steps_seen.insert(i);
+        }
+    }
+    assert_eq!(steps_seen.into_iter().collect::<Vec<_>>(), [0, 1, 2], "every step observed");
+    let end = seen.last().unwrap();
+    assert_eq!(end.state, DriveState::Idle);
+    assert_eq!(end.step, None);
+    assert_eq!(end.amplitude_q15, 0);
+    // All steps, then the final ramp to zero (the last step's 30 ms ramp): to the sample.
+    assert_eq!(end.elapsed_samples, t + (30 * SAMPLES_PER_MS) as u64);
+}
+
+#[test]
+fn manual_drive_stop_and_refusals() {
+    let (_emulator, mut client) = start("manual");
+
+    // Invalid plans are refused by the controller itself with the typed error.
+    let bad = plan(
+        "bad",
+        &[
+            Step { freq_mhz: 100_000, amplitude_q15: 1000, duration_ms: 10, ramp_ms: 0 },
+            Step { freq_mhz: 2_500_000, amplitude_q15: 1000, duration_ms: 10, ramp_ms: 0 },
+        ],
+        1,
+    );
+    match client.run_plan(bad) {
+        Err(DeviceError::Rejected {
+            error: DriveError::Plan(PlanError::FrequencyOutOfRange { step: 1, freq_mhz, .. }),
+            ..
+        }) => assert_eq!(freq_mhz, 2_500_000),
+        other => panic!("expected a frequency error for step 1, got {other:?}"),
+    }
+    match client.drive(440_000, 40_000) {
+        Err(DeviceError::Rejected { error: DriveError::Setpoint(e), .. }) => {
+            assert!(matches!(e, PlanError::AmplitudeTooHigh { amplitude_q15: 40_000, .. }))
+        }
+        other => panic!("expected an amplitude error, got {other:?}"),
+    }
+    assert_eq!(client.status().unwrap().state, DriveState::Idle);
+
+    client.drive(440_500, 16_384).expect("drive accepted");
+    let seen = poll_until(&mut client, Duration::from_secs(60), |s| {
+        s.state == DriveState::Running && s.amplitude_q15 == 16_384
+    });
+    let s = *seen.last().unwrap();
+    assert_eq!((s.freq_mhz, s.step), (440_500, None));
+    // The manual ramp takes MANUAL_RAMP_MS: running at full amplitude only after it.
+    assert!(s.elapsed_samples >= (MANUAL_RAMP_MS * SAMPLES_PER_MS) as u64);
+
+    client.stop().expect("stop accepted");
+    let seen = poll_until(&mut client, Duration::from_secs(60), |t| {
+        t.commands > s.commands && t.state == DriveState::Idle
+    });
+    // The amplitude only ever falls while stopping: a ramp, not a cut.
+    let amps: Vec<u16> = seen.iter().map(|s| s.amplitude_q15).collect();
+    assert!(amps.windows(2).all(|w| w[1] <= w[0]), "amplitude rose while stopping: {amps:?}");
+    assert_eq!(*amps.last().unwrap(), 0);
+}
