@@ -1,0 +1,4 @@
+//! Plates.
+
+pub mod file;
+pub mod solver;
