@@ -78,7 +78,8 @@ impl ModesArgs {
         if !(3..=401).contains(&self.grid) {
             return Err(InputError(format!("--grid must be in 3..=401, got {}", self.grid)).into());
         }
-        let spinner = ProgressBar::new_spinner().with_message(format!("solving ({0}×{0} terms)", self.terms));
+        let spinner =
+            ProgressBar::new_spinner().with_message(format!("solving ({0}×{0} terms)", self.terms));
         spinner.enable_steady_tick(std::time::Duration::from_millis(120));
         let sol = solver::solve(&plate, self.count, self.terms);
         spinner.finish_and_clear();
@@ -86,14 +87,27 @@ impl ModesArgs {
         if let Some(dir) = &self.plot {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
             let bar = ProgressBar::new(sol.modes.len() as u64).with_style(
-                ProgressStyle::with_template("plotting {bar:30} {pos}/{len}").unwrap_or(ProgressStyle::default_bar()),
+                ProgressStyle::with_template("plotting {bar:30} {pos}/{len}")
+                    .unwrap_or(ProgressStyle::default_bar()),
             );
             let (nx, ny) = grid_dims(121, plate.size_mm);
             for (k, m) in sol.modes.iter().enumerate() {
                 let grid = sol.sample(k, nx, ny);
                 let lines = node_lines(&grid);
-                let title = format!("{} — mode {}: {:.1} Hz, λ = {:.3}", plate.name, k + 1, m.freq_hz, m.lambda);
-                plot::chladni_figure(&dir.join(format!("mode-{:02}.png", k + 1)), &title, &plate, &grid, &lines)?;
+                let title = format!(
+                    "{} — mode {}: {:.1} Hz, λ = {:.3}",
+                    plate.name,
+                    k + 1,
+                    m.freq_hz,
+                    m.lambda
+                );
+                plot::chladni_figure(
+                    &dir.join(format!("mode-{:02}.png", k + 1)),
+                    &title,
+                    &plate,
+                    &grid,
+                    &lines,
+                )?;
                 bar.inc(1);
             }
             bar.finish_and_clear();
@@ -103,7 +117,12 @@ impl ModesArgs {
             let entries = (0..sol.modes.len())
                 .map(|k| {
                     let m = &sol.modes[k];
-                    modes_file::grid_mode(&format!("mode {}", k + 1), m.freq_hz, m.lambda, &sol.sample(k, nx, ny))
+                    modes_file::grid_mode(
+                        &format!("mode {}", k + 1),
+                        m.freq_hz,
+                        m.lambda,
+                        &sol.sample(k, nx, ny),
+                    )
                 })
                 .collect();
             let text = modes_file::render(&file.plate, entries)?;
@@ -111,12 +130,21 @@ impl ModesArgs {
         }
 
         if self.json {
-            let modes: Vec<_> =
-                sol.modes.iter().map(|m| json!({"freq_hz": m.freq_hz, "lambda": m.lambda})).collect();
+            let modes: Vec<_> = sol
+                .modes
+                .iter()
+                .map(|m| json!({"freq_hz": m.freq_hz, "lambda": m.lambda}))
+                .collect();
             println!("{}", json!({ "modes": modes }));
         } else {
-            println!("{} ({:?}, {:.0}×{:.0} mm):", plate.name, plate.boundary, plate.size_mm[0], plate.size_mm[1]);
-            println!("{:>4} {:>12} {:>10} {:>8} {:>16}", "mode", "freq (Hz)", "lambda", "lines", "node length (mm)");
+            println!(
+                "{} ({:?}, {:.0}×{:.0} mm):",
+                plate.name, plate.boundary, plate.size_mm[0], plate.size_mm[1]
+            );
+            println!(
+                "{:>4} {:>12} {:>10} {:>8} {:>16}",
+                "mode", "freq (Hz)", "lambda", "lines", "node length (mm)"
+            );
             let (nx, ny) = grid_dims(121, plate.size_mm);
             for (k, m) in sol.modes.iter().enumerate() {
                 let lines = node_lines(&sol.sample(k, nx, ny));
@@ -126,7 +154,7 @@ impl ModesArgs {
                     m.freq_hz,
                     m.lambda,
                     lines.len(),
-                    total_length(&lines)
+                    total_length(&lines) + 0.0
                 );
             }
         }
@@ -160,7 +188,10 @@ impl FromPhotoArgs {
     fn run(&self) -> anyhow::Result<ExitCode> {
         let size = [self.size_mm[0], self.size_mm[1]];
         if !size.iter().all(|v| v.is_finite() && *v > 0.0) {
-            return Err(InputError(format!("--size-mm must be two positive numbers, got {size:?}")).into());
+            return Err(InputError(format!(
+                "--size-mm must be two positive numbers, got {size:?}"
+            ))
+            .into());
         }
         if let Some(f) = self.freq_hz
             && !(f.is_finite() && f > 0.0)
@@ -175,10 +206,20 @@ impl FromPhotoArgs {
                 .lines
                 .iter()
                 .enumerate()
-                .map(|(k, l)| modes_file::line_mode(&format!("photo line {}", k + 1), self.freq_hz, l.angle_deg, l.offset_mm))
+                .map(|(k, l)| {
+                    modes_file::line_mode(
+                        &format!("photo line {}", k + 1),
+                        self.freq_hz,
+                        l.angle_deg,
+                        l.offset_mm,
+                    )
+                })
                 .collect::<Vec<_>>();
             let mut doc = toml::Table::new();
-            doc.insert("mode".into(), toml::Value::Array(entries.into_iter().map(toml::Value::Table).collect()));
+            doc.insert(
+                "mode".into(),
+                toml::Value::Array(entries.into_iter().map(toml::Value::Table).collect()),
+            );
             write(out, &toml::to_string(&doc)?)?;
         }
         if self.json {

@@ -555,6 +555,27 @@ mod tests {
     }
 
     #[test]
+    fn png_round_trip_and_heavier_noise() {
+        let mut s = scene(vec![(90.0, 0.0), (0.0, 0.0)], false, 5);
+        s.noise = 40.0;
+        s.stray = 0.05;
+        let path = std::env::temp_dir()
+            .join(format!("chladni-synthetic-photo-{}.png", std::process::id()));
+        render(&s).save(&path).unwrap();
+        let img = image::open(&path).unwrap().to_luma8();
+        std::fs::remove_file(&path).ok();
+        let found = find_lines(&img, s.size_mm, &Params::default());
+        assert_eq!(found.lines.len(), 2, "{:?}", found.lines);
+        for t in [(90.0, 0.0), (0.0, 0.0)] {
+            assert!(
+                found.lines.iter().any(|l| matches(l, t, s.size_mm).is_some()),
+                "{t:?}: {:?}",
+                found.lines
+            );
+        }
+    }
+
+    #[test]
     fn blank_plate_has_no_lines() {
         let mut s = scene(vec![], false, 4);
         s.density = 0.0;

@@ -60,7 +60,7 @@ pub fn chladni_figure(
         .caption(title, ("sans-serif", 16))
         .margin(8)
         .x_label_area_size(28)
-        .y_label_area_size(40)
+        .y_label_area_size(52)
         .build_cartesian_2d(0.0..w, 0.0..h)
         .map_err(|x| e(&x))?;
     chart
