@@ -223,9 +223,9 @@ pub fn skeleton(m: &Mask) -> Mask {
                     let a = (0..8).filter(|&k| !n[k] && n[(k + 1) % 8]).count();
                     let (p2, p4, p6, p8) = (n[0], n[2], n[4], n[6]);
                     let cond = if pass == 0 {
-                        !(p2 && p4 && p6) && !(p4 && p6 && p8)
+                        !(p4 && p6 && (p2 || p8))
                     } else {
-                        !(p2 && p4 && p8) && !(p2 && p6 && p8)
+                        !(p2 && p8 && (p4 || p6))
                     };
                     if (2..=6).contains(&b) && a == 1 && cond {
                         remove.push(y as usize * m.w + x as usize);
