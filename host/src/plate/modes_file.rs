@@ -63,3 +63,33 @@ pub fn grid_of(entry: &Table, size_mm: [f64; 2]) -> Option<Grid> {
     let values = values?;
     (values.len() == nx * ny && nx >= 2 && ny >= 2).then_some(Grid { nx, ny, size_mm, values })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plate::solver;
+
+    #[test]
+    fn written_modes_parse_back_as_a_plate_file_with_grids() {
+        let text = "[plate]\nname = \"p\"\nsize_mm = [300.0, 200.0]\nthickness_mm = 2.0\n\
+                    youngs_modulus_gpa = 70.0\ndensity_kg_m3 = 2700.0\npoisson = 0.33\nboundary = \"cantilever\"\n";
+        let file = PlateFile::parse(text, "t").unwrap();
+        let plate = file.plate.mechanics().unwrap();
+        let sol = solver::solve(&plate, 2, 8);
+        let grid = sol.sample(1, 31, 21);
+        let out = render(
+            &file.plate,
+            vec![grid_mode("mode 2", sol.modes[1].freq_hz, sol.modes[1].lambda, &grid)],
+        )
+        .unwrap();
+        let back = PlateFile::parse(&out, "out").unwrap();
+        assert_eq!(back.plate.mechanics().unwrap(), plate);
+        assert_eq!(back.mode.len(), 1);
+        let g = grid_of(&back.mode[0], plate.size_mm).unwrap();
+        assert_eq!((g.nx, g.ny), (31, 21));
+        assert!(g.values.iter().zip(&grid.values).all(|(a, b)| (a - b).abs() <= 5e-6));
+        let line = line_mode("l", Some(60.0), 90.0, -12.5);
+        assert_eq!(line["node"]["kind"].as_str(), Some("line"));
+        assert!(grid_of(&line, plate.size_mm).is_none());
+    }
+}
