@@ -4,7 +4,11 @@
 //! - [`device`]: the client for the controller's link (serial port or QEMU's TCP socket).
 //! - [`emulator`]: builds the QEMU firmware and runs it as a controller on a TCP port.
 //! - [`firmware`]: locates and builds firmware images.
+//! - [`plate`]: plate files, the plate mode solver, node lines, Chladni photos.
+//! - [`physics`]: the particle-on-a-string model of the paper's Appendix.
 
 pub mod device;
 pub mod emulator;
 pub mod firmware;
+pub mod physics;
+pub mod plate;

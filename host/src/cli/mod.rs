@@ -7,6 +7,8 @@ use clap::{Parser, Subcommand};
 
 mod device;
 mod emulator;
+mod physics;
+mod plate;
 
 /// Bad input from the user: exit code 2.
 #[derive(Debug, thiserror::Error)]
@@ -33,6 +35,12 @@ enum Command {
     Device(device::DeviceCommand),
     /// Run the controller firmware in QEMU, its link on a TCP port.
     Emulator(emulator::EmulatorArgs),
+    /// Plate modes from theory, node lines from Chladni photos.
+    #[command(subcommand)]
+    Plate(plate::PlateCommand),
+    /// Physics models (particle on a vibrating string).
+    #[command(subcommand)]
+    Physics(physics::PhysicsCommand),
 }
 
 impl Cli {
@@ -41,6 +49,8 @@ impl Cli {
         match &self.command {
             Command::Device(cmd) => cmd.run(),
             Command::Emulator(args) => args.run(),
+            Command::Plate(cmd) => cmd.run(),
+            Command::Physics(cmd) => cmd.run(),
         }
     }
 }

@@ -1,0 +1,264 @@
+//! `chladni plate ...`: plate modes from theory (Rayleigh–Ritz) and node lines from photos.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::{Args, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::json;
+
+use super::InputError;
+use chladni::plate::contour::{node_lines, total_length};
+use chladni::plate::file::PlateFile;
+use chladni::plate::{modes_file, photo, plot, solver};
+
+#[derive(Debug, Subcommand)]
+pub enum PlateCommand {
+    /// Natural frequencies, node lines (Chladni figures) and `[[mode]]` entries of a plate.
+    Modes(ModesArgs),
+    /// Straight node lines from a photo of sand gathered on the nodes of a vibrating plate.
+    FromPhoto(FromPhotoArgs),
+}
+
+impl PlateCommand {
+    pub fn run(&self) -> anyhow::Result<ExitCode> {
+        match self {
+            PlateCommand::Modes(a) => a.run(),
+            PlateCommand::FromPhoto(a) => a.run(),
+        }
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct ModesArgs {
+    /// Plate file (TOML with a `[plate]` table; see docs/plate.md).
+    plate: PathBuf,
+    /// Number of elastic modes (rigid-body modes are left out).
+    #[arg(long, default_value_t = 6)]
+    count: usize,
+    /// Print `{"modes": [{"freq_hz": f, "lambda": λ}, ...]}` instead of a table.
+    #[arg(long)]
+    json: bool,
+    /// Write one node-line PNG per mode (mode-01.png, ...) into this directory.
+    #[arg(long, value_name = "DIR")]
+    plot: Option<PathBuf>,
+    /// Write a plate file: the input's `[plate]` table plus one `[[mode]]` per mode, with the
+    /// mode shape sampled on a grid (`node = { kind = "grid", ... }`).
+    #[arg(long, value_name = "FILE")]
+    write_modes: Option<PathBuf>,
+    /// Grid points along x for `--write-modes` (y follows the aspect ratio).
+    #[arg(long, default_value_t = 41)]
+    grid: usize,
+    /// Legendre polynomials per direction in the Ritz basis (terms² unknowns).
+    #[arg(long, default_value_t = solver::DEFAULT_TERMS)]
+    terms: usize,
+}
+
+fn grid_dims(nx: usize, size: [f64; 2]) -> (usize, usize) {
+    let ny = (((nx - 1) as f64) * size[1] / size[0]).round() as usize + 1;
+    (nx, ny.max(2))
+}
+
+impl ModesArgs {
+    fn run(&self) -> anyhow::Result<ExitCode> {
+        let file = PlateFile::load(&self.plate).map_err(|e| InputError(e.to_string()))?;
+        let plate = file.plate.mechanics().map_err(|e| InputError(e.to_string()))?;
+        if !(4..=30).contains(&self.terms) {
+            return Err(InputError(format!("--terms must be in 4..=30, got {}", self.terms)).into());
+        }
+        let available = self.terms * self.terms / 4;
+        if self.count == 0 || self.count > available {
+            return Err(InputError(format!(
+                "--count must be in 1..={available} (a quarter of the Ritz unknowns), got {}",
+                self.count
+            ))
+            .into());
+        }
+        if !(3..=401).contains(&self.grid) {
+            return Err(InputError(format!("--grid must be in 3..=401, got {}", self.grid)).into());
+        }
+        let spinner =
+            ProgressBar::new_spinner().with_message(format!("solving ({0}×{0} terms)", self.terms));
+        spinner.enable_steady_tick(std::time::Duration::from_millis(120));
+        let sol = solver::solve(&plate, self.count, self.terms);
+        spinner.finish_and_clear();
+
+        if let Some(dir) = &self.plot {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            let bar = ProgressBar::new(sol.modes.len() as u64).with_style(
+                ProgressStyle::with_template("plotting {bar:30} {pos}/{len}")
+                    .unwrap_or(ProgressStyle::default_bar()),
+            );
+            let (nx, ny) = grid_dims(121, plate.size_mm);
+            for (k, m) in sol.modes.iter().enumerate() {
+                let grid = sol.sample(k, nx, ny);
+                let lines = node_lines(&grid);
+                let title = format!(
+                    "{} — mode {}: {:.1} Hz, λ = {:.3}",
+                    plate.name,
+                    k + 1,
+                    m.freq_hz,
+                    m.lambda
+                );
+                plot::chladni_figure(
+                    &dir.join(format!("mode-{:02}.png", k + 1)),
+                    &title,
+                    &plate,
+                    &grid,
+                    &lines,
+                )?;
+                bar.inc(1);
+            }
+            bar.finish_and_clear();
+        }
+        if let Some(out) = &self.write_modes {
+            let (nx, ny) = grid_dims(self.grid, plate.size_mm);
+            let entries = (0..sol.modes.len())
+                .map(|k| {
+                    let m = &sol.modes[k];
+                    modes_file::grid_mode(
+                        &format!("mode {}", k + 1),
+                        m.freq_hz,
+                        m.lambda,
+                        &sol.sample(k, nx, ny),
+                    )
+                })
+                .collect();
+            let text = modes_file::render(&file.plate, entries)?;
+            write(out, &text)?;
+        }
+
+        if self.json {
+            let modes: Vec<_> = sol
+                .modes
+                .iter()
+                .map(|m| json!({"freq_hz": m.freq_hz, "lambda": m.lambda}))
+                .collect();
+            println!("{}", json!({ "modes": modes }));
+        } else {
+            println!(
+                "{} ({:?}, {:.0}×{:.0} mm):",
+                plate.name, plate.boundary, plate.size_mm[0], plate.size_mm[1]
+            );
+            println!(
+                "{:>4} {:>12} {:>10} {:>8} {:>16}",
+                "mode", "freq (Hz)", "lambda", "lines", "node length (mm)"
+            );
+            let (nx, ny) = grid_dims(121, plate.size_mm);
+            for (k, m) in sol.modes.iter().enumerate() {
+                let lines = node_lines(&sol.sample(k, nx, ny));
+                println!(
+                    "{:>4} {:>12.2} {:>10.4} {:>8} {:>16.1}",
+                    k + 1,
+                    m.freq_hz,
+                    m.lambda,
+                    lines.len(),
+                    total_length(&lines) + 0.0
+                );
+            }
+        }
+        Ok(ExitCode::SUCCESS)
+    }
+}
+
+fn write(path: &Path, text: &str) -> anyhow::Result<()> {
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+#[derive(Debug, Args)]
+pub struct FromPhotoArgs {
+    /// Photo of the plate, cropped to the plate's edges (PNG), +y up = top of the image.
+    image: PathBuf,
+    /// Plate size W H (mm): the image's width and height.
+    #[arg(long, num_args = 2, value_names = ["W", "H"], required = true)]
+    size_mm: Vec<f64>,
+    /// Drive frequency the photo was taken at (written as freq_hz).
+    #[arg(long)]
+    freq_hz: Option<f64>,
+    /// Print the recovered lines as JSON.
+    #[arg(long)]
+    json: bool,
+    /// Write `[[mode]]` entries (one per straight node line) to this TOML file.
+    #[arg(long, value_name = "FILE")]
+    out: Option<PathBuf>,
+}
+
+impl FromPhotoArgs {
+    fn run(&self) -> anyhow::Result<ExitCode> {
+        let size = [self.size_mm[0], self.size_mm[1]];
+        if !size.iter().all(|v| v.is_finite() && *v > 0.0) {
+            return Err(InputError(format!(
+                "--size-mm must be two positive numbers, got {size:?}"
+            ))
+            .into());
+        }
+        if let Some(f) = self.freq_hz
+            && !(f.is_finite() && f > 0.0)
+        {
+            return Err(InputError(format!("--freq-hz must be positive, got {f}")).into());
+        }
+        let img = image::open(&self.image)
+            .map_err(|e| InputError(format!("cannot read image {}: {e}", self.image.display())))?;
+        let found = photo::find_lines(&img.to_luma8(), size, &photo::Params::default());
+        if let Some(out) = &self.out {
+            let entries = found
+                .lines
+                .iter()
+                .enumerate()
+                .map(|(k, l)| {
+                    modes_file::line_mode(
+                        &format!("photo line {}", k + 1),
+                        self.freq_hz,
+                        l.angle_deg,
+                        l.offset_mm,
+                    )
+                })
+                .collect::<Vec<_>>();
+            let mut doc = toml::Table::new();
+            doc.insert(
+                "mode".into(),
+                toml::Value::Array(entries.into_iter().map(toml::Value::Table).collect()),
+            );
+            write(out, &toml::to_string(&doc)?)?;
+        }
+        if self.json {
+            let lines: Vec<_> = found
+                .lines
+                .iter()
+                .map(|l| {
+                    json!({"angle_deg": l.angle_deg, "offset_mm": l.offset_mm, "rms_mm": l.rms_mm,
+                           "length_mm": l.length_mm, "pixels": l.pixels})
+                })
+                .collect();
+            println!(
+                "{}",
+                json!({"threshold": found.threshold, "sand_is_dark": found.sand_is_dark,
+                       "skeleton_pixels": found.skeleton_pixels, "unexplained_pixels": found.unexplained_pixels,
+                       "lines": lines})
+            );
+        } else {
+            println!(
+                "threshold {} ({} sand), {} skeleton pixels, {} not on a straight line",
+                found.threshold,
+                if found.sand_is_dark { "dark" } else { "light" },
+                found.skeleton_pixels,
+                found.unexplained_pixels
+            );
+            for (k, l) in found.lines.iter().enumerate() {
+                println!(
+                    "line {}: angle {:.2}°, offset {:+.2} mm, length {:.0} mm, rms {:.2} mm",
+                    k + 1,
+                    l.angle_deg,
+                    l.offset_mm,
+                    l.length_mm,
+                    l.rms_mm
+                );
+            }
+            if found.lines.is_empty() {
+                println!("no straight node line found");
+            }
+        }
+        Ok(ExitCode::SUCCESS)
+    }
+}

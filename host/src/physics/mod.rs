@@ -1,0 +1,3 @@
+//! Physics models behind the field model of DESIGN §2.
+
+pub mod string;

@@ -1,0 +1,306 @@
+//! The plate file: a TOML document with a `[plate]` table and an optional `[[mode]]` array.
+//!
+//! ```toml
+//! [plate]
+//! name = "cantilever 300x200"
+//! size_mm = [300.0, 200.0]
+//! thickness_mm = 2.0
+//! youngs_modulus_gpa = 70.0
+//! density_kg_m3 = 2700.0
+//! poisson = 0.33
+//! boundary = "cantilever"   # cantilever | free | hinged-rod
+//! # hinged-rod only (defaults shown): hinge line x = hinge_x_mm, rod clamped at rod_mm
+//! # hinge_x_mm = 150.0       # W/2
+//! # rod_mm = [225.0, 100.0]  # [3W/4, H/2]
+//! ```
+//! Only `name` and `size_mm` are needed by every user of the file; the material and boundary
+//! keys are needed by the mode solver and checked when it asks for them
+//! ([`PlateTable::mechanics`]). `[[mode]]` entries are kept as raw tables here: their schema
+//! belongs to the planner.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+/// A whole plate file.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlateFile {
+    /// The `[plate]` table.
+    pub plate: PlateTable,
+    /// The `[[mode]]` array, unparsed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub mode: Vec<toml::Table>,
+}
+
+/// The `[plate]` table as written.
+#[derive(Debug, Clone, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PlateTable {
+    /// Free-form name.
+    pub name: String,
+    /// Plate size [W, H] (mm): x then y.
+    pub size_mm: Option<[f64; 2]>,
+    /// Thickness (mm).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub thickness_mm: Option<f64>,
+    /// Young's modulus (GPa).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub youngs_modulus_gpa: Option<f64>,
+    /// Density (kg/m³).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub density_kg_m3: Option<f64>,
+    /// Poisson ratio, in (0, 0.5).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub poisson: Option<f64>,
+    /// Boundary conditions.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub boundary: Option<Boundary>,
+    /// Hinge line position x (mm), hinged-rod only; default W/2.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hinge_x_mm: Option<f64>,
+    /// Rod attachment point [x, y] (mm), hinged-rod only; default [3W/4, H/2].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rod_mm: Option<[f64; 2]>,
+}
+
+/// Boundary conditions of the plate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Boundary {
+    /// Clamped along x = 0, the other three edges free (the paper's setup 1).
+    Cantilever,
+    /// All four edges free.
+    Free,
+    /// Hinged along x = hinge_x_mm, driven (clamped) by a rod at one point (the paper's setup 2).
+    HingedRod,
+}
+
+/// A validated plate, ready for the mode solver.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plate {
+    /// Name.
+    pub name: String,
+    /// Size [W, H] (mm).
+    pub size_mm: [f64; 2],
+    /// Thickness (mm).
+    pub thickness_mm: f64,
+    /// Young's modulus (GPa).
+    pub youngs_modulus_gpa: f64,
+    /// Density (kg/m³).
+    pub density_kg_m3: f64,
+    /// Poisson ratio.
+    pub poisson: f64,
+    /// Boundary conditions.
+    pub boundary: Boundary,
+    /// Hinge line x (mm) for hinged-rod.
+    pub hinge_x_mm: f64,
+    /// Rod point (mm) for hinged-rod.
+    pub rod_mm: [f64; 2],
+}
+
+/// What is wrong with a plate file; each variant names the key and the offending value.
+#[derive(Debug, thiserror::Error)]
+pub enum PlateFileError {
+    /// The file could not be read.
+    #[error("cannot read plate file {path}: {source}")]
+    Io {
+        /// File.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// Not valid TOML, or not the expected structure (unknown key, wrong type).
+    #[error("plate file {path}: {message}")]
+    Syntax {
+        /// File.
+        path: String,
+        /// Parser message (with line and column).
+        message: String,
+    },
+    /// A key the mode solver needs is absent.
+    #[error("[plate] needs `{0}` for the mode solver")]
+    Missing(&'static str),
+    /// A length, modulus or density that must be positive (and finite) is not.
+    #[error("[plate] {key} must be positive and finite, got {value}")]
+    NotPositive {
+        /// Key.
+        key: &'static str,
+        /// Value.
+        value: f64,
+    },
+    /// Poisson ratio outside (0, 0.5).
+    #[error("[plate] poisson must be in (0, 0.5), got {0}")]
+    Poisson(f64),
+    /// The hinge line or rod point lies outside the plate.
+    #[error("[plate] {key} = {value:?} mm is outside the plate (0..{limit:?} mm)")]
+    OutsidePlate {
+        /// Key.
+        key: &'static str,
+        /// Value.
+        value: Vec<f64>,
+        /// Plate size.
+        limit: [f64; 2],
+    },
+    /// The rod point lies on the hinge line (the plate could then rock freely).
+    #[error("[plate] rod_mm {rod:?} lies on the hinge line x = {hinge} mm")]
+    RodOnHinge {
+        /// Rod point.
+        rod: [f64; 2],
+        /// Hinge x.
+        hinge: f64,
+    },
+}
+
+fn positive(key: &'static str, v: f64) -> Result<f64, PlateFileError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(PlateFileError::NotPositive { key, value: v })
+    }
+}
+
+impl PlateFile {
+    /// Parses a plate file from text (`path` only labels errors).
+    pub fn parse(text: &str, path: &str) -> Result<Self, PlateFileError> {
+        let file: PlateFile = toml::from_str(text)
+            .map_err(|e| PlateFileError::Syntax { path: path.into(), message: e.to_string() })?;
+        if let Some([w, h]) = file.plate.size_mm {
+            positive("size_mm[0]", w)?;
+            positive("size_mm[1]", h)?;
+        }
+        Ok(file)
+    }
+
+    /// Reads and parses a plate file.
+    pub fn load(path: &Path) -> Result<Self, PlateFileError> {
+        let label = path.display().to_string();
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| PlateFileError::Io { path: label.clone(), source })?;
+        Self::parse(&text, &label)
+    }
+}
+
+impl PlateTable {
+    /// Checks and returns everything the mode solver needs.
+    pub fn mechanics(&self) -> Result<Plate, PlateFileError> {
+        let [w, h] = self.size_mm.ok_or(PlateFileError::Missing("size_mm"))?;
+        let w = positive("size_mm[0]", w)?;
+        let h = positive("size_mm[1]", h)?;
+        let t = positive(
+            "thickness_mm",
+            self.thickness_mm.ok_or(PlateFileError::Missing("thickness_mm"))?,
+        )?;
+        let e = positive(
+            "youngs_modulus_gpa",
+            self.youngs_modulus_gpa.ok_or(PlateFileError::Missing("youngs_modulus_gpa"))?,
+        )?;
+        let rho = positive(
+            "density_kg_m3",
+            self.density_kg_m3.ok_or(PlateFileError::Missing("density_kg_m3"))?,
+        )?;
+        let nu = self.poisson.ok_or(PlateFileError::Missing("poisson"))?;
+        if !(nu > 0.0 && nu < 0.5) {
+            return Err(PlateFileError::Poisson(nu));
+        }
+        let boundary = self.boundary.ok_or(PlateFileError::Missing("boundary"))?;
+        let hinge = self.hinge_x_mm.unwrap_or(w / 2.0);
+        let rod = self.rod_mm.unwrap_or([0.75 * w, 0.5 * h]);
+        if boundary == Boundary::HingedRod {
+            if !(hinge > 0.0 && hinge < w) {
+                return Err(PlateFileError::OutsidePlate {
+                    key: "hinge_x_mm",
+                    value: vec![hinge],
+                    limit: [w, h],
+                });
+            }
+            if !(rod[0] >= 0.0 && rod[0] <= w && rod[1] >= 0.0 && rod[1] <= h) {
+                return Err(PlateFileError::OutsidePlate {
+                    key: "rod_mm",
+                    value: rod.to_vec(),
+                    limit: [w, h],
+                });
+            }
+            if (rod[0] - hinge).abs() < 1e-3 * w {
+                return Err(PlateFileError::RodOnHinge { rod, hinge });
+            }
+        }
+        Ok(Plate {
+            name: self.name.clone(),
+            size_mm: [w, h],
+            thickness_mm: t,
+            youngs_modulus_gpa: e,
+            density_kg_m3: rho,
+            poisson: nu,
+            boundary,
+            hinge_x_mm: hinge,
+            rod_mm: rod,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+[plate]
+name = "alu"
+size_mm = [300.0, 200.0]
+thickness_mm = 2.0
+youngs_modulus_gpa = 70.0
+density_kg_m3 = 2700.0
+poisson = 0.33
+boundary = "hinged-rod"
+
+[[mode]]
+freq_hz = 60.0
+node = { kind = "line", angle_deg = 90.0, offset_mm = 0.0 }
+"#;
+
+    #[test]
+    fn parses_plate_and_keeps_modes_raw() {
+        let f = PlateFile::parse(GOOD, "t").unwrap();
+        let p = f.plate.mechanics().unwrap();
+        assert_eq!(p.boundary, Boundary::HingedRod);
+        assert_eq!(p.hinge_x_mm, 150.0);
+        assert_eq!(p.rod_mm, [225.0, 100.0]);
+        assert_eq!(f.mode.len(), 1);
+        assert_eq!(f.mode[0]["freq_hz"].as_float(), Some(60.0));
+    }
+
+    #[test]
+    fn planner_only_file_parses_without_material() {
+        let f = PlateFile::parse("[plate]\nname = \"x\"\nsize_mm = [300.0, 200.0]\n", "t").unwrap();
+        assert!(matches!(f.plate.mechanics(), Err(PlateFileError::Missing("thickness_mm"))));
+    }
+
+    #[test]
+    fn named_errors() {
+        let bad = |from: &str, to: &str| PlateFile::parse(&GOOD.replace(from, to), "t");
+        let mech = |from: &str, to: &str| bad(from, to).unwrap().plate.mechanics();
+        assert!(matches!(
+            bad("[300.0, 200.0]", "[300.0, -2.0]"),
+            Err(PlateFileError::NotPositive { key: "size_mm[1]", value }) if value == -2.0
+        ));
+        assert!(
+            matches!(mech("poisson = 0.33", "poisson = 0.5"), Err(PlateFileError::Poisson(v)) if v == 0.5)
+        );
+        assert!(matches!(
+            mech("thickness_mm = 2.0", "thickness_mm = 0.0"),
+            Err(PlateFileError::NotPositive { key: "thickness_mm", .. })
+        ));
+        let e = bad("poisson = 0.33", "poisson = 0.33\ncolour = 1").unwrap_err();
+        assert!(e.to_string().contains("colour"), "{e}");
+        let e = bad("\"hinged-rod\"", "\"clamped\"").unwrap_err();
+        assert!(e.to_string().contains("clamped"), "{e}");
+        assert!(matches!(
+            mech("poisson = 0.33", "poisson = 0.33\nrod_mm = [150.0, 10.0]"),
+            Err(PlateFileError::RodOnHinge { .. })
+        ));
+        assert!(matches!(
+            mech("poisson = 0.33", "poisson = 0.33\nrod_mm = [400.0, 10.0]"),
+            Err(PlateFileError::OutsidePlate { key: "rod_mm", .. })
+        ));
+    }
+}

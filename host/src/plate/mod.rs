@@ -1,0 +1,9 @@
+//! Plates: the plate file, the Kirchhoff-plate mode solver, node lines (contours of φ = 0),
+//! Chladni photos to node lines, and plots.
+
+pub mod contour;
+pub mod file;
+pub mod modes_file;
+pub mod photo;
+pub mod plot;
+pub mod solver;

@@ -1,0 +1,95 @@
+//! `[[mode]]` entries for plate files: solver modes as sampled mode shapes (`node.kind =
+//! "grid"`), photo-derived straight nodes (`node.kind = "line"`). Schema in docs/plate.md.
+
+use toml::{Table, Value};
+
+use super::file::{PlateFile, PlateTable};
+use super::solver::Grid;
+
+/// Rounds to `digits` decimals so files stay small and diff well.
+fn round(v: f64, digits: i32) -> f64 {
+    let s = 10f64.powi(digits);
+    (v * s).round() / s
+}
+
+/// A `[[mode]]` entry holding a sampled mode shape.
+pub fn grid_mode(name: &str, freq_hz: f64, lambda: f64, grid: &Grid) -> Table {
+    let mut node = Table::new();
+    node.insert("kind".into(), "grid".into());
+    node.insert("nx".into(), Value::Integer(grid.nx as i64));
+    node.insert("ny".into(), Value::Integer(grid.ny as i64));
+    node.insert(
+        "values".into(),
+        Value::Array(grid.values.iter().map(|&v| Value::Float(round(v, 5))).collect()),
+    );
+    let mut m = Table::new();
+    m.insert("name".into(), name.into());
+    m.insert("freq_hz".into(), Value::Float(round(freq_hz, 4)));
+    m.insert("lambda".into(), Value::Float(round(lambda, 5)));
+    m.insert("node".into(), Value::Table(node));
+    m
+}
+
+/// A `[[mode]]` entry holding a straight node line.
+pub fn line_mode(name: &str, freq_hz: Option<f64>, angle_deg: f64, offset_mm: f64) -> Table {
+    let mut node = Table::new();
+    node.insert("kind".into(), "line".into());
+    node.insert("angle_deg".into(), Value::Float(round(angle_deg, 3)));
+    node.insert("offset_mm".into(), Value::Float(round(offset_mm, 3)));
+    let mut m = Table::new();
+    m.insert("name".into(), name.into());
+    if let Some(f) = freq_hz {
+        m.insert("freq_hz".into(), Value::Float(f));
+    }
+    m.insert("node".into(), Value::Table(node));
+    m
+}
+
+/// Renders a plate file with the given `[plate]` table and `[[mode]]` entries.
+pub fn render(plate: &PlateTable, modes: Vec<Table>) -> Result<String, toml::ser::Error> {
+    toml::to_string(&PlateFile { plate: plate.clone(), mode: modes })
+}
+
+/// Reads the grid of a `node = { kind = "grid", ... }` entry back (for checks and tools).
+pub fn grid_of(entry: &Table, size_mm: [f64; 2]) -> Option<Grid> {
+    let node = entry.get("node")?.as_table()?;
+    if node.get("kind")?.as_str()? != "grid" {
+        return None;
+    }
+    let nx = usize::try_from(node.get("nx")?.as_integer()?).ok()?;
+    let ny = usize::try_from(node.get("ny")?.as_integer()?).ok()?;
+    let values: Option<Vec<f64>> =
+        node.get("values")?.as_array()?.iter().map(Value::as_float).collect();
+    let values = values?;
+    (values.len() == nx * ny && nx >= 2 && ny >= 2).then_some(Grid { nx, ny, size_mm, values })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plate::solver;
+
+    #[test]
+    fn written_modes_parse_back_as_a_plate_file_with_grids() {
+        let text = "[plate]\nname = \"p\"\nsize_mm = [300.0, 200.0]\nthickness_mm = 2.0\n\
+                    youngs_modulus_gpa = 70.0\ndensity_kg_m3 = 2700.0\npoisson = 0.33\nboundary = \"cantilever\"\n";
+        let file = PlateFile::parse(text, "t").unwrap();
+        let plate = file.plate.mechanics().unwrap();
+        let sol = solver::solve(&plate, 2, 8);
+        let grid = sol.sample(1, 31, 21);
+        let out = render(
+            &file.plate,
+            vec![grid_mode("mode 2", sol.modes[1].freq_hz, sol.modes[1].lambda, &grid)],
+        )
+        .unwrap();
+        let back = PlateFile::parse(&out, "out").unwrap();
+        assert_eq!(back.plate.mechanics().unwrap(), plate);
+        assert_eq!(back.mode.len(), 1);
+        let g = grid_of(&back.mode[0], plate.size_mm).unwrap();
+        assert_eq!((g.nx, g.ny), (31, 21));
+        assert!(g.values.iter().zip(&grid.values).all(|(a, b)| (a - b).abs() <= 5e-6));
+        let line = line_mode("l", Some(60.0), 90.0, -12.5);
+        assert_eq!(line["node"]["kind"].as_str(), Some("line"));
+        assert!(grid_of(&line, plate.size_mm).is_none());
+    }
+}
