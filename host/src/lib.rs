@@ -4,7 +4,13 @@
 //! - [`device`]: the client for the controller's link (serial port or QEMU's TCP socket).
 //! - [`emulator`]: builds the QEMU firmware and runs it as a controller on a TCP port.
 //! - [`firmware`]: locates and builds firmware images.
+//! - [`part`]: planar parts: JSON/SVG import and validation.
+//! - [`reference`]: the f64 reference implementation of the rest analysis.
+//! - [`plot`]: part, turn-function and alignment-function plots.
 
 pub mod device;
 pub mod emulator;
 pub mod firmware;
+pub mod part;
+pub mod plot;
+pub mod reference;
