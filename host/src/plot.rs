@@ -49,6 +49,8 @@ fn register_font() {
 /// Writes the plot; the format follows the extension (`.png` or `.svg`).
 pub fn write(path: &Path, data: &PlotData) -> anyhow::Result<()> {
     let size = (1500, 520);
+    // Text is measured with the registered font for both backends.
+    register_font();
     match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
         Some("svg") => {
             let root = SVGBackend::new(path, size).into_drawing_area();
@@ -56,7 +58,6 @@ pub fn write(path: &Path, data: &PlotData) -> anyhow::Result<()> {
             root.present().map_err(|e| anyhow!("{e}")).with_context(|| path.display().to_string())
         }
         Some("png") => {
-            register_font();
             let root = BitMapBackend::new(path, size).into_drawing_area();
             draw(&root, data)?;
             root.present().map_err(|e| anyhow!("{e}")).with_context(|| path.display().to_string())

@@ -2,7 +2,7 @@
 //! on purpose: explicit Sutherland–Hodgman clipping of every ring at the node, side
 //! integrals by Gauss–Legendre quadrature of Green's boundary integrals (exact for the
 //! polynomial laws, ~1e-15 for the sine law), balance by plain bisection, roots by dense
-//! sampling (0.25°) over the full turn and bisection. Slow and simple; used by the tests to
+//! sampling (0.5°) over the full turn and bisection. Slow and simple; used by the tests to
 //! check the fixed-point code (agreement within 0.05° on stable orientations).
 
 use crate::part::Part;
@@ -89,6 +89,15 @@ impl Reference {
         }
     }
 
+    /// H(x) = ∫₀ˣ g: closed form for the polynomial laws, 5-point Gauss on [0, x] for sine.
+    fn big_h(&self, x: f64, side: f64) -> f64 {
+        match self.field.law {
+            Law::Sign => side * x,
+            Law::Linear => 0.5 * x * x,
+            Law::Sine(_) => GL.iter().map(|(v, wv)| wv * self.g(0.5 * x * (v + 1.0))).sum::<f64>() * 0.5 * x,
+        }
+    }
+
     /// F and M at orientation `deg`, centroid at x = `s`.
     pub fn force_moment(&self, deg: f64, s: f64) -> (f64, f64) {
         let (sn, cs) = deg.to_radians().sin_cos();
@@ -110,18 +119,7 @@ impl Reference {
                     for (u, wu) in GL {
                         let t = 0.5 * (u + 1.0);
                         let (x, y) = (p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1]));
-                        // H(x) = ∫₀ˣ g(ξ) dξ by 5-point Gauss on [0, x].
-                        let big_h: f64 = GL
-                            .iter()
-                            .map(|(v, wv)| {
-                                let xi = 0.5 * x * (v + 1.0);
-                                // Stay on this side for the sign law at ξ = 0.
-                                let gx = if xi == 0.0 { side * 0.0 } else { self.g(xi) };
-                                wv * gx
-                            })
-                            .sum::<f64>()
-                            * 0.5
-                            * x;
+                        let big_h = self.big_h(x, side);
                         let f = -k * big_h; // force density integral contribution
                         force += f * wu * 0.5 * dy;
                         moment += -y * f * wu * 0.5 * dy;
@@ -154,7 +152,7 @@ impl Reference {
 
     /// Rest orientations over 360° (empty and `true` when neutral).
     pub fn rests(&self) -> (Vec<RefRest>, bool) {
-        let n = 1440;
+        let n = 720;
         let t: Vec<f64> = (0..n).map(|i| self.turn(i as f64 * 360.0 / n as f64)).collect();
         if t.iter().all(|v| v.abs() <= 1e-6 * self.scale) {
             return (Vec::new(), true);
@@ -163,8 +161,8 @@ impl Reference {
         for i in 0..n {
             let (a, b) = (t[i], t[(i + 1) % n]);
             if (a > 0.0) != (b > 0.0) {
-                let (mut lo, mut hi) = (i as f64 * 0.25, (i + 1) as f64 * 0.25);
-                for _ in 0..40 {
+                let (mut lo, mut hi) = (i as f64 * 0.5, (i + 1) as f64 * 0.5);
+                for _ in 0..32 {
                     let mid = 0.5 * (lo + hi);
                     if (self.turn(mid) > 0.0) == (a > 0.0) {
                         lo = mid;
