@@ -79,9 +79,9 @@ impl Fx {
     #[inline]
     pub const fn mul(self, rhs: Fx) -> Fx {
         let p = self.0 as i128 * rhs.0 as i128;
-        let r = (p.unsigned_abs() + (1u128 << (FRAC - 1))) >> FRAC;
-        let r = r as i64;
-        if p < 0 { Fx(-r) } else { Fx(r) }
+        // Branch-free round half away from zero: for p < 0, (p + ½ − 1) >> 32 equals
+        // −((−p + ½) >> 32).
+        Fx(((p + (1i128 << (FRAC - 1)) + (p >> 127)) >> FRAC) as i64)
     }
     /// Divides by a positive integer, rounding half away from zero.
     pub const fn div_int(self, d: i64) -> Fx {
@@ -268,6 +268,27 @@ mod tests {
     }
     fn q(x: f64) -> Fx {
         Fx((x * 4294967296.0).round() as i64)
+    }
+
+    #[test]
+    fn branch_free_mul_rounds_half_away_from_zero() {
+        let reference = |a: i64, b: i64| {
+            let p = a as i128 * b as i128;
+            let r = ((p.unsigned_abs() + (1u128 << 31)) >> 32) as i64;
+            if p < 0 { -r } else { r }
+        };
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        for i in 0..20_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let a = (x as i64) >> (i % 40);
+            let b = ((x.rotate_left(17)) as i64) >> (20 + i % 30);
+            assert_eq!((Fx(a) * Fx(b)).0, reference(a, b), "{a} {b}");
+        }
+        for (a, b) in [(1i64 << 31, 1i64), (-(1i64 << 31), 1), (3, 1 << 31), (-3, 1 << 31)] {
+            assert_eq!((Fx(a) * Fx(b)).0, reference(a, b), "{a} {b}");
+        }
     }
 
     #[test]

@@ -29,7 +29,7 @@ use crate::fx::{self, Bam, Fx, HALF_TURN};
 use crate::geometry::{self, Pt};
 
 /// Turn-function samples per field period before root refinement.
-pub const SAMPLES: usize = 256;
+pub const SAMPLES: usize = 128;
 /// Most rest orientations (stable + unstable, over 360°) an analysis can hold.
 pub const MAX_RESTS: usize = 64;
 /// Newton tolerance on the balance offset (normalised units, ≈ 1.5·10⁻⁸).
