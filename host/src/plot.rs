@@ -48,7 +48,7 @@ fn register_font() {
 
 /// Writes the plot; the format follows the extension (`.png` or `.svg`).
 pub fn write(path: &Path, data: &PlotData) -> anyhow::Result<()> {
-    let size = (1500, 520);
+    let size = (1200, 420);
     // Text is measured with the registered font for both backends.
     register_font();
     match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
@@ -75,7 +75,7 @@ where
     DB::ErrorType: 'static,
 {
     root.fill(&WHITE).map_err(err)?;
-    let root = root.titled(&data.title, ("sans-serif", 22)).map_err(err)?;
+    let root = root.titled(&data.title, ("sans-serif", 20)).map_err(err)?;
     let panels = root.split_evenly((1, 3));
     let stable_col = RGBColor(0, 120, 60);
     let unstable_col = RGBColor(200, 40, 40);
@@ -84,7 +84,7 @@ where
     let all = data.rest_pose.iter().flatten();
     let r = all.fold(1e-9f64, |m, p| m.max(p[0].abs()).max(p[1].abs())) * 1.15;
     let mut part = ChartBuilder::on(&panels[0])
-        .caption(format!("part at rest, θ = {:.1}°", data.rest_pose_deg), ("sans-serif", 18))
+        .caption(format!("part at rest, θ = {:.1}°", data.rest_pose_deg), ("sans-serif", 16))
         .margin(10)
         .x_label_area_size(30)
         .y_label_area_size(40)
@@ -108,7 +108,7 @@ where
 
     // (b) Turn function.
     let mut turn = ChartBuilder::on(&panels[1])
-        .caption("turn function t(θ)", ("sans-serif", 18))
+        .caption("turn function t(θ)", ("sans-serif", 16))
         .margin(10)
         .x_label_area_size(30)
         .y_label_area_size(45)
@@ -118,6 +118,7 @@ where
         .x_desc("θ (deg)")
         .y_desc("t / max|t|")
         .x_labels(9)
+        .light_line_style(WHITE)
         .draw()
         .map_err(err)?;
     turn.draw_series(LineSeries::new(vec![(0.0, 0.0), (360.0, 0.0)], RGBColor(150, 150, 150)))
@@ -139,7 +140,7 @@ where
 
     // (c) Alignment function.
     let mut align = ChartBuilder::on(&panels[2])
-        .caption("alignment function a(θ)", ("sans-serif", 18))
+        .caption("alignment function a(θ)", ("sans-serif", 16))
         .margin(10)
         .x_label_area_size(30)
         .y_label_area_size(45)
@@ -151,6 +152,7 @@ where
         .y_desc("final θ (deg)")
         .x_labels(9)
         .y_labels(9)
+        .light_line_style(WHITE)
         .draw()
         .map_err(err)?;
     align
