@@ -109,7 +109,9 @@ pub enum PartError {
         value: f64,
     },
     /// A coordinate beyond [`MAX_COORD_MM`].
-    #[error("{ring}, vertex {index}: coordinate {value} mm is absurdly large (limit ±{MAX_COORD_MM} mm)")]
+    #[error(
+        "{ring}, vertex {index}: coordinate {value} mm is absurdly large (limit ±{MAX_COORD_MM} mm)"
+    )]
     TooLarge {
         /// Which ring.
         ring: Ring,
@@ -233,7 +235,8 @@ impl Part {
             let ts = transform_of(node).map_err(|m| bad("transform", m))?;
             match tag {
                 "polygon" => {
-                    let pts = node.attribute("points").ok_or_else(|| bad("points", "missing".into()))?;
+                    let pts =
+                        node.attribute("points").ok_or_else(|| bad("points", "missing".into()))?;
                     let ring: Vec<[f64; 2]> =
                         svgtypes::PointsParser::from(pts).map(|(x, y)| apply(&ts, x, y)).collect();
                     rings.push(ring);
@@ -274,9 +277,7 @@ impl Part {
         }
         // Largest ring by area is the outline.
         let outer = (0..rings.len())
-            .max_by(|&a, &b| {
-                signed_area(&rings[a]).abs().total_cmp(&signed_area(&rings[b]).abs())
-            })
+            .max_by(|&a, &b| signed_area(&rings[a]).abs().total_cmp(&signed_area(&rings[b]).abs()))
             .unwrap_or(0);
         let outline = rings.remove(outer);
         Part::new(name.to_string(), outline, rings)
@@ -384,7 +385,9 @@ impl Part {
 
     /// The rings in Q31.32 (mm), for `chladni_shared::rest::Analyzer`.
     pub fn to_fixed(&self) -> Vec<Vec<Pt>> {
-        self.rings().map(|r| r.iter().map(|p| Pt::new(to_fx(p[0]), to_fx(p[1]))).collect()).collect()
+        self.rings()
+            .map(|r| r.iter().map(|p| Pt::new(to_fx(p[0]), to_fx(p[1]))).collect())
+            .collect()
     }
 }
 
@@ -444,7 +447,10 @@ fn orient(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
 }
 
 fn on_segment(a: [f64; 2], b: [f64; 2], p: [f64; 2]) -> bool {
-    p[0] >= a[0].min(b[0]) && p[0] <= a[0].max(b[0]) && p[1] >= a[1].min(b[1]) && p[1] <= a[1].max(b[1])
+    p[0] >= a[0].min(b[0])
+        && p[0] <= a[0].max(b[0])
+        && p[1] >= a[1].min(b[1])
+        && p[1] <= a[1].max(b[1])
 }
 
 /// Do closed segments ab and cd share a point?
@@ -466,7 +472,8 @@ fn segments_meet(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
 fn adjacent_overlap(prev: [f64; 2], shared: [f64; 2], next: [f64; 2]) -> bool {
     // Collinear and pointing back along the previous edge.
     orient(prev, shared, next) == 0.0
-        && (next[0] - shared[0]) * (prev[0] - shared[0]) + (next[1] - shared[1]) * (prev[1] - shared[1])
+        && (next[0] - shared[0]) * (prev[0] - shared[0])
+            + (next[1] - shared[1]) * (prev[1] - shared[1])
             > 0.0
 }
 
@@ -485,7 +492,14 @@ fn check_intersections(rings: &[Vec<[f64; 2]>]) -> Result<(), PartError> {
         let n = ring.len();
         for i in 0..n {
             let (a, b) = (ring[i], ring[(i + 1) % n]);
-            edges.push(Edge { ring: r, index: i, a, b, xmin: a[0].min(b[0]), xmax: a[0].max(b[0]) });
+            edges.push(Edge {
+                ring: r,
+                index: i,
+                a,
+                b,
+                xmin: a[0].min(b[0]),
+                xmax: a[0].max(b[0]),
+            });
         }
     }
     edges.sort_by(|p, q| p.xmin.total_cmp(&q.xmin));

@@ -90,7 +90,12 @@ where
         .y_label_area_size(40)
         .build_cartesian_2d(-r..r, -r..r)
         .map_err(err)?;
-    part.configure_mesh().x_desc("x (mm)").y_desc("y (mm)").light_line_style(WHITE).draw().map_err(err)?;
+    part.configure_mesh()
+        .x_desc("x (mm)")
+        .y_desc("y (mm)")
+        .light_line_style(WHITE)
+        .draw()
+        .map_err(err)?;
     for (i, ring) in data.rest_pose.iter().enumerate() {
         let pts: Vec<(f64, f64)> = ring.iter().map(|p| (p[0], p[1])).collect();
         let fill = if i == 0 { RGBColor(170, 190, 220).filled() } else { WHITE.filled() };
@@ -123,7 +128,8 @@ where
         .map_err(err)?;
     turn.draw_series(LineSeries::new(vec![(0.0, 0.0), (360.0, 0.0)], RGBColor(150, 150, 150)))
         .map_err(err)?;
-    turn.draw_series(LineSeries::new(data.turn.iter().copied(), BLUE.stroke_width(2))).map_err(err)?;
+    turn.draw_series(LineSeries::new(data.turn.iter().copied(), BLUE.stroke_width(2)))
+        .map_err(err)?;
     turn.draw_series(data.rests.iter().map(|&(d, stable)| {
         let c = if stable { stable_col } else { unstable_col };
         Circle::new((d, 0.0), 5, if stable { c.filled() } else { c.stroke_width(2) })
@@ -162,10 +168,10 @@ where
     let mut piece: Vec<(f64, f64)> = Vec::new();
     let mut pieces = Vec::new();
     for &(x, y) in &data.align {
-        if let Some(&(_, py)) = piece.last() {
-            if (y - py).abs() > 1.0 {
-                pieces.push(std::mem::take(&mut piece));
-            }
+        if let Some(&(_, py)) = piece.last()
+            && (y - py).abs() > 1.0
+        {
+            pieces.push(std::mem::take(&mut piece));
         }
         piece.push((x, y));
     }

@@ -94,7 +94,9 @@ impl Reference {
         match self.field.law {
             Law::Sign => side * x,
             Law::Linear => 0.5 * x * x,
-            Law::Sine(_) => GL.iter().map(|(v, wv)| wv * self.g(0.5 * x * (v + 1.0))).sum::<f64>() * 0.5 * x,
+            Law::Sine(_) => {
+                GL.iter().map(|(v, wv)| wv * self.g(0.5 * x * (v + 1.0))).sum::<f64>() * 0.5 * x
+            }
         }
     }
 

@@ -79,7 +79,14 @@ fn rotated_input_file_shifts_the_orientations() {
 
 #[test]
 fn every_example_part_analyses_and_the_table_is_readable() {
-    for name in ["rectangle.json", "triangle.json", "trapezoid.json", "l-shape.json", "plate-with-hole.json", "key.svg"] {
+    for name in [
+        "rectangle.json",
+        "triangle.json",
+        "trapezoid.json",
+        "l-shape.json",
+        "plate-with-hole.json",
+        "key.svg",
+    ] {
         let out = chladni(&["analyze", &example(name), "--field", "linear"]);
         assert!(out.status.success(), "{name}: {}", String::from_utf8_lossy(&out.stderr));
         let text = String::from_utf8(out.stdout).unwrap();
@@ -94,7 +101,10 @@ fn bad_input_exits_with_code_2_and_names_the_problem() {
     let out = chladni(&["analyze", bow.to_str().unwrap(), "--field", "sign"]);
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("self-intersection") && err.contains("vertex 0") && err.lines().count() == 1, "{err}");
+    assert!(
+        err.contains("self-intersection") && err.contains("vertex 0") && err.lines().count() == 1,
+        "{err}"
+    );
     let rect = example("rectangle.json");
     for args in [
         vec!["analyze", &rect, "--field", "sine"],
@@ -104,7 +114,12 @@ fn bad_input_exits_with_code_2_and_names_the_problem() {
         vec!["analyze", "/nonexistent/part.json", "--field", "sign"],
     ] {
         let out = chladni(&args);
-        assert_eq!(out.status.code(), Some(2), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        assert_eq!(
+            out.status.code(),
+            Some(2),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
     }
     let out = chladni(&["analyze", &rect, "--field", "sine", "--wavelength", "10"]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("too short"));
@@ -115,7 +130,14 @@ fn plots_are_written_as_png_and_svg() {
     let png = tmp("l.png");
     let svg = tmp("l.svg");
     for p in [&png, &svg] {
-        let out = chladni(&["analyze", &example("l-shape.json"), "--field", "sign", "--plot", p.to_str().unwrap()]);
+        let out = chladni(&[
+            "analyze",
+            &example("l-shape.json"),
+            "--field",
+            "sign",
+            "--plot",
+            p.to_str().unwrap(),
+        ]);
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     }
     let bytes = std::fs::read(&png).unwrap();

@@ -133,11 +133,7 @@ pub fn piece(law: Law, x0: Fx, y0: Fx, x1: Fx, y1: Fx) -> PieceSums {
         Law::Sign => PieceSums { p: k2 * m, d: k2, q: k2 * (m * q + h * k * Fx::ratio(1, 3)) },
         Law::Linear => {
             let b = m * m + h * h * Fx::ratio(1, 3);
-            PieceSums {
-                p: k * b,
-                d: k2 * m,
-                q: k * (q * b + (k * m * h) * Fx::ratio(2, 3)),
-            }
+            PieceSums { p: k * b, d: k2 * m, q: k * (q * b + (k * m * h) * Fx::ratio(2, 3)) }
         }
         Law::Sine { a } => {
             let am = a * m;

@@ -45,9 +45,10 @@ pub struct Moments {
     pub sxy: Fx,
 }
 
-impl Moments {
+impl core::ops::Add for Moments {
+    type Output = Moments;
     /// Sum of two regions' moments.
-    pub fn add(self, o: Moments) -> Moments {
+    fn add(self, o: Moments) -> Moments {
         Moments {
             area: self.area + o.area,
             sx: self.sx + o.sx,
@@ -57,6 +58,9 @@ impl Moments {
             sxy: self.sxy + o.sxy,
         }
     }
+}
+
+impl Moments {
     /// Centroid `(sx/area, sy/area)`; `None` for zero area.
     pub fn centroid(&self) -> Option<Pt> {
         Some(Pt::new(self.sx.checked_div(self.area)?, self.sy.checked_div(self.area)?))
@@ -112,7 +116,7 @@ pub fn edge_moments(edges: impl Iterator<Item = (Pt, Pt)>) -> Moments {
 
 /// Moments of a shape (outline counter-clockwise, holes clockwise).
 pub fn shape_moments(rings: &[&[Pt]]) -> Moments {
-    rings.iter().fold(Moments::default(), |m, r| m.add(ring_moments(r)))
+    rings.iter().fold(Moments::default(), |m, r| m + ring_moments(r))
 }
 
 /// The closed half-plane `nx·x + ny·y ≥ d`.

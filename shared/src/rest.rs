@@ -165,7 +165,8 @@ impl<'a> Analyzer<'a> {
             return Err(AnalysisError::TooLarge);
         }
         let origin = Pt::new(lo.x.half() + hi.x.half(), lo.y.half() + hi.y.half());
-        let extent = (hi.x - origin.x).max(origin.x - lo.x).max(hi.y - origin.y).max(origin.y - lo.y);
+        let extent =
+            (hi.x - origin.x).max(origin.x - lo.x).max(hi.y - origin.y).max(origin.y - lo.y);
         if extent <= Fx::ZERO {
             return Err(AnalysisError::ZeroArea);
         }
@@ -193,7 +194,7 @@ impl<'a> Analyzer<'a> {
             if (i == 0) != (m.area > Fx::ZERO) || m.area.is_zero() {
                 return Err(AnalysisError::Winding { ring: i });
             }
-            total = total.add(m);
+            total = total + m;
         }
         if total.area <= Fx::ZERO {
             return Err(AnalysisError::ZeroArea);
@@ -477,7 +478,7 @@ fn symmetry_order(rests: &[Rest]) -> u32 {
     let ns = rests.iter().filter(|r| r.stable).count();
     let nu = rests.len() - ns;
     for m in (2..=ns.max(1)).rev() {
-        if ns % m != 0 || nu % m != 0 {
+        if !ns.is_multiple_of(m) || !nu.is_multiple_of(m) {
             continue;
         }
         let shift = ((1u64 << 32) / m as u64) as u32;

@@ -137,14 +137,20 @@ fn rest_rectangle_sign() -> Result<u64, &'static str> {
 
 /// An L-shape with a square hole under a linear field with gains 1 (left) and 2.5 (right).
 fn rest_lshape_hole_linear_skewed() -> Result<u64, &'static str> {
-    let outline =
-        [Pt::int(0, 0), Pt::int(60, 0), Pt::int(60, 20), Pt::int(20, 20), Pt::int(20, 50), Pt::int(0, 50)];
+    let outline = [
+        Pt::int(0, 0),
+        Pt::int(60, 0),
+        Pt::int(60, 20),
+        Pt::int(20, 20),
+        Pt::int(20, 50),
+        Pt::int(0, 50),
+    ];
     let hole = [Pt::int(5, 5), Pt::int(5, 15), Pt::int(15, 15), Pt::int(15, 5)];
     let rings: [&[Pt]; 2] = [&outline, &hole];
     let field = Field { kind: FieldKind::Linear, gain_left: Fx::ONE, gain_right: Fx::ratio(5, 2) };
     let an = Analyzer::new(&rings, field).map_err(|_| "prepare")?;
     let a = an.analyze().map_err(|_| "analyze")?;
-    if a.neutral || a.rests.len() < 2 || a.rests.len() % 2 != 0 {
+    if a.neutral || a.rests.len() < 2 || !a.rests.len().is_multiple_of(2) {
         return Err("L-shape: expected an even number of rests");
     }
     let mut d = Digest::new();

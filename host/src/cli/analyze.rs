@@ -90,7 +90,10 @@ impl AnalyzeArgs {
                 FieldKind::Sine { wavelength: to_fx(w) }
             }
             (f, Some(_)) => {
-                return Err(bad(format!("--wavelength only applies to --field sine, not {}", f.name())));
+                return Err(bad(format!(
+                    "--wavelength only applies to --field sine, not {}",
+                    f.name()
+                )));
             }
             (FieldArg::Sign, None) => FieldKind::Sign,
             (FieldArg::Linear, None) => FieldKind::Linear,
@@ -100,10 +103,11 @@ impl AnalyzeArgs {
 
     pub fn run(&self) -> anyhow::Result<ExitCode> {
         let field = self.field()?;
-        let part = Part::load(&self.part)
-            .map_err(|e| bad(format!("{}: {e}", self.part.display())))?;
+        let part =
+            Part::load(&self.part).map_err(|e| bad(format!("{}: {e}", self.part.display())))?;
         let rings = part.to_fixed();
-        let slices: Vec<&[chladni_shared::geometry::Pt]> = rings.iter().map(Vec::as_slice).collect();
+        let slices: Vec<&[chladni_shared::geometry::Pt]> =
+            rings.iter().map(Vec::as_slice).collect();
         let an = Analyzer::new(&slices, field).map_err(|e| match e {
             AnalysisError::WavelengthTooShort => {
                 let diameter = 2.0 * radius_mm(&part);
@@ -118,7 +122,8 @@ impl AnalyzeArgs {
             other => bad(format!("{}: cannot analyse: {other:?}", self.part.display())),
         })?;
         let analysis = an.analyze().map_err(|e| anyhow::anyhow!("analysis failed: {e:?}"))?;
-        let stable: Vec<f64> = analysis.rests.iter().filter(|r| r.stable).map(|r| deg(r.angle)).collect();
+        let stable: Vec<f64> =
+            analysis.rests.iter().filter(|r| r.stable).map(|r| deg(r.angle)).collect();
         let unstable: Vec<f64> =
             analysis.rests.iter().filter(|r| !r.stable).map(|r| deg(r.angle)).collect();
         let period = 360.0 / analysis.order as f64;

@@ -29,7 +29,10 @@ fn validation_errors_name_the_problem_and_vertex() {
     // Bow tie: edge 0 (0,0)-(2,2) crosses edge 2 (2,0)-(0,2).
     let e = json(r#"{"outline": [[0,0],[2,2],[2,0],[0,2]]}"#).unwrap_err();
     assert!(matches!(e, PartError::SelfIntersection { a: 0, b: 2, .. }), "{e}");
-    assert_eq!(e.to_string(), "outline: self-intersection, edge from vertex 0 crosses edge from vertex 2");
+    assert_eq!(
+        e.to_string(),
+        "outline: self-intersection, edge from vertex 0 crosses edge from vertex 2"
+    );
     let e = json(r#"{"outline": [[0,0],[1,0],[1,1],[0,1]], "holes": [[[5,5],[6,5],[6,6]]]}"#)
         .unwrap_err();
     assert!(matches!(e, PartError::HoleOutside { hole: 0, index: 0 }), "{e}");
@@ -62,7 +65,8 @@ fn validation_errors_name_the_problem_and_vertex() {
 
 #[test]
 fn non_finite_values_are_rejected() {
-    let e = Part::new("x".into(), vec![[0.0, 0.0], [1.0, f64::NAN], [0.0, 1.0]], vec![]).unwrap_err();
+    let e =
+        Part::new("x".into(), vec![[0.0, 0.0], [1.0, f64::NAN], [0.0, 1.0]], vec![]).unwrap_err();
     assert!(matches!(e, PartError::NotFinite { ring: Ring::Outline, index: 1, .. }), "{e}");
     let e = Part::new(
         "x".into(),

@@ -120,10 +120,10 @@ fn side_sums_equal_explicit_clipping() {
             let mut buf = [Pt::default(); 32];
             let hp = HalfPlane { nx: Fx::ONE, ny: Fx::ZERO, d: Fx::ZERO };
             let k = clip_ring(&moved, hp, &mut buf).unwrap();
-            right = right.add(ring_moments(&buf[..k]));
+            right = right + ring_moments(&buf[..k]);
             let hp = HalfPlane { nx: -Fx::ONE, ny: Fx::ZERO, d: Fx::ZERO };
             let k = clip_ring(&moved, hp, &mut buf).unwrap();
-            left = left.add(ring_moments(&buf[..k]));
+            left = left + ring_moments(&buf[..k]);
         }
         let (r, l) = an.side_sums(theta, s);
         assert!((f(r.p) - f(right.area)).abs() < 1e-8);
@@ -316,7 +316,7 @@ proptest! {
         let a = an.analyze().unwrap();
         if a.neutral { return Ok(()); }
         let n = a.rests.len();
-        prop_assert!(n >= 2 && n % 2 == 0, "{:?}", a.rests);
+        prop_assert!(n >= 2 && n.is_multiple_of(2), "{:?}", a.rests);
         for i in 0..n {
             let (r, s) = (a.rests[i], a.rests[(i + 1) % n]);
             // Stable and unstable alternate, and t has the right sign in between.
