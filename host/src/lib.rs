@@ -6,9 +6,15 @@
 //! - [`firmware`]: locates and builds firmware images.
 //! - [`plate`]: plate files, the plate mode solver, node lines, Chladni photos.
 //! - [`physics`]: the particle-on-a-string model of the paper's Appendix.
+//! - [`part`]: planar parts: JSON/SVG import and validation.
+//! - [`reference`]: the f64 reference implementation of the rest analysis.
+//! - [`plot`]: part, turn-function and alignment-function plots.
 
 pub mod device;
 pub mod emulator;
 pub mod firmware;
+pub mod part;
 pub mod physics;
 pub mod plate;
+pub mod plot;
+pub mod reference;

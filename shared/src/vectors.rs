@@ -8,9 +8,13 @@
 //! A vector may also check invariants itself and return `Err` with a message; that fails on
 //! both sides.
 
+use crate::field::{Field, FieldKind};
+use crate::fx::Fx;
+use crate::geometry::Pt;
 use crate::link::{self, Envelope, Request, Response};
 use crate::plan::{DeviceLimits, Plan, Step};
 use crate::plant::{Plant, PlantParams};
+use crate::rest::{Analysis, Analyzer};
 use crate::runner::{BLOCK_LEN, DriveState, Runner};
 
 /// FNV-1a, 64-bit: small, dependency-free, and plenty to tell two bit patterns apart.
@@ -59,6 +63,9 @@ pub const ALL: &[(&str, Vector)] = &[
     ("drive_plan_stream", drive_plan_stream),
     ("drive_link_frames", drive_link_frames),
     ("plant_response", plant_response),
+    ("rest_rectangle_sign", rest_rectangle_sign),
+    ("rest_lshape_hole_linear_skewed", rest_lshape_hole_linear_skewed),
+    ("rest_trapezoid_sine", rest_trapezoid_sine),
 ];
 
 /// Encodes and decodes a fixed set of requests and responses; digests the wire bytes.
@@ -178,8 +185,90 @@ fn vector_plan() -> Plan {
     plan
 }
 
+/// Folds a whole analysis in: every rest (angle bits, kind), the flags, the order, and the
+/// balance offset, turn value and alignment at a few fixed angles.
+fn digest_analysis(d: &mut Digest, an: &Analyzer<'_>, a: &Analysis) {
+    d.u64(a.rests.len() as u64).u64(a.neutral as u64).u64(a.order as u64);
+    for r in &a.rests {
+        d.u64(r.angle as u64).u64(r.stable as u64);
+    }
+    for theta in [0u32, 0x1234_5678, 0x8000_0000, 0xdead_beef] {
+        let b = an.balance(theta, Fx::ZERO);
+        d.i64(b.offset.raw()).i64(b.turn.raw()).u64(a.align(theta, b.turn.signum()) as u64);
+    }
+}
+
+/// Rest angle nearest to `deg` degrees is within `tol_bam` binary-angle units of it.
+fn has_rest(a: &Analysis, deg: u32, stable: bool, tol_bam: u32) -> bool {
+    let target = ((deg as u64) << 32) / 360;
+    a.rests.iter().any(|r| {
+        let e = r.angle.wrapping_sub(target as u32);
+        r.stable == stable && e.min(e.wrapping_neg()) <= tol_bam
+    })
+}
+
+/// A 40 × 10 mm rectangle under the sign field: rests at 90°/270° (stable), 0°/180°.
+fn rest_rectangle_sign() -> Result<u64, &'static str> {
+    let r = [Pt::int(5, 5), Pt::int(45, 5), Pt::int(45, 15), Pt::int(5, 15)];
+    let rings: [&[Pt]; 1] = [&r];
+    let an = Analyzer::new(&rings, Field::symmetric(FieldKind::Sign)).map_err(|_| "prepare")?;
+    let a = an.analyze().map_err(|_| "analyze")?;
+    let tol = 50; // ≈ 4·10⁻⁶°
+    if a.rests.len() != 4
+        || !has_rest(&a, 90, true, tol)
+        || !has_rest(&a, 270, true, tol)
+        || !has_rest(&a, 0, false, tol)
+        || !has_rest(&a, 180, false, tol)
+    {
+        return Err("rectangle rests are not 90/270 stable, 0/180 unstable");
+    }
+    let mut d = Digest::new();
+    digest_analysis(&mut d, &an, &a);
+    Ok(d.value())
+}
+
+/// An L-shape with a square hole under a linear field with gains 1 (left) and 2.5 (right).
+fn rest_lshape_hole_linear_skewed() -> Result<u64, &'static str> {
+    let outline = [
+        Pt::int(0, 0),
+        Pt::int(60, 0),
+        Pt::int(60, 20),
+        Pt::int(20, 20),
+        Pt::int(20, 50),
+        Pt::int(0, 50),
+    ];
+    let hole = [Pt::int(5, 5), Pt::int(5, 15), Pt::int(15, 15), Pt::int(15, 5)];
+    let rings: [&[Pt]; 2] = [&outline, &hole];
+    let field = Field { kind: FieldKind::Linear, gain_left: Fx::ONE, gain_right: Fx::ratio(5, 2) };
+    let an = Analyzer::new(&rings, field).map_err(|_| "prepare")?;
+    let a = an.analyze().map_err(|_| "analyze")?;
+    if a.neutral || a.rests.len() < 2 || !a.rests.len().is_multiple_of(2) {
+        return Err("L-shape: expected an even number of rests");
+    }
+    let mut d = Digest::new();
+    digest_analysis(&mut d, &an, &a);
+    Ok(d.value())
+}
+
+/// A trapezoid (fractional coordinates) under a sine field, w = 90 mm.
+fn rest_trapezoid_sine() -> Result<u64, &'static str> {
+    let p = |x: i64, y: i64| Pt::new(Fx::ratio(x, 8), Fx::ratio(y, 8));
+    let r = [p(0, 0), p(320, 0), p(250, 130), p(41, 130)];
+    let rings: [&[Pt]; 1] = [&r];
+    let field = Field::symmetric(FieldKind::Sine { wavelength: Fx::from_int(90) });
+    let an = Analyzer::new(&rings, field).map_err(|_| "prepare")?;
+    let a = an.analyze().map_err(|_| "analyze")?;
+    if a.neutral || a.order < 2 {
+        return Err("trapezoid: expected a 180°-periodic rest pattern");
+    }
+    let mut d = Digest::new();
+    digest_analysis(&mut d, &an, &a);
+    Ok(d.value())
+}
+
 #[cfg(test)]
 mod tests {
+    extern crate std;
     use super::*;
 
     #[test]
@@ -193,9 +282,20 @@ mod tests {
     /// the on-target format, to compare by eye with `scripts/firmware.sh test qemu`.
     #[test]
     fn print_digests() {
-        extern crate std;
         for (name, vector) in ALL {
             std::println!("vector {name} {:016x}", vector().unwrap());
+        }
+    }
+
+    #[test]
+    #[ignore = "prints timings; run with --ignored --nocapture"]
+    fn vector_timings() {
+        // The on-target runner is ~20× slower than the host; keep each vector small.
+        for (name, vector) in ALL {
+            let t = std::time::Instant::now();
+            let digest = vector().unwrap();
+            let ms = t.elapsed().as_secs_f64() * 1e3;
+            std::println!("vector {name} {digest:016x} ({ms:.1} ms)");
         }
     }
 

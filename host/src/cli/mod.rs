@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod analyze;
 mod device;
 mod emulator;
 mod physics;
@@ -30,6 +31,8 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Rest orientations of a part at a straight node: turn and alignment functions.
+    Analyze(analyze::AnalyzeArgs),
     /// Talk to a controller (board or emulator).
     #[command(subcommand)]
     Device(device::DeviceCommand),
@@ -47,6 +50,7 @@ impl Cli {
     /// Runs the parsed command.
     pub fn run(&self) -> anyhow::Result<ExitCode> {
         match &self.command {
+            Command::Analyze(args) => args.run(),
             Command::Device(cmd) => cmd.run(),
             Command::Emulator(args) => args.run(),
             Command::Plate(cmd) => cmd.run(),

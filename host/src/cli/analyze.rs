@@ -1,0 +1,250 @@
+//! `chladni analyze PART --field …`: rest orientations of a part at a straight node.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use chladni::part::{Part, from_fx, to_fx};
+use chladni::plot::{self, PlotData};
+use chladni_shared::field::{Field, FieldKind};
+use chladni_shared::fx::{Bam, Fx};
+use chladni_shared::rest::{Analysis, AnalysisError, Analyzer};
+use clap::{Args, ValueEnum};
+
+use super::InputError;
+
+/// Field law at the node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FieldArg {
+    /// Constant force towards the node (paper eq. 5).
+    Sign,
+    /// Force proportional to the distance from the node (paper §5.2).
+    Linear,
+    /// sin(π d / w): needs --wavelength.
+    Sine,
+}
+
+impl FieldArg {
+    fn name(self) -> &'static str {
+        match self {
+            FieldArg::Sign => "sign",
+            FieldArg::Linear => "linear",
+            FieldArg::Sine => "sine",
+        }
+    }
+}
+
+/// Rest orientations of a part at a straight node (the plate's y-axis).
+#[derive(Debug, Args)]
+pub struct AnalyzeArgs {
+    /// Part file: .json (DESIGN.md format) or .svg (<polygon>/<path>, straight segments).
+    part: PathBuf,
+    /// Field law.
+    #[arg(long, value_enum)]
+    field: FieldArg,
+    /// Sine field: distance from the node to the next antinode (mm).
+    #[arg(long, value_name = "MM")]
+    wavelength: Option<f64>,
+    /// Gain on the left side of the node (x < 0).
+    #[arg(long, value_name = "G", default_value_t = 1.0)]
+    gain_left: f64,
+    /// Gain on the right side of the node (x > 0).
+    #[arg(long, value_name = "G", default_value_t = 1.0)]
+    gain_right: f64,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
+    /// Draw the part at rest, t(θ) and a(θ) to this file (.png or .svg).
+    #[arg(long, value_name = "FILE")]
+    plot: Option<PathBuf>,
+}
+
+/// Binary angle → degrees in [0, 360), rounded to 1e-6°.
+fn deg(a: Bam) -> f64 {
+    let d = (a as f64 * 360.0 / 4_294_967_296.0 * 1e6).round() / 1e6;
+    if d >= 360.0 { 0.0 } else { d }
+}
+
+fn bam(d: f64) -> Bam {
+    (d.rem_euclid(360.0) / 360.0 * 4_294_967_296.0).round() as u64 as u32
+}
+
+fn bad(msg: String) -> anyhow::Error {
+    InputError(msg).into()
+}
+
+impl AnalyzeArgs {
+    fn field(&self) -> anyhow::Result<Field> {
+        for (name, g) in [("--gain-left", self.gain_left), ("--gain-right", self.gain_right)] {
+            if !(g.is_finite() && g > 0.0 && g <= 1e6) {
+                return Err(bad(format!("{name} must be a number in (0, 1e6], got {g}")));
+            }
+        }
+        let kind = match (self.field, self.wavelength) {
+            (FieldArg::Sine, None) => {
+                return Err(bad("--field sine needs --wavelength MM".into()));
+            }
+            (FieldArg::Sine, Some(w)) => {
+                if !(w.is_finite() && w > 0.0 && w <= 1e7) {
+                    return Err(bad(format!("--wavelength must be in (0, 1e7] mm, got {w}")));
+                }
+                FieldKind::Sine { wavelength: to_fx(w) }
+            }
+            (f, Some(_)) => {
+                return Err(bad(format!(
+                    "--wavelength only applies to --field sine, not {}",
+                    f.name()
+                )));
+            }
+            (FieldArg::Sign, None) => FieldKind::Sign,
+            (FieldArg::Linear, None) => FieldKind::Linear,
+        };
+        Ok(Field { kind, gain_left: to_fx(self.gain_left), gain_right: to_fx(self.gain_right) })
+    }
+
+    pub fn run(&self) -> anyhow::Result<ExitCode> {
+        let field = self.field()?;
+        let part =
+            Part::load(&self.part).map_err(|e| bad(format!("{}: {e}", self.part.display())))?;
+        let rings = part.to_fixed();
+        let slices: Vec<&[chladni_shared::geometry::Pt]> =
+            rings.iter().map(Vec::as_slice).collect();
+        let an = Analyzer::new(&slices, field).map_err(|e| match e {
+            AnalysisError::WavelengthTooShort => {
+                let diameter = 2.0 * radius_mm(&part);
+                bad(format!(
+                    "--wavelength {} mm is too short for {}: the part must fit between node and \
+                     antinode on either side, so the wavelength must be at least its diameter \
+                     about the centroid, {diameter:.3} mm",
+                    self.wavelength.unwrap_or(0.0),
+                    part.name
+                ))
+            }
+            other => bad(format!("{}: cannot analyse: {other:?}", self.part.display())),
+        })?;
+        let analysis = an.analyze().map_err(|e| anyhow::anyhow!("analysis failed: {e:?}"))?;
+        let stable: Vec<f64> =
+            analysis.rests.iter().filter(|r| r.stable).map(|r| deg(r.angle)).collect();
+        let unstable: Vec<f64> =
+            analysis.rests.iter().filter(|r| !r.stable).map(|r| deg(r.angle)).collect();
+        let period = 360.0 / analysis.order as f64;
+        if self.json {
+            let value = serde_json::json!({
+                "part": part.name,
+                "field": self.field.name(),
+                "stable_deg": stable,
+                "unstable_deg": unstable,
+                "neutral": analysis.neutral,
+                "period_deg": period,
+            });
+            println!("{value}");
+        } else {
+            self.print_table(&part, &an, &analysis, period);
+        }
+        if let Some(path) = &self.plot {
+            let data = plot_data(&part, &an, &analysis, self.field.name(), &self.describe_field());
+            plot::write(path, &data)?;
+            if !self.json {
+                println!("plot       {}", path.display());
+            }
+        }
+        Ok(ExitCode::SUCCESS)
+    }
+
+    fn describe_field(&self) -> String {
+        let mut s = self.field.name().to_string();
+        if let Some(w) = self.wavelength {
+            s += &format!(" (w = {w} mm)");
+        }
+        if self.gain_left != self.gain_right {
+            s += &format!(", gains left {} / right {}", self.gain_left, self.gain_right);
+        }
+        s
+    }
+
+    fn print_table(&self, part: &Part, an: &Analyzer<'_>, a: &Analysis, period: f64) {
+        println!(
+            "part       {} ({} vertices, {} hole(s), area {:.3} mm²)",
+            part.name,
+            part.vertex_count(),
+            part.holes.len(),
+            part.area()
+        );
+        println!("field      {}", self.describe_field());
+        if a.neutral {
+            println!("result     neutral: every orientation is at rest");
+            return;
+        }
+        println!("period     {period}°");
+        println!("{:>12}  {:<9}  {:>18}", "θ (deg)", "kind", "node offset (mm)");
+        for r in &a.rests {
+            let s = offset_mm(an, an.balance(r.angle, Fx::ZERO).offset);
+            let kind = if r.stable { "stable" } else { "unstable" };
+            println!("{:>12.6}  {:<9}  {:>18.6}", deg(r.angle), kind, s);
+        }
+    }
+}
+
+fn offset_mm(an: &Analyzer<'_>, s: Fx) -> f64 {
+    from_fx(s) * (-an.shift() as f64).exp2()
+}
+
+fn radius_mm(part: &Part) -> f64 {
+    let (mut a, mut sx, mut sy) = (0.0, 0.0, 0.0);
+    for r in part.rings() {
+        for i in 0..r.len() {
+            let (p, q) = (r[i], r[(i + 1) % r.len()]);
+            let c = p[0] * q[1] - q[0] * p[1];
+            a += c / 2.0;
+            sx += (p[0] + q[0]) * c / 6.0;
+            sy += (p[1] + q[1]) * c / 6.0;
+        }
+    }
+    let (cx, cy) = (sx / a, sy / a);
+    part.rings().flatten().map(|p| (p[0] - cx).hypot(p[1] - cy)).fold(0.0, f64::max)
+}
+
+/// Samples t and a every 0.5° and poses the part at its first stable rest.
+fn plot_data(part: &Part, an: &Analyzer<'_>, a: &Analysis, field: &str, desc: &str) -> PlotData {
+    let n = 720;
+    let mut turn = Vec::with_capacity(n + 1);
+    let mut align = Vec::with_capacity(n + 1);
+    let mut guess = Fx::ZERO;
+    for i in 0..=n {
+        let d = i as f64 * 360.0 / n as f64;
+        let b = an.balance(bam(d), guess);
+        guess = b.offset;
+        turn.push((d, from_fx(b.turn)));
+        align.push((d, deg(a.align(bam(d), b.turn.signum()))));
+    }
+    let max = turn.iter().fold(0.0f64, |m, p| m.max(p.1.abs()));
+    if max > 0.0 && !a.neutral {
+        turn.iter_mut().for_each(|p| p.1 /= max);
+    } else {
+        turn.iter_mut().for_each(|p| p.1 = 0.0);
+    }
+    let pose = a.rests.iter().find(|r| r.stable).map_or(0, |r| r.angle);
+    let s = offset_mm(an, an.balance(pose, Fx::ZERO).offset);
+    let c = an.centroid_mm();
+    let (cx, cy) = (from_fx(c.x), from_fx(c.y));
+    let (sn, cs) = (deg(pose)).to_radians().sin_cos();
+    let rest_pose = part
+        .rings()
+        .map(|r| {
+            r.iter()
+                .map(|p| {
+                    let (x, y) = (p[0] - cx, p[1] - cy);
+                    [cs * x - sn * y + s, sn * x + cs * y]
+                })
+                .collect()
+        })
+        .collect();
+    PlotData {
+        title: format!("{} — {} field{}", part.name, field, desc.strip_prefix(field).unwrap_or("")),
+        rest_pose,
+        rest_pose_deg: deg(pose),
+        turn,
+        align,
+        rests: a.rests.iter().map(|r| (deg(r.angle), r.stable)).collect(),
+        neutral: a.neutral,
+    }
+}

@@ -1,0 +1,556 @@
+//! Planar parts: import from JSON (DESIGN.md §2) or SVG, validation, conversion to the
+//! fixed-point rings of `chladni_shared::rest`.
+//!
+//! JSON: `{"name": "...", "outline": [[x,y],...], "holes": [[[x,y],...],...]}`, mm, any
+//! winding, y up. SVG: every `<polygon>` and every sub-path of every `<path>` (straight
+//! segments only: M/L/H/V/Z, absolute or relative; `transform` attributes are applied) is a
+//! ring; the ring of largest area is the outline, the others are holes. SVG user units are
+//! taken as mm and SVG's y-down axis is flipped, so the part looks as drawn.
+//!
+//! After import every ring is checked and the winding normalised (outline counter-clockwise,
+//! holes clockwise). Errors name the problem, the ring and the vertex index (0-based, as in
+//! the file).
+
+use std::fmt;
+use std::path::Path;
+
+use chladni_shared::fx::Fx;
+use chladni_shared::geometry::Pt;
+
+/// Coordinates beyond this (mm) are rejected as absurd.
+pub const MAX_COORD_MM: f64 = 1.0e5;
+/// Parts smaller than this across (mm) are rejected as absurd.
+pub const MIN_SIZE_MM: f64 = 1.0e-3;
+/// Rings with more vertices than this are rejected.
+pub const MAX_VERTICES: usize = 1_000_000;
+
+/// Which ring of a part.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ring {
+    /// The outer boundary.
+    Outline,
+    /// Hole number i (0-based).
+    Hole(usize),
+}
+
+impl Ring {
+    fn of(i: usize) -> Ring {
+        if i == 0 { Ring::Outline } else { Ring::Hole(i - 1) }
+    }
+}
+
+impl fmt::Display for Ring {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Ring::Outline => write!(f, "outline"),
+            Ring::Hole(i) => write!(f, "hole {i}"),
+        }
+    }
+}
+
+/// Why a part file was rejected.
+#[derive(Debug, thiserror::Error)]
+pub enum PartError {
+    /// The file could not be read.
+    #[error("cannot read part file: {0}")]
+    Io(#[from] std::io::Error),
+    /// Not valid JSON for a part.
+    #[error("invalid part JSON: {0}")]
+    Json(#[from] serde_json::Error),
+    /// Not well-formed XML.
+    #[error("invalid SVG: {0}")]
+    Xml(#[from] roxmltree::Error),
+    /// A malformed attribute in the SVG.
+    #[error("invalid SVG: <{element}> attribute {attribute}: {message}")]
+    SvgAttribute {
+        /// Element name.
+        element: String,
+        /// Attribute name.
+        attribute: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+    /// A curve in an SVG path.
+    #[error("SVG <path> {path}: curved segment (only straight segments M/L/H/V/Z are supported)")]
+    Curve {
+        /// Index of the path element in the document.
+        path: usize,
+    },
+    /// No polygon or path found.
+    #[error("SVG has no <polygon> or <path> element")]
+    NoShape,
+    /// Unknown file type.
+    #[error("unknown part format (expected .json or .svg)")]
+    UnknownFormat,
+    /// Fewer than three vertices.
+    #[error("{ring}: {count} vertices, a polygon needs at least 3")]
+    TooFewVertices {
+        /// Which ring.
+        ring: Ring,
+        /// How many it has.
+        count: usize,
+    },
+    /// Too many vertices.
+    #[error("{ring}: {count} vertices, more than the limit of {MAX_VERTICES}")]
+    TooManyVertices {
+        /// Which ring.
+        ring: Ring,
+        /// How many it has.
+        count: usize,
+    },
+    /// NaN or infinity.
+    #[error("{ring}, vertex {index}: coordinate is not a finite number ({value})")]
+    NotFinite {
+        /// Which ring.
+        ring: Ring,
+        /// Vertex index.
+        index: usize,
+        /// The value.
+        value: f64,
+    },
+    /// A coordinate beyond [`MAX_COORD_MM`].
+    #[error(
+        "{ring}, vertex {index}: coordinate {value} mm is absurdly large (limit ±{MAX_COORD_MM} mm)"
+    )]
+    TooLarge {
+        /// Which ring.
+        ring: Ring,
+        /// Vertex index.
+        index: usize,
+        /// The value.
+        value: f64,
+    },
+    /// The part is smaller than [`MIN_SIZE_MM`].
+    #[error("part is absurdly small: {size:e} mm across (minimum {MIN_SIZE_MM} mm)")]
+    TooSmall {
+        /// Its size.
+        size: f64,
+    },
+    /// Two consecutive vertices coincide.
+    #[error("{ring}, vertex {index}: repeats the previous vertex (zero-length edge)")]
+    DuplicateVertex {
+        /// Which ring.
+        ring: Ring,
+        /// Vertex index.
+        index: usize,
+    },
+    /// Zero area after normalising the winding.
+    #[error("{ring}: zero area (all vertices on a line?), starting at vertex 0")]
+    ZeroArea {
+        /// Which ring.
+        ring: Ring,
+    },
+    /// Two edges of one ring cross or touch.
+    #[error("{ring}: self-intersection, edge from vertex {a} crosses edge from vertex {b}")]
+    SelfIntersection {
+        /// Which ring.
+        ring: Ring,
+        /// Start vertex of the first edge.
+        a: usize,
+        /// Start vertex of the second edge.
+        b: usize,
+    },
+    /// A hole is not inside the outline.
+    #[error("hole {hole}, vertex {index}: lies outside the outline or on it")]
+    HoleOutside {
+        /// Which hole.
+        hole: usize,
+        /// Vertex index (or start of the crossing edge).
+        index: usize,
+    },
+    /// Two holes overlap or one contains the other.
+    #[error("hole {a}, vertex {index}: overlaps hole {b}")]
+    HolesOverlap {
+        /// First hole.
+        a: usize,
+        /// Its vertex (or start of the crossing edge).
+        index: usize,
+        /// Second hole.
+        b: usize,
+    },
+}
+
+/// A validated part: outline counter-clockwise, holes clockwise, coordinates in mm.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Part {
+    /// Name (from the file, or its stem).
+    pub name: String,
+    /// Outline, counter-clockwise.
+    pub outline: Vec<[f64; 2]>,
+    /// Holes, clockwise.
+    pub holes: Vec<Vec<[f64; 2]>>,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PartJson {
+    name: Option<String>,
+    outline: Vec<[f64; 2]>,
+    #[serde(default)]
+    holes: Vec<Vec<[f64; 2]>>,
+}
+
+/// Signed area (counter-clockwise positive).
+pub fn signed_area(ring: &[[f64; 2]]) -> f64 {
+    let n = ring.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (ring[i], ring[(i + 1) % n]);
+            a[0] * b[1] - b[0] * a[1]
+        })
+        .sum::<f64>()
+        / 2.0
+}
+
+impl Part {
+    /// Loads a `.json` or `.svg` part file.
+    pub fn load(path: &Path) -> Result<Part, PartError> {
+        let text = std::fs::read_to_string(path)?;
+        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+            Some("json") => Part::from_json(&text, &stem),
+            Some("svg") => Part::from_svg(&text, &stem),
+            _ => Err(PartError::UnknownFormat),
+        }
+    }
+
+    /// Parses the JSON part format; `default_name` is used when the file has none.
+    pub fn from_json(text: &str, default_name: &str) -> Result<Part, PartError> {
+        let j: PartJson = serde_json::from_str(text)?;
+        Part::new(j.name.unwrap_or_else(|| default_name.to_string()), j.outline, j.holes)
+    }
+
+    /// Parses an SVG drawing (see the module docs).
+    pub fn from_svg(text: &str, name: &str) -> Result<Part, PartError> {
+        let doc = roxmltree::Document::parse(text)?;
+        let mut rings: Vec<Vec<[f64; 2]>> = Vec::new();
+        let mut path_index = 0;
+        for node in doc.descendants().filter(|n| n.is_element()) {
+            let tag = node.tag_name().name();
+            let bad = |attribute: &'static str, message: String| PartError::SvgAttribute {
+                element: tag.to_string(),
+                attribute,
+                message,
+            };
+            let ts = transform_of(node).map_err(|m| bad("transform", m))?;
+            match tag {
+                "polygon" => {
+                    let pts =
+                        node.attribute("points").ok_or_else(|| bad("points", "missing".into()))?;
+                    let ring: Vec<[f64; 2]> =
+                        svgtypes::PointsParser::from(pts).map(|(x, y)| apply(&ts, x, y)).collect();
+                    rings.push(ring);
+                }
+                "path" => {
+                    let d = node.attribute("d").ok_or_else(|| bad("d", "missing".into()))?;
+                    let mut current: Vec<[f64; 2]> = Vec::new();
+                    for seg in svgtypes::SimplifyingPathParser::from(d) {
+                        let seg = seg.map_err(|e| bad("d", e.to_string()))?;
+                        match seg {
+                            svgtypes::SimplePathSegment::MoveTo { x, y } => {
+                                if current.len() > 1 {
+                                    rings.push(std::mem::take(&mut current));
+                                }
+                                current = vec![apply(&ts, x, y)];
+                            }
+                            svgtypes::SimplePathSegment::LineTo { x, y } => {
+                                current.push(apply(&ts, x, y))
+                            }
+                            svgtypes::SimplePathSegment::ClosePath => {
+                                if !current.is_empty() {
+                                    rings.push(std::mem::take(&mut current));
+                                }
+                            }
+                            _ => return Err(PartError::Curve { path: path_index }),
+                        }
+                    }
+                    if current.len() > 1 {
+                        rings.push(current);
+                    }
+                    path_index += 1;
+                }
+                _ => {}
+            }
+        }
+        if rings.is_empty() {
+            return Err(PartError::NoShape);
+        }
+        // Largest ring by area is the outline.
+        let outer = (0..rings.len())
+            .max_by(|&a, &b| signed_area(&rings[a]).abs().total_cmp(&signed_area(&rings[b]).abs()))
+            .unwrap_or(0);
+        let outline = rings.remove(outer);
+        Part::new(name.to_string(), outline, rings)
+    }
+
+    /// Validates and normalises a part.
+    pub fn new(
+        name: String,
+        outline: Vec<[f64; 2]>,
+        holes: Vec<Vec<[f64; 2]>>,
+    ) -> Result<Part, PartError> {
+        let mut rings: Vec<Vec<[f64; 2]>> = Some(outline).into_iter().chain(holes).collect();
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for (i, ring) in rings.iter_mut().enumerate() {
+            let which = Ring::of(i);
+            for (index, p) in ring.iter().enumerate() {
+                for value in *p {
+                    if !value.is_finite() {
+                        return Err(PartError::NotFinite { ring: which, index, value });
+                    }
+                    if value.abs() > MAX_COORD_MM {
+                        return Err(PartError::TooLarge { ring: which, index, value });
+                    }
+                }
+            }
+            // A closing vertex equal to the first is common (SVG, GeoJSON habits): drop it.
+            if ring.len() > 1 && ring.first() == ring.last() {
+                ring.pop();
+            }
+            if ring.len() < 3 {
+                return Err(PartError::TooFewVertices { ring: which, count: ring.len() });
+            }
+            if ring.len() > MAX_VERTICES {
+                return Err(PartError::TooManyVertices { ring: which, count: ring.len() });
+            }
+            for index in 1..ring.len() {
+                if ring[index] == ring[index - 1] {
+                    return Err(PartError::DuplicateVertex { ring: which, index });
+                }
+            }
+            for p in ring.iter() {
+                for k in 0..2 {
+                    lo[k] = lo[k].min(p[k]);
+                    hi[k] = hi[k].max(p[k]);
+                }
+            }
+        }
+        let size = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        if size < MIN_SIZE_MM {
+            return Err(PartError::TooSmall { size });
+        }
+        // All vertices on one line: a zero-area ring (before the crossing test, which would
+        // call it a fold-back).
+        for (i, ring) in rings.iter().enumerate() {
+            let far = ring.iter().copied().max_by(|p, q| {
+                let d = |v: &[f64; 2]| (v[0] - ring[0][0]).hypot(v[1] - ring[0][1]);
+                d(p).total_cmp(&d(q))
+            });
+            let far = far.unwrap_or(ring[0]);
+            if ring.iter().all(|&v| orient(ring[0], far, v).abs() <= 1e-12 * size * size) {
+                return Err(PartError::ZeroArea { ring: Ring::of(i) });
+            }
+        }
+        check_intersections(&rings)?;
+        // Winding: outline counter-clockwise, holes clockwise; zero area is an error.
+        for (i, ring) in rings.iter_mut().enumerate() {
+            let a = signed_area(ring);
+            // Relative to the part's size: a "polygon" thinner than 1e-9 of it is a line.
+            if a.abs() <= 1e-9 * size * size {
+                return Err(PartError::ZeroArea { ring: Ring::of(i) });
+            }
+            if (i == 0) != (a > 0.0) {
+                ring.reverse();
+            }
+        }
+        // Containment: every hole inside the outline, no hole inside another.
+        for (h, hole) in rings.iter().enumerate().skip(1) {
+            if !inside(hole[0], &rings[0]) {
+                return Err(PartError::HoleOutside { hole: h - 1, index: 0 });
+            }
+            for (g, other) in rings.iter().enumerate().skip(1) {
+                if g != h && inside(hole[0], other) {
+                    return Err(PartError::HolesOverlap { a: h - 1, index: 0, b: g - 1 });
+                }
+            }
+        }
+        let outline = rings.remove(0);
+        Ok(Part { name, outline, holes: rings })
+    }
+
+    /// All rings (outline first).
+    pub fn rings(&self) -> impl Iterator<Item = &Vec<[f64; 2]>> {
+        std::iter::once(&self.outline).chain(self.holes.iter())
+    }
+
+    /// Area (mm²).
+    pub fn area(&self) -> f64 {
+        self.rings().map(|r| signed_area(r)).sum()
+    }
+
+    /// Number of vertices over all rings.
+    pub fn vertex_count(&self) -> usize {
+        self.rings().map(Vec::len).sum()
+    }
+
+    /// The rings in Q31.32 (mm), for `chladni_shared::rest::Analyzer`.
+    pub fn to_fixed(&self) -> Vec<Vec<Pt>> {
+        self.rings()
+            .map(|r| r.iter().map(|p| Pt::new(to_fx(p[0]), to_fx(p[1]))).collect())
+            .collect()
+    }
+}
+
+/// An `f64` as Q31.32 (rounded to nearest).
+pub fn to_fx(v: f64) -> Fx {
+    Fx((v * 4_294_967_296.0).round() as i64)
+}
+
+/// A Q31.32 value as `f64` (exact for |v| < 2²¹).
+pub fn from_fx(v: Fx) -> f64 {
+    v.raw() as f64 / 4_294_967_296.0
+}
+
+fn apply(ts: &svgtypes::Transform, x: f64, y: f64) -> [f64; 2] {
+    let (x, y) = (ts.a * x + ts.c * y + ts.e, ts.b * x + ts.d * y + ts.f);
+    [x, -y] // SVG y points down; ours up.
+}
+
+/// Product of the `transform` attributes of a node and its ancestors (outermost last).
+fn transform_of(node: roxmltree::Node<'_, '_>) -> Result<svgtypes::Transform, String> {
+    let mut ts = svgtypes::Transform::default();
+    for n in node.ancestors() {
+        if let Some(t) = n.attribute("transform") {
+            let t: svgtypes::Transform = t.parse().map_err(|e: svgtypes::Error| e.to_string())?;
+            // ts := t ∘ ts
+            ts = svgtypes::Transform::new(
+                t.a * ts.a + t.c * ts.b,
+                t.b * ts.a + t.d * ts.b,
+                t.a * ts.c + t.c * ts.d,
+                t.b * ts.c + t.d * ts.d,
+                t.a * ts.e + t.c * ts.f + t.e,
+                t.b * ts.e + t.d * ts.f + t.f,
+            );
+        }
+    }
+    Ok(ts)
+}
+
+/// Point strictly inside a ring (even–odd rule).
+fn inside(p: [f64; 2], ring: &[[f64; 2]]) -> bool {
+    let n = ring.len();
+    let mut c = false;
+    for i in 0..n {
+        let (a, b) = (ring[i], ring[(i + 1) % n]);
+        if (a[1] > p[1]) != (b[1] > p[1]) {
+            let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+            if p[0] < x {
+                c = !c;
+            }
+        }
+    }
+    c
+}
+
+fn orient(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
+    (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+}
+
+fn on_segment(a: [f64; 2], b: [f64; 2], p: [f64; 2]) -> bool {
+    p[0] >= a[0].min(b[0])
+        && p[0] <= a[0].max(b[0])
+        && p[1] >= a[1].min(b[1])
+        && p[1] <= a[1].max(b[1])
+}
+
+/// Do closed segments ab and cd share a point?
+fn segments_meet(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
+    let (d1, d2) = (orient(c, d, a), orient(c, d, b));
+    let (d3, d4) = (orient(a, b, c), orient(a, b, d));
+    if ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0))
+        && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
+    {
+        return true;
+    }
+    (d1 == 0.0 && on_segment(c, d, a))
+        || (d2 == 0.0 && on_segment(c, d, b))
+        || (d3 == 0.0 && on_segment(a, b, c))
+        || (d4 == 0.0 && on_segment(a, b, d))
+}
+
+/// Adjacent edges of one ring meet only at their shared vertex (no fold-back).
+fn adjacent_overlap(prev: [f64; 2], shared: [f64; 2], next: [f64; 2]) -> bool {
+    // Collinear and pointing back along the previous edge.
+    orient(prev, shared, next) == 0.0
+        && (next[0] - shared[0]) * (prev[0] - shared[0])
+            + (next[1] - shared[1]) * (prev[1] - shared[1])
+            > 0.0
+}
+
+/// Sweep over all edges sorted by their left end; reports the first crossing found.
+fn check_intersections(rings: &[Vec<[f64; 2]>]) -> Result<(), PartError> {
+    struct Edge {
+        ring: usize,
+        index: usize,
+        a: [f64; 2],
+        b: [f64; 2],
+        xmin: f64,
+        xmax: f64,
+    }
+    let mut edges: Vec<Edge> = Vec::new();
+    for (r, ring) in rings.iter().enumerate() {
+        let n = ring.len();
+        for i in 0..n {
+            let (a, b) = (ring[i], ring[(i + 1) % n]);
+            edges.push(Edge {
+                ring: r,
+                index: i,
+                a,
+                b,
+                xmin: a[0].min(b[0]),
+                xmax: a[0].max(b[0]),
+            });
+        }
+    }
+    edges.sort_by(|p, q| p.xmin.total_cmp(&q.xmin));
+    // Report crossings in vertex order for stable messages: keep the smallest pair.
+    let mut found: Option<(usize, usize, usize, usize)> = None;
+    for i in 0..edges.len() {
+        let e = &edges[i];
+        for f in edges[i + 1..].iter().take_while(|f| f.xmin <= e.xmax) {
+            let (ymin_e, ymax_e) = (e.a[1].min(e.b[1]), e.a[1].max(e.b[1]));
+            if f.a[1].max(f.b[1]) < ymin_e || f.a[1].min(f.b[1]) > ymax_e {
+                continue;
+            }
+            let crossing = if e.ring == f.ring {
+                let n = rings[e.ring].len();
+                let (lo, hi) = (e.index.min(f.index), e.index.max(f.index));
+                if hi == lo + 1 || (lo == 0 && hi == n - 1) {
+                    // Adjacent: the shared vertex is fine, folding back onto the edge is not.
+                    let ring = &rings[e.ring];
+                    let (p, s, q) = if hi == lo + 1 {
+                        (ring[lo], ring[hi], ring[(hi + 1) % n])
+                    } else {
+                        (ring[n - 1], ring[0], ring[1])
+                    };
+                    adjacent_overlap(p, s, q)
+                } else {
+                    segments_meet(e.a, e.b, f.a, f.b)
+                }
+            } else {
+                segments_meet(e.a, e.b, f.a, f.b)
+            };
+            if crossing {
+                let key = if (e.ring, e.index) < (f.ring, f.index) {
+                    (e.ring, e.index, f.ring, f.index)
+                } else {
+                    (f.ring, f.index, e.ring, e.index)
+                };
+                if found.is_none_or(|k| key < k) {
+                    found = Some(key);
+                }
+            }
+        }
+    }
+    match found {
+        None => Ok(()),
+        Some((r1, i1, r2, i2)) if r1 == r2 => {
+            Err(PartError::SelfIntersection { ring: Ring::of(r1), a: i1, b: i2 })
+        }
+        Some((0, _, r2, i2)) => Err(PartError::HoleOutside { hole: r2 - 1, index: i2 }),
+        Some((r1, i1, r2, _)) => Err(PartError::HolesOverlap { a: r1 - 1, index: i1, b: r2 - 1 }),
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,189 @@
+//! Plots of a rest analysis like the paper's Fig. 8: the part at rest on the node, the turn
+//! function t(θ) with its roots, and the alignment function a(θ). PNG or SVG by extension.
+//!
+//! PNG text uses the Ubuntu Light font shipped inside the `epaint_default_fonts` crate and
+//! rendered by plotters' `ab_glyph` backend, so no system font is needed (fresh CI machines).
+
+use std::path::Path;
+use std::sync::Once;
+
+use anyhow::{Context, anyhow};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::FontStyle;
+
+/// What to draw.
+#[derive(Debug, Clone)]
+pub struct PlotData {
+    /// Title line (part and field).
+    pub title: String,
+    /// Rings of the part in its rest pose, plate frame (mm): outline first.
+    pub rest_pose: Vec<Vec<[f64; 2]>>,
+    /// θ of the rest pose shown (degrees).
+    pub rest_pose_deg: f64,
+    /// Samples of t(θ): (degrees, t), normalised so max |t| = 1.
+    pub turn: Vec<(f64, f64)>,
+    /// Samples of a(θ): (degrees, degrees).
+    pub align: Vec<(f64, f64)>,
+    /// Rest orientations: (degrees, stable).
+    pub rests: Vec<(f64, bool)>,
+    /// Every orientation is at rest.
+    pub neutral: bool,
+}
+
+static FONT: Once = Once::new();
+
+fn register_font() {
+    FONT.call_once(|| {
+        for style in [FontStyle::Normal, FontStyle::Bold] {
+            // The bytes are a valid TTF shipped by the crate; failure would be a packaging bug.
+            let _ = plotters::style::register_font(
+                "sans-serif",
+                style,
+                epaint_default_fonts::UBUNTU_LIGHT,
+            );
+        }
+    });
+}
+
+/// Writes the plot; the format follows the extension (`.png` or `.svg`).
+pub fn write(path: &Path, data: &PlotData) -> anyhow::Result<()> {
+    let size = (1200, 420);
+    // Text is measured with the registered font for both backends.
+    register_font();
+    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+        Some("svg") => {
+            let root = SVGBackend::new(path, size).into_drawing_area();
+            draw(&root, data)?;
+            root.present().map_err(|e| anyhow!("{e}")).with_context(|| path.display().to_string())
+        }
+        Some("png") => {
+            let root = BitMapBackend::new(path, size).into_drawing_area();
+            draw(&root, data)?;
+            root.present().map_err(|e| anyhow!("{e}")).with_context(|| path.display().to_string())
+        }
+        _ => Err(anyhow!("plot file must end in .png or .svg: {}", path.display())),
+    }
+}
+
+fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
+    anyhow!("plotting: {e}")
+}
+
+fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, data: &PlotData) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(err)?;
+    let root = root.titled(&data.title, ("sans-serif", 20)).map_err(err)?;
+    let panels = root.split_evenly((1, 3));
+    let stable_col = RGBColor(0, 120, 60);
+    let unstable_col = RGBColor(200, 40, 40);
+
+    // (a) The part at rest on the node.
+    let all = data.rest_pose.iter().flatten();
+    let r = all.fold(1e-9f64, |m, p| m.max(p[0].abs()).max(p[1].abs())) * 1.15;
+    let mut part = ChartBuilder::on(&panels[0])
+        .caption(format!("part at rest, θ = {:.1}°", data.rest_pose_deg), ("sans-serif", 16))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(40)
+        .build_cartesian_2d(-r..r, -r..r)
+        .map_err(err)?;
+    part.configure_mesh()
+        .x_desc("x (mm)")
+        .y_desc("y (mm)")
+        .light_line_style(WHITE)
+        .draw()
+        .map_err(err)?;
+    for (i, ring) in data.rest_pose.iter().enumerate() {
+        let pts: Vec<(f64, f64)> = ring.iter().map(|p| (p[0], p[1])).collect();
+        let fill = if i == 0 { RGBColor(170, 190, 220).filled() } else { WHITE.filled() };
+        part.draw_series(std::iter::once(Polygon::new(pts.clone(), fill))).map_err(err)?;
+        let mut closed = pts;
+        closed.push(closed[0]);
+        part.draw_series(std::iter::once(PathElement::new(closed, BLACK.stroke_width(2))))
+            .map_err(err)?;
+    }
+    part.draw_series(std::iter::once(PathElement::new(
+        vec![(0.0, -r), (0.0, r)],
+        RGBColor(120, 120, 120).stroke_width(1),
+    )))
+    .map_err(err)?;
+
+    // (b) Turn function.
+    let mut turn = ChartBuilder::on(&panels[1])
+        .caption("turn function t(θ)", ("sans-serif", 16))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(45)
+        .build_cartesian_2d(0.0..360.0, -1.1..1.1)
+        .map_err(err)?;
+    turn.configure_mesh()
+        .x_desc("θ (deg)")
+        .y_desc("t / max|t|")
+        .x_labels(9)
+        .light_line_style(WHITE)
+        .draw()
+        .map_err(err)?;
+    turn.draw_series(LineSeries::new(vec![(0.0, 0.0), (360.0, 0.0)], RGBColor(150, 150, 150)))
+        .map_err(err)?;
+    turn.draw_series(LineSeries::new(data.turn.iter().copied(), BLUE.stroke_width(2)))
+        .map_err(err)?;
+    turn.draw_series(data.rests.iter().map(|&(d, stable)| {
+        let c = if stable { stable_col } else { unstable_col };
+        Circle::new((d, 0.0), 5, if stable { c.filled() } else { c.stroke_width(2) })
+    }))
+    .map_err(err)?;
+    if data.neutral {
+        turn.draw_series(std::iter::once(Text::new(
+            "neutral: every orientation is at rest",
+            (20.0, 0.6),
+            ("sans-serif", 16),
+        )))
+        .map_err(err)?;
+    }
+
+    // (c) Alignment function.
+    let mut align = ChartBuilder::on(&panels[2])
+        .caption("alignment function a(θ)", ("sans-serif", 16))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(45)
+        .build_cartesian_2d(0.0..360.0, 0.0..360.0)
+        .map_err(err)?;
+    align
+        .configure_mesh()
+        .x_desc("start θ (deg)")
+        .y_desc("final θ (deg)")
+        .x_labels(9)
+        .y_labels(9)
+        .light_line_style(WHITE)
+        .draw()
+        .map_err(err)?;
+    align
+        .draw_series(LineSeries::new(vec![(0.0, 0.0), (360.0, 360.0)], RGBColor(190, 190, 190)))
+        .map_err(err)?;
+    // Continuous pieces only: break the line where a(θ) jumps (unstable rests).
+    let mut piece: Vec<(f64, f64)> = Vec::new();
+    let mut pieces = Vec::new();
+    for &(x, y) in &data.align {
+        if let Some(&(_, py)) = piece.last()
+            && (y - py).abs() > 1.0
+        {
+            pieces.push(std::mem::take(&mut piece));
+        }
+        piece.push((x, y));
+    }
+    pieces.push(piece);
+    for p in pieces {
+        align.draw_series(LineSeries::new(p, stable_col.stroke_width(3))).map_err(err)?;
+    }
+    align
+        .draw_series(data.rests.iter().map(|&(d, stable)| {
+            let c = if stable { stable_col } else { unstable_col };
+            Circle::new((d, d), 5, if stable { c.filled() } else { c.stroke_width(2) })
+        }))
+        .map_err(err)?;
+    Ok(())
+}
