@@ -378,6 +378,21 @@ impl Part {
         self.rings().map(|r| signed_area(r)).sum()
     }
 
+    /// Centroid of the contact surface (outline minus holes), mm.
+    pub fn centroid(&self) -> [f64; 2] {
+        let (mut a, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        for r in self.rings() {
+            for (i, &p) in r.iter().enumerate() {
+                let q = r[(i + 1) % r.len()];
+                let c = p[0] * q[1] - q[0] * p[1];
+                a += c / 2.0;
+                sx += (p[0] + q[0]) * c / 6.0;
+                sy += (p[1] + q[1]) * c / 6.0;
+            }
+        }
+        [sx / a, sy / a]
+    }
+
     /// Number of vertices over all rings.
     pub fn vertex_count(&self) -> usize {
         self.rings().map(Vec::len).sum()

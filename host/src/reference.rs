@@ -59,18 +59,8 @@ const GL: [(f64, f64); 5] = [
 impl Reference {
     /// Prepares a validated part.
     pub fn new(part: &Part, field: RefField) -> Reference {
-        // Centroid.
-        let (mut a, mut sx, mut sy) = (0.0, 0.0, 0.0);
-        for r in part.rings() {
-            for i in 0..r.len() {
-                let (p, q) = (r[i], r[(i + 1) % r.len()]);
-                let c = p[0] * q[1] - q[0] * p[1];
-                a += c / 2.0;
-                sx += (p[0] + q[0]) * c / 6.0;
-                sy += (p[1] + q[1]) * c / 6.0;
-            }
-        }
-        let (cx, cy) = (sx / a, sy / a);
+        let [cx, cy] = part.centroid();
+        let a = part.area();
         let rings: Vec<Vec<[f64; 2]>> =
             part.rings().map(|r| r.iter().map(|p| [p[0] - cx, p[1] - cy]).collect()).collect();
         let radius = rings.iter().flatten().map(|p| p[0].hypot(p[1])).fold(0.0, f64::max);

@@ -189,17 +189,7 @@ fn offset_mm(an: &Analyzer<'_>, s: Fx) -> f64 {
 }
 
 fn radius_mm(part: &Part) -> f64 {
-    let (mut a, mut sx, mut sy) = (0.0, 0.0, 0.0);
-    for r in part.rings() {
-        for i in 0..r.len() {
-            let (p, q) = (r[i], r[(i + 1) % r.len()]);
-            let c = p[0] * q[1] - q[0] * p[1];
-            a += c / 2.0;
-            sx += (p[0] + q[0]) * c / 6.0;
-            sy += (p[1] + q[1]) * c / 6.0;
-        }
-    }
-    let (cx, cy) = (sx / a, sy / a);
+    let [cx, cy] = part.centroid();
     part.rings().flatten().map(|p| (p[0] - cx).hypot(p[1] - cy)).fold(0.0, f64::max)
 }
 
