@@ -32,10 +32,7 @@ pub struct StringArgs {
     /// Coefficient of restitution, in [0, 1].
     #[arg(long)]
     e: f64,
-    /// Tangential dissipation factor β of eq. 8, in [0, 1].
-    #[arg(long, default_value_t = Params::default().beta)]
-    beta: f64,
-    /// Coulomb friction while the particle rides on the string.
+    /// Coulomb friction coefficient (impacts and sliding).
     #[arg(long, default_value_t = Params::default().mu)]
     mu: f64,
     /// String amplitude A (m; the string spans x ∈ [0, π] m).
@@ -44,14 +41,18 @@ pub struct StringArgs {
     /// Drive frequency (Hz).
     #[arg(long, default_value_t = Params::default().freq_hz)]
     freq_hz: f64,
-    /// Start position x0 (released at rest on the string).
+    /// Start position x0.
     #[arg(long, default_value_t = 1.2)]
     x0: f64,
+    /// Release height above the string's mean position (m; 0 = at rest on the string).
+    /// Default: the period-1 bounce height g/(8 f²).
+    #[arg(long)]
+    drop: Option<f64>,
     /// Simulated time (s).
     #[arg(long, default_value_t = 300.0)]
     duration: f64,
-    /// Averaging time per point of the force profile (s).
-    #[arg(long, default_value_t = 30.0)]
+    /// Averaging time per particle of the force profile (s; 8 particles per point).
+    #[arg(long, default_value_t = 10.0)]
     average: f64,
     /// Write a PNG: x(t) and the averaged force with its −c·sin 2x fit.
     #[arg(long, value_name = "FILE")]
@@ -71,7 +72,6 @@ impl StringArgs {
             }
         };
         unit("e", self.e)?;
-        unit("beta", self.beta)?;
         for (name, v) in [("mu", self.mu), ("amplitude", self.amplitude), ("freq-hz", self.freq_hz)]
         {
             if !(v.is_finite() && v >= 0.0) || (name != "mu" && v == 0.0) {
@@ -96,7 +96,6 @@ impl StringArgs {
             amplitude: self.amplitude,
             freq_hz: self.freq_hz,
             e: self.e,
-            beta: self.beta,
             mu: self.mu,
             g: Params::default().g,
         };
@@ -105,9 +104,13 @@ impl StringArgs {
             ProgressStyle::with_template("simulating {bar:30} {pos}/{len}")
                 .unwrap_or(ProgressStyle::default_bar()),
         );
-        let traj = string::simulate(&p, self.x0, self.duration, self.duration / 600.0);
+        let drop = self.drop.unwrap_or(p.g / (8.0 * p.freq_hz * p.freq_hz));
+        if !(drop.is_finite() && drop >= 0.0) {
+            return Err(InputError(format!("--drop must be ≥ 0, got {drop}")).into());
+        }
+        let traj = string::simulate(&p, self.x0, drop, self.duration, self.duration / 600.0);
         bar.inc(1);
-        let profile = string::force_profile(&p, points, self.average, || bar.inc(1));
+        let profile = string::force_profile(&p, points, self.average, 8, || bar.inc(1));
         bar.finish_and_clear();
         let fit = string::fit_sin2x(&p, &profile);
         let x_end = traj.samples.last().map_or(self.x0, |s| s.1);
@@ -120,10 +123,10 @@ impl StringArgs {
             println!(
                 "{}",
                 json!({
-                    "params": {"e": p.e, "beta": p.beta, "mu": p.mu, "amplitude_m": p.amplitude,
+                    "params": {"e": p.e, "mu": p.mu, "amplitude_m": p.amplitude,
                                "freq_hz": p.freq_hz, "gamma": p.gamma()},
-                    "trajectory": {"x0": self.x0, "x_end": x_end, "duration_s": self.duration,
-                                   "impacts": traj.impacts,
+                    "trajectory": {"x0": self.x0, "drop_m": drop, "x_end": x_end, "duration_s": self.duration,
+                                   "impacts": traj.stats.impacts, "impacts_above_mean": traj.stats.above_mean,
                                    "samples": traj.samples.iter().step_by(10).map(|s| [s.0, s.1]).collect::<Vec<_>>()},
                     "force": profile.iter().map(|(x, f)| [*x, *f]).collect::<Vec<_>>(),
                     "fit": {"model": "F = -c sin 2x", "c": fit.c, "r2": fit.r2, "c_per_e_a2_omega": fit.per_e_a2_omega},
@@ -131,17 +134,21 @@ impl StringArgs {
             );
         } else {
             println!(
-                "e = {}, β = {}, μ = {}, A = {} m, f = {} Hz (Γ = Aω²/g = {:.2})",
+                "e = {}, μ = {}, A = {} m, f = {} Hz (Γ = Aω²/g = {:.2})",
                 p.e,
-                p.beta,
                 p.mu,
                 p.amplitude,
                 p.freq_hz,
                 p.gamma()
             );
             println!(
-                "x: {:.3} → {:.3} after {} s ({} impacts)",
-                self.x0, x_end, self.duration, traj.impacts
+                "x: {:.3} → {:.3} after {} s (dropped from {:.3} m; {} impacts, {:.0}% above the mean)",
+                self.x0,
+                x_end,
+                self.duration,
+                drop,
+                traj.stats.impacts,
+                100.0 * traj.stats.above_fraction()
             );
             println!(
                 "averaged force ≈ −c·sin 2x: c = {:.4} m/s², R² = {:.3}, c/(e A² ω) = {:.3}",

@@ -2,23 +2,36 @@
 //!
 //! The string, `x ∈ [0, π]`, vibrates in its first mode, `y_s = A sin x sin ωt`, and is not
 //! affected by the particle; its ends x = 0 and x = π are the nodes. The particle flies
-//! ballistically under gravity between impacts. At an impact, with string slope
-//! `tan α = A cos x sin ωt` (small: sin α ≈ tan α, cos α ≈ 1) and velocities just before
-//! (`ẋ⁻`, `ẏ⁻`), the paper's impact law is
+//! ballistically under gravity between impacts.
+//!
+//! Impact law, in the string's local frame (tangent `t = (cos α, sin α)`, normal
+//! `n = (−sin α, cos α)`, `tan α = A cos x sin ωt`); the string's material velocity is
+//! `(0, ẏ_s)`, so the relative velocity is `w = (ẋ⁻, ẏ⁻ − ẏ_s)`:
 //! ```text
-//! ẋ⁺ = e (ẏ⁻ − ẏ_s) sin α + β v_t,   v_t = (ẏ⁻ − ẏ_s) sin α + ẋ⁻        (eq. 8)
-//! ẏ⁺ = ẏ_s (1 + e) − e ẏ⁻                                              (eq. 9)
+//! w_n⁺ = −e w_n                                  (restitution, w_n < 0 approaching)
+//! P_n  = (1 + e)|w_n|                            (normal impulse per unit mass)
+//! w_t⁺ = w_t − sign(w_t) min(|w_t|, μ P_n)       (Coulomb: tangential impulse ≤ μ P_n)
 //! ```
-//! with restitution `e` and tangential dissipation factor `β ∈ [0, 1]` (set by friction).
-//! When the rebound is too slow to separate (`ẏ⁺ − ẏ_s` below a small threshold) the particle
-//! rides on the string until the string's downward acceleration exceeds g, sliding with
-//! Coulomb friction `μ` meanwhile. This resolves the chattering sequence that a small `e`
-//! produces, which would otherwise take infinitely many impacts.
+//! and back to (ẋ⁺, ẏ⁺) = (0, ẏ_s) + w_t⁺ t + w_n⁺ n. For small α this is the paper's
+//! eqs. 8–9, `ẋ⁺ = e (ẏ⁻ − ẏ_s) sin α + β v_t`, `ẏ⁺ = ẏ_s (1 + e) − e ẏ⁻`, with the
+//! dissipation factor `β = 1 − min(1, μ P_n / |v_t|)`. On a string with small slope the
+//! tangential slip is much smaller than μ P_n, so β = 0 (the impact sticks tangentially) and
+//! `ẋ⁺ = e w_n sin α`: the horizontal kick is the rebound along the tilted normal, pointing
+//! downhill and proportional to e. Downhill is towards the nearer node while the string is
+//! above its mean position (a hump) and towards the antinode while it is below (a dip).
+//!
+//! When the rebound is too slow to separate (relative normal velocity below
+//! [`Sim::stick_speed`], or too many impacts within one period: the chattering sequence of
+//! small e) the particle rides on the string until the string's downward acceleration
+//! exceeds g, sliding with Coulomb friction meanwhile.
 //!
 //! The paper argues (eq. 10 and after) that the time-averaged horizontal force is
-//! `F_avg ∝ −e A² ω sin 2x`, pointing from the antinode x = π/2 to the nodes.
-//! [`force_profile`] measures the average force on a particle held at x, and [`fit_sin2x`]
-//! fits it to `−c sin 2x`.
+//! `F_avg ∝ −e A² ω sin 2x`, pointing from the antinode x = π/2 to the nodes, provided the
+//! impacts happen mostly while the string is above its mean position. That is the case in
+//! the periodic (period-1) bouncing regime, `Γ = Aω²/g` near 1; for larger Γ the bouncing is
+//! chaotic and impacts below the mean (the string rising to meet a falling particle) win.
+//! [`force_profile`] measures the ensemble-averaged force on particles held at x, and
+//! [`fit_sin2x`] fits it to `−c sin 2x`. See docs/plate.md, "Particle on a string".
 
 use std::f64::consts::PI;
 
@@ -31,9 +44,7 @@ pub struct Params {
     pub freq_hz: f64,
     /// Coefficient of restitution e.
     pub e: f64,
-    /// Tangential dissipation factor β of eq. 8.
-    pub beta: f64,
-    /// Coulomb friction while riding on the string.
+    /// Coulomb friction coefficient μ (impacts and sliding).
     pub mu: f64,
     /// Gravity (m/s²).
     pub g: f64,
@@ -41,7 +52,7 @@ pub struct Params {
 
 impl Default for Params {
     fn default() -> Self {
-        Params { amplitude: 0.02, freq_hz: 6.0, e: 0.9, beta: 0.5, mu: 0.3, g: 9.81 }
+        Params { amplitude: 0.02, freq_hz: 3.9, e: 0.9, mu: 0.3, g: 9.81 }
     }
 }
 
@@ -66,6 +77,9 @@ impl Params {
     pub fn gamma(&self) -> f64 {
         self.amplitude * self.omega().powi(2) / self.g
     }
+    fn period(&self) -> f64 {
+        1.0 / self.freq_hz
+    }
 }
 
 /// Particle state.
@@ -79,39 +93,82 @@ struct State {
     riding: bool,
 }
 
-/// Impact law (eqs. 8–9): returns (ẋ⁺, ẏ⁺).
+/// Impact law (see the module docs): velocities just before → just after.
 fn impact(p: &Params, x: f64, t: f64, u: f64, v: f64) -> (f64, f64) {
     let ysd = p.ys_dot(x, t);
     let tan_a = p.slope(x, t);
-    let sin_a = tan_a / (1.0 + tan_a * tan_a).sqrt();
-    let vt = (v - ysd) * sin_a + u;
-    (p.e * (v - ysd) * sin_a + p.beta * vt, ysd * (1.0 + p.e) - p.e * v)
+    let cos_a = 1.0 / (1.0 + tan_a * tan_a).sqrt();
+    let sin_a = tan_a * cos_a;
+    let (wx, wy) = (u, v - ysd);
+    let wn = -wx * sin_a + wy * cos_a;
+    let wt = wx * cos_a + wy * sin_a;
+    let wn = wn.min(0.0);
+    let pn = -(1.0 + p.e) * wn;
+    let wn1 = -p.e * wn;
+    let wt1 = wt - wt.signum() * wt.abs().min(p.mu * pn);
+    (wt1 * cos_a - wn1 * sin_a, ysd + wt1 * sin_a + wn1 * cos_a)
 }
 
-/// Simulator. `hold_x` keeps the particle at its x (for force measurement): its ẋ is
-/// recorded at each impact and reset to zero.
+/// Impact statistics.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ImpactStats {
+    /// Number of impacts.
+    pub impacts: u64,
+    /// Impacts while the string was above its mean position (`sin ωt > 0`).
+    pub above_mean: u64,
+}
+
+impl ImpactStats {
+    /// Fraction of impacts above the string's mean position (0 if there were none).
+    pub fn above_fraction(&self) -> f64 {
+        if self.impacts == 0 { 0.0 } else { self.above_mean as f64 / self.impacts as f64 }
+    }
+}
+
+/// Simulator. `hold_x` keeps the particle at its x (for force measurement): the ẋ each
+/// impact gives it is accumulated in `impulse` and reset to zero.
 struct Sim {
     p: Params,
     s: State,
     dt: f64,
     hold_x: bool,
     impulse: f64,
-    impacts: u64,
+    stats: ImpactStats,
+    /// Impacts since the particle last rode on the string or a period started.
+    burst: u32,
+    burst_start: f64,
 }
+
+/// Impacts within one drive period after which the particle is put in contact (chattering).
+const MAX_BURST: u32 = 200;
 
 impl Sim {
     fn new(p: Params, x0: f64, hold_x: bool) -> Self {
         let s =
             State { t: 0.0, x: x0, y: p.ys(x0, 0.0), u: 0.0, v: p.ys_dot(x0, 0.0), riding: true };
-        Sim { p, s, dt: 1.0 / (p.freq_hz * 200.0), hold_x, impulse: 0.0, impacts: 0 }
+        Sim::with_state(p, s, hold_x)
     }
 
-    /// Separation below which a rebound counts as staying in contact (m/s).
+    fn with_state(p: Params, s: State, hold_x: bool) -> Self {
+        Sim {
+            p,
+            s,
+            dt: p.period() / 200.0,
+            hold_x,
+            impulse: 0.0,
+            stats: ImpactStats::default(),
+            burst: 0,
+            burst_start: s.t,
+        }
+    }
+
+    /// Relative normal rebound speed below which the particle stays in contact (m/s).
     fn stick_speed(&self) -> f64 {
-        1e-4 * self.p.amplitude * self.p.omega()
+        1e-3 * self.p.amplitude * self.p.omega()
     }
 
-    /// Advances to time `t_end`.
+    /// Advances to time `t_end`. Every step makes progress in time or ends in contact, and
+    /// the chattering guard bounds the impacts per period, so this terminates.
     fn run_until(&mut self, t_end: f64) {
         while self.s.t < t_end {
             if self.s.riding {
@@ -123,6 +180,9 @@ impl Sim {
                 // Reached a node (an end of the string): it stays there.
                 self.s.x = self.s.x.clamp(0.0, PI);
                 self.s.u = 0.0;
+                self.s.y = 0.0;
+                self.s.v = 0.0;
+                self.s.riding = true;
             }
         }
     }
@@ -130,6 +190,8 @@ impl Sim {
     fn ride(&mut self, t_end: f64) {
         let p = self.p;
         let mut s = self.s;
+        self.burst = 0;
+        self.burst_start = s.t;
         while s.t < t_end {
             let t1 = s.t + self.dt;
             if p.ys_ddot(s.x, t1) < -p.g {
@@ -151,8 +213,12 @@ impl Sim {
                 let du = p.mu * normal * self.dt;
                 s.u = if s.u.abs() <= du { 0.0 } else { s.u - du * s.u.signum() };
                 s.x += s.u * self.dt;
+            } else {
+                s.u = 0.0;
             }
             s.t = t1;
+            s.y = p.ys(s.x, s.t);
+            s.v = p.ys_dot(s.x, s.t);
         }
         self.s = s;
     }
@@ -167,8 +233,11 @@ impl Sim {
         };
         let mut t = s0.t;
         loop {
-            let t1 = t + self.dt;
+            let t1 = (t + self.dt).min(t_end);
             if gap(t1) < 0.0 {
+                // Bisection keeps `lo` on the free side; at lo = s0.t (just after the previous
+                // impact) the gap is 0 but opening at ≥ stick_speed, so the root found is the
+                // next impact, not the previous one.
                 let (mut lo, mut hi) = (t, t1);
                 for _ in 0..60 {
                     let mid = 0.5 * (lo + hi);
@@ -178,15 +247,25 @@ impl Sim {
                 let tau = ti - s0.t;
                 let x = s0.x + s0.u * tau;
                 let (u, v) = impact(&p, x, ti, s0.u, s0.v - p.g * tau);
-                self.impacts += 1;
+                self.stats.impacts += 1;
+                if (p.omega() * ti).sin() > 0.0 {
+                    self.stats.above_mean += 1;
+                }
                 let u = if self.hold_x {
                     self.impulse += u;
                     0.0
                 } else {
                     u
                 };
-                let riding = v - p.ys_dot(x, ti) < self.stick_speed();
-                self.s = State { t: ti, x, y: p.ys(x, ti), u, v, riding };
+                if ti - self.burst_start > p.period() {
+                    self.burst = 0;
+                    self.burst_start = ti;
+                }
+                self.burst += 1;
+                let slow = v - p.ys_dot(x, ti) < self.stick_speed();
+                let riding = slow || self.burst >= MAX_BURST;
+                let (y, v) = if riding { (p.ys(x, ti), p.ys_dot(x, ti)) } else { (p.ys(x, ti), v) };
+                self.s = State { t: ti, x, y, u, v, riding };
                 return;
             }
             if t1 >= t_end {
@@ -211,14 +290,31 @@ impl Sim {
 pub struct Trajectory {
     /// (time s, x) samples.
     pub samples: Vec<(f64, f64)>,
-    /// Number of impacts.
-    pub impacts: u64,
+    /// Impact statistics.
+    pub stats: ImpactStats,
 }
 
-/// Simulates a particle released at rest on the string at `x0` for `duration` seconds,
-/// sampling x every `sample_dt` seconds.
-pub fn simulate(p: &Params, x0: f64, duration: f64, sample_dt: f64) -> Trajectory {
-    let mut sim = Sim::new(*p, x0, false);
+impl Trajectory {
+    /// The last sampled x.
+    pub fn x_end(&self) -> f64 {
+        self.samples.last().map_or(f64::NAN, |s| s.1)
+    }
+
+    /// First sampled time at which x is within `dist` of a node (0 or π).
+    pub fn time_to_node(&self, dist: f64) -> Option<f64> {
+        self.samples.iter().find(|&&(_, x)| x.min(PI - x) <= dist).map(|s| s.0)
+    }
+}
+
+/// Simulates a particle released at rest at `x0`, `drop` metres above the string's mean
+/// position (0: on the string), for `duration` seconds, sampling x every `sample_dt` seconds.
+pub fn simulate(p: &Params, x0: f64, drop: f64, duration: f64, sample_dt: f64) -> Trajectory {
+    let mut sim = if drop > 0.0 {
+        let s = State { t: 0.0, x: x0, y: drop.max(p.amplitude), u: 0.0, v: 0.0, riding: false };
+        Sim::with_state(*p, s, false)
+    } else {
+        Sim::new(*p, x0, false)
+    };
     let mut samples = vec![(0.0, x0)];
     let mut t = 0.0;
     while t < duration {
@@ -226,28 +322,80 @@ pub fn simulate(p: &Params, x0: f64, duration: f64, sample_dt: f64) -> Trajector
         sim.run_until(t);
         samples.push((t, sim.s.x));
     }
-    Trajectory { samples, impacts: sim.impacts }
+    Trajectory { samples, stats: sim.stats }
 }
 
-/// Average horizontal force per unit mass (m/s²) on a particle held at `x`, over `duration`
-/// seconds: the total ẋ the impacts give it, divided by the time.
-pub fn average_force(p: &Params, x: f64, duration: f64) -> f64 {
-    let mut sim = Sim::new(*p, x, true);
-    sim.run_until(duration);
-    sim.impulse / duration
+/// Release state of ensemble member `k` of `members` at `x`: dropped from rest at drive phase
+/// 2π(k + ½)/members, from a height above the string's peak spread over
+/// [0, 2 g T²/8) (twice the period-1 bounce height) by a golden-ratio sequence.
+fn release(p: &Params, x: f64, k: usize, members: usize) -> State {
+    let period = p.period();
+    let h1 = p.g * period * period / 8.0;
+    let t0 = period * (k as f64 + 0.5) / members.max(1) as f64;
+    let h = 2.0 * h1 * ((k as f64 * 0.618_033_988_75 + 0.3) % 1.0);
+    State { t: t0, x, y: p.amplitude + h, u: 0.0, v: 0.0, riding: false }
 }
 
-/// Average force at `n` points spread over (0, π) (endpoints excluded).
+/// Trajectories of `members` particles dropped near `x0` (see [`release`]; member k is
+/// released at time t0 < T and sampled from t = 0 with x = x0 until then).
+pub fn simulate_ensemble(
+    p: &Params,
+    x0: f64,
+    members: usize,
+    duration: f64,
+    sample_dt: f64,
+) -> Vec<Trajectory> {
+    (0..members.max(1))
+        .map(|k| {
+            let mut sim = Sim::with_state(*p, release(p, x0, k, members), false);
+            let mut samples = vec![(0.0, x0)];
+            let mut t = 0.0;
+            while t < duration {
+                t = (t + sample_dt).min(duration);
+                sim.run_until(t);
+                samples.push((t, sim.s.x));
+            }
+            Trajectory { samples, stats: sim.stats }
+        })
+        .collect()
+}
+
+/// Ensemble-averaged horizontal force per unit mass (m/s²) on a particle held at `x`: the
+/// total ẋ the impacts give it, per unit time, averaged over `members` particles dropped at
+/// different drive phases from different heights (see [`release`]), each followed for
+/// `duration` seconds after a 10-period transient.
+pub fn average_force(p: &Params, x: f64, duration: f64, members: usize) -> (f64, ImpactStats) {
+    let period = p.period();
+    let mut total = 0.0;
+    let mut stats = ImpactStats::default();
+    let members = members.max(1);
+    for k in 0..members {
+        let s = release(p, x, k, members);
+        let t0 = s.t;
+        let mut sim = Sim::with_state(*p, s, true);
+        sim.run_until(t0 + 10.0 * period);
+        sim.impulse = 0.0;
+        sim.stats = ImpactStats::default();
+        sim.run_until(t0 + 10.0 * period + duration);
+        total += sim.impulse / duration;
+        stats.impacts += sim.stats.impacts;
+        stats.above_mean += sim.stats.above_mean;
+    }
+    (total / members as f64, stats)
+}
+
+/// Ensemble-averaged force at `n` points spread over (0, π) (endpoints excluded).
 pub fn force_profile(
     p: &Params,
     n: usize,
     duration: f64,
+    members: usize,
     mut progress: impl FnMut(),
 ) -> Vec<(f64, f64)> {
     (0..n)
         .map(|k| {
             let x = PI * (k as f64 + 0.5) / n as f64;
-            let f = average_force(p, x, duration);
+            let (f, _) = average_force(p, x, duration, members);
             progress();
             (x, f)
         })
@@ -287,14 +435,33 @@ mod tests {
     }
 
     #[test]
-    fn impact_law_reverses_relative_normal_velocity() {
+    fn impact_law_reverses_relative_normal_velocity_and_sticks_tangentially() {
         let p = with_e(0.5);
         // At ωt = 0 the string is flat (sin α = 0) and moving up at A ω sin x.
         let x = 1.0;
         let (u, v) = impact(&p, x, 0.0, 0.2, -1.0);
         let ysd = p.ys_dot(x, 0.0);
         assert!((v - ysd - 0.5 * (ysd + 1.0)).abs() < 1e-12);
-        assert!((u - 0.5 * 0.2).abs() < 1e-12, "only β·ẋ⁻ remains on a flat string: {u}");
+        // |w_t| = 0.2 < μ P_n = 0.3 · 1.5 · (1 + ẏ_s): friction stops the slip.
+        assert!(u.abs() < 1e-12, "{u}");
+        // Frictionless: the tangential velocity is kept.
+        let (u, _) = impact(&Params { mu: 0.0, ..p }, x, 0.0, 0.2, -1.0);
+        assert!((u - 0.2).abs() < 1e-12, "{u}");
+    }
+
+    #[test]
+    fn tilted_impact_kicks_downhill_by_e_times_normal_velocity() {
+        // ωt = π/2: the string is a hump at rest (ẏ_s = 0), slope A cos x > 0 at x = 0.5.
+        let p = with_e(0.9);
+        let (x, t) = (0.5, 0.25 / p.freq_hz);
+        let tan_a = p.slope(x, t);
+        assert!(p.ys_dot(x, t).abs() < 1e-12 && tan_a > 0.0);
+        let (u, v) = impact(&p, x, t, 0.0, -1.0);
+        let sin_a = tan_a / (1.0 + tan_a * tan_a).sqrt();
+        let wn = -(1.0 - sin_a * sin_a).sqrt();
+        // ẋ⁺ = e w_n sin α (β = 0): towards the node x = 0.
+        assert!((u - 0.9 * wn * sin_a).abs() < 1e-12, "{u}");
+        assert!(u < 0.0 && v > 0.0);
     }
 
     #[test]
@@ -314,52 +481,76 @@ mod tests {
 
     #[test]
     fn particle_stays_on_the_string_and_leaves_it_only_where_gamma_sin_x_exceeds_one() {
-        let p = with_e(0.9);
+        let p = Params { freq_hz: 6.0, ..with_e(0.9) };
         // Near the node Γ sin x < 1: the string never throws the particle up.
-        let near = simulate(&p, 0.2, 5.0, 0.5);
-        assert_eq!(near.impacts, 0);
+        let near = simulate(&p, 0.2, 0.0, 5.0, 0.5);
+        assert_eq!(near.stats.impacts, 0);
         assert!(near.samples.iter().all(|&(_, x)| (x - 0.2).abs() < 1e-12));
-        let far = simulate(&p, 1.2, 20.0, 0.5);
-        assert!(far.impacts > 20, "{}", far.impacts);
+        let far = simulate(&p, 1.2, 0.0, 20.0, 0.5);
+        assert!(far.stats.impacts > 20, "{:?}", far.stats);
         assert!(far.samples.iter().all(|&(_, x)| (0.0..=PI).contains(&x)));
     }
 
-    // The two tests below state the paper's Fig. 12 / eq. 10 claims. With eqs. 8–9 simulated
-    // literally they do not hold (see docs/plate.md, "Particle on a string"): kept, ignored,
-    // so that a corrected model can be checked against them.
     #[test]
-    #[ignore = "eqs. 8-9 simulated literally do not reproduce Fig. 12's drift; see docs/plate.md"]
-    fn particle_drifts_to_the_nearest_node_faster_for_high_restitution() {
-        let left_hi = simulate(&with_e(0.9), 1.2, 60.0, 1.0);
-        let left_lo = simulate(&with_e(0.1), 1.2, 60.0, 1.0);
-        let (xh, xl) = (left_hi.samples.last().unwrap().1, left_lo.samples.last().unwrap().1);
-        println!("x(60 s) from 1.2: e = 0.9 → {xh:.3}, e = 0.1 → {xl:.3}");
-        assert!(xh < xl, "e = 0.9 should be nearer the node: {xh} vs {xl}");
-        assert!(xl < 1.2 - 0.05, "e = 0.1 should still drift toward x = 0: {xl}");
-        assert!(xh < 0.5, "e = 0.9 should be close to the node: {xh}");
-        // Mirror image: from the other half it goes to x = π.
-        let right = simulate(&with_e(0.9), PI - 1.2, 60.0, 1.0);
-        assert!(right.samples.last().unwrap().1 > PI - 0.5);
+    fn chattering_low_restitution_particle_terminates_and_rides() {
+        // e = 0.1 lands, chatters and rides every period; the run must stay bounded.
+        let p = with_e(0.1);
+        let tr = simulate(&p, 1.2, 0.0, 20.0, 1.0);
+        let periods = 20.0 * p.freq_hz;
+        assert!(tr.stats.impacts > 0 && (tr.stats.impacts as f64) < 20.0 * periods);
     }
 
+    fn mean_end(p: &Params, x0: f64, secs: f64) -> (f64, Vec<Trajectory>) {
+        let tr = simulate_ensemble(p, x0, 8, secs, 1.0);
+        (tr.iter().map(Trajectory::x_end).sum::<f64>() / tr.len() as f64, tr)
+    }
+
+    // Fig. 12, high-e panel, in the periodic regime Γ = 1.22 (defaults): 8 particles
+    // dropped at x = 1.2 (and at π − 1.2) drift to the nearer node; e = 0.1 does not beat it.
     #[test]
-    #[ignore = "eqs. 8-9 simulated literally give an erratic averaged force; see docs/plate.md"]
+    fn particle_drifts_to_the_nearest_node_faster_for_high_restitution() {
+        let (xh, hi) = mean_end(&with_e(0.9), 1.2, 90.0);
+        let (xl, lo) = mean_end(&with_e(0.1), 1.2, 90.0);
+        println!("mean x(90 s) from 1.2: e = 0.9 → {xh:.3}, e = 0.1 → {xl:.3}");
+        assert!(xh < 0.5, "e = 0.9 should be close to the node: {xh}");
+        assert!(hi.iter().all(|t| t.x_end() < 1.2 - 0.1), "every e = 0.9 particle moves to 0");
+        assert!(xh < xl, "e = 0.9 should be nearer the node: {xh} vs {xl}");
+        assert!(lo.iter().all(|t| t.x_end() <= 1.2 + 1e-3), "e = 0.1 never moves to π/2");
+        // Mirror image: from the other half it goes to x = π.
+        let (xr, right) = mean_end(&with_e(0.9), PI - 1.2, 90.0);
+        assert!(xr > PI - 0.5, "{xr}");
+        assert!(right.iter().all(|t| t.x_end() > PI - 1.2 + 0.1));
+    }
+
+    // Fig. 12, low-e panel: NOT reproduced. With a Coulomb impact (β = 0) the e = 0.1 particle
+    // locks onto the string every period (take-off where ÿ_s = −g, land, chatter, ride), so
+    // its only horizontal motion is the e-sized kick during the short chatter flights:
+    // drift ∝ e², ~10⁻⁶ m/s here. See docs/plate.md, "Particle on a string".
+    #[test]
+    #[ignore = "low-e drift is ∝ e² and ~1e-6 m/s in this model (Fig. 12 left not reproduced)"]
+    fn low_restitution_particle_still_drifts_to_the_node() {
+        let (xl, _) = mean_end(&with_e(0.1), 1.2, 60.0);
+        assert!(xl < 1.2 - 0.05, "e = 0.1 should still drift toward x = 0: {xl}");
+    }
+
+    // Eq. 10's F_avg ∝ −e A² ω sin 2x, ensemble-averaged over 8 dropped particles per point.
+    #[test]
     fn averaged_force_follows_minus_sin_2x_and_grows_with_e() {
         let fits: Vec<Fit> = [0.9, 0.1]
             .iter()
             .map(|&e| {
                 let p = with_e(e);
-                let prof = force_profile(&p, 12, 20.0, || {});
+                let prof = force_profile(&p, 12, 10.0, 8, || {});
                 let fit = fit_sin2x(&p, &prof);
                 println!(
-                    "e = {e}: c = {:.4} m/s², R² = {:.3}, c/(eA²ω) = {:.0}",
+                    "e = {e}: c = {:.5} m/s², R² = {:.3}, c/(eA²ω) = {:.2}",
                     fit.c, fit.r2, fit.per_e_a2_omega
                 );
                 fit
             })
             .collect();
-        assert!(fits[0].c > 0.0 && fits[1].c > 0.0);
-        assert!(fits[0].c > 2.0 * fits[1].c, "{fits:?}");
-        assert!(fits[0].r2 > 0.8, "{fits:?}");
+        assert!(fits[0].c > 0.0 && fits[0].r2 >= 0.8, "{fits:?}");
+        // e = 0.1 gives no resolvable force (|c| ≲ 10⁻⁵); e = 0.9 at least 100× more.
+        assert!(fits[0].c > 100.0 * fits[1].c.abs(), "{fits:?}");
     }
 }
