@@ -3,9 +3,24 @@
 
 use std::time::Duration;
 
-use chladni::device::DeviceError;
+use chladni::device::{DeviceClient, DeviceError};
 use chladni_e2e::{pseudo_random_bytes, start_emulator};
-use chladni_shared::link::{Board, LinkError, MAX_FRAME, PROTOCOL_VERSION, Request};
+use chladni_shared::link::{
+    Board, DriveState, LinkError, MAX_FRAME, PROTOCOL_VERSION, Request, StatusReport,
+};
+
+/// Polls `status` until `done` holds (generous timeout: QEMU's clock slips under load).
+fn wait_for(client: &mut DeviceClient, done: impl Fn(&StatusReport) -> bool) -> StatusReport {
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    loop {
+        let status = client.status().expect("status");
+        if done(&status) {
+            return status;
+        }
+        assert!(std::time::Instant::now() < deadline, "status never reached: last {status:?}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
 
 #[test]
 fn link_survives_everything_the_host_can_throw_at_it() {
@@ -55,6 +70,21 @@ fn link_survives_everything_the_host_can_throw_at_it() {
     frame.push(0);
     client.send_raw(&frame).unwrap();
     client.ping().expect("ping after a malformed request");
+
+    // Garbage while the shaker is driven: the drive carries on undisturbed (same frequency
+    // and amplitude, samples still counting), and stops with a ramp when asked.
+    client.drive(120_000, 8_192).expect("manual drive accepted");
+    let before =
+        wait_for(&mut client, |s| s.state == DriveState::Running && s.amplitude_q15 == 8_192);
+    for seed in 100..110u64 {
+        client.send_raw(&pseudo_random_bytes(seed, 1024)).unwrap();
+    }
+    let after = client.status().expect("status after garbage");
+    assert_eq!(after.state, DriveState::Running, "garbage disturbed the drive: {after:?}");
+    assert_eq!((after.freq_mhz, after.amplitude_q15), (120_000, 8_192));
+    assert!(after.elapsed_samples > before.elapsed_samples, "drive stalled: {after:?}");
+    client.stop().expect("stop");
+    wait_for(&mut client, |s| s.state == DriveState::Idle && s.amplitude_q15 == 0);
 
     // Requests keep their ids straight across many round trips.
     for _ in 0..50 {
