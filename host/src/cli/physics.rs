@@ -35,6 +35,10 @@ pub struct StringArgs {
     /// Coulomb friction coefficient (impacts and sliding).
     #[arg(long, default_value_t = Params::default().mu)]
     mu: f64,
+    /// Tangential impact law of the paper's eq. 8 with a constant dissipation factor β
+    /// (w_t⁺ = β w_t) instead of Coulomb friction at impacts (μ still acts in contact).
+    #[arg(long)]
+    beta: Option<f64>,
     /// String amplitude A (m; the string spans x ∈ [0, π] m).
     #[arg(long, default_value_t = Params::default().amplitude)]
     amplitude: f64,
@@ -72,6 +76,9 @@ impl StringArgs {
             }
         };
         unit("e", self.e)?;
+        if let Some(b) = self.beta {
+            unit("beta", b)?;
+        }
         for (name, v) in [("mu", self.mu), ("amplitude", self.amplitude), ("freq-hz", self.freq_hz)]
         {
             if !(v.is_finite() && v >= 0.0) || (name != "mu" && v == 0.0) {
@@ -98,6 +105,7 @@ impl StringArgs {
             e: self.e,
             mu: self.mu,
             g: Params::default().g,
+            beta: self.beta,
         };
         let points = 16;
         let bar = ProgressBar::new(points as u64 + 1).with_style(
@@ -123,7 +131,7 @@ impl StringArgs {
             println!(
                 "{}",
                 json!({
-                    "params": {"e": p.e, "mu": p.mu, "amplitude_m": p.amplitude,
+                    "params": {"e": p.e, "mu": p.mu, "beta": p.beta, "amplitude_m": p.amplitude,
                                "freq_hz": p.freq_hz, "gamma": p.gamma()},
                     "trajectory": {"x0": self.x0, "drop_m": drop, "x_end": x_end, "duration_s": self.duration,
                                    "impacts": traj.stats.impacts, "impacts_above_mean": traj.stats.above_mean,
