@@ -340,12 +340,17 @@ impl Trajectory {
 /// Simulates a particle released at rest at `x0`, `drop` metres above the string's mean
 /// position (0: on the string), for `duration` seconds, sampling x every `sample_dt` seconds.
 pub fn simulate(p: &Params, x0: f64, drop: f64, duration: f64, sample_dt: f64) -> Trajectory {
-    let mut sim = if drop > 0.0 {
+    let sim = if drop > 0.0 {
         let s = State { t: 0.0, x: x0, y: drop.max(p.amplitude), u: 0.0, v: 0.0, riding: false };
         Sim::with_state(*p, s, false)
     } else {
         Sim::new(*p, x0, false)
     };
+    record(sim, x0, duration, sample_dt)
+}
+
+/// Runs `sim` for `duration` seconds, sampling x every `sample_dt` seconds from `x0` at t = 0.
+fn record(mut sim: Sim, x0: f64, duration: f64, sample_dt: f64) -> Trajectory {
     let mut samples = vec![(0.0, x0)];
     let mut t = 0.0;
     while t < duration {
@@ -378,15 +383,8 @@ pub fn simulate_ensemble(
 ) -> Vec<Trajectory> {
     (0..members.max(1))
         .map(|k| {
-            let mut sim = Sim::with_state(*p, release(p, x0, k, members), false);
-            let mut samples = vec![(0.0, x0)];
-            let mut t = 0.0;
-            while t < duration {
-                t = (t + sample_dt).min(duration);
-                sim.run_until(t);
-                samples.push((t, sim.s.x));
-            }
-            Trajectory { samples, stats: sim.stats }
+            let sim = Sim::with_state(*p, release(p, x0, k, members), false);
+            record(sim, x0, duration, sample_dt)
         })
         .collect()
 }
