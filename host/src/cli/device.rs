@@ -63,6 +63,9 @@ pub enum DeviceCommand {
         port: PortArg,
         /// Plan file: {"name", "repeat", "steps": [{"freq_mhz", "amplitude_q15", "duration_ms", "ramp_ms"}]}.
         plan: PathBuf,
+        /// Stay and show the plan's progress until the drive is idle again (exit 1 on a fault).
+        #[arg(long)]
+        wait: bool,
     },
     /// Ramp the drive to zero and idle (also clears a fault).
     Stop {
@@ -169,11 +172,15 @@ impl DeviceCommand {
                     a as f64 / 32767.0
                 );
             }
-            DeviceCommand::RunFile { port, plan } => {
+            DeviceCommand::RunFile { port, plan, wait } => {
                 let plan = read_plan(plan)?;
                 let (name, steps, ms) = (plan.name.clone(), plan.steps.len(), plan.total_ms());
-                port.open()?.run_plan(plan)?;
+                let mut client = port.open()?;
+                client.run_plan(plan)?;
                 println!("running plan '{name}': {steps} step(s), {ms} ms");
+                if *wait {
+                    return watch_plan(&mut client, steps, ms);
+                }
             }
             DeviceCommand::Stop { port } => {
                 port.open()?.stop()?;
@@ -198,6 +205,50 @@ impl DeviceCommand {
         }
         Ok(ExitCode::SUCCESS)
     }
+}
+
+/// Polls the controller until its drive is idle, with a progress bar over the plan's length;
+/// prints what happened. A fault, or a drive that stops answering, fails the command.
+fn watch_plan(client: &mut DeviceClient, steps: usize, total_ms: u64) -> anyhow::Result<ExitCode> {
+    use chladni_shared::runner::DriveState;
+    let bar = indicatif::ProgressBar::new(total_ms.max(1));
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:40.cyan/blue} {pos:>7}/{len} ms  {msg}")
+            .expect("static template"),
+    );
+    let mut steps_seen = std::collections::BTreeSet::new();
+    let last = loop {
+        let s = client.status()?;
+        if let Some(step) = s.step {
+            steps_seen.insert(step);
+        }
+        bar.set_position((s.elapsed_ms() as u64).min(total_ms));
+        bar.set_message(format!(
+            "{} · step {}/{} · {:.3} Hz · amplitude {:.3}",
+            s.state.name(),
+            s.step.map_or("-".to_string(), |i| (i + 1).to_string()),
+            steps,
+            s.freq_mhz as f64 / 1000.0,
+            s.amplitude_q15 as f64 / 32767.0
+        ));
+        match s.state {
+            DriveState::Idle => break s,
+            DriveState::Faulted => {
+                bar.abandon_with_message("faulted");
+                anyhow::bail!("the drive faulted after {:.1} ms", s.elapsed_ms());
+            }
+            _ => std::thread::sleep(std::time::Duration::from_millis(100)),
+        }
+    };
+    bar.finish_and_clear();
+    println!(
+        "plan done: {} of {} step(s) seen running, {:.1} ms, {} underrun(s)",
+        steps_seen.len(),
+        steps,
+        last.elapsed_ms(),
+        last.underruns
+    );
+    Ok(ExitCode::SUCCESS)
 }
 
 #[cfg(test)]
