@@ -9,6 +9,7 @@
 //! - [`part`]: planar parts: JSON/SVG import and validation.
 //! - [`reference`]: the f64 reference implementation of the rest analysis.
 //! - [`plot`]: part, turn-function and alignment-function plots.
+//! - [`sim`]: quasi-static part motion under a mode's field.
 
 pub mod device;
 pub mod emulator;
@@ -18,3 +19,4 @@ pub mod physics;
 pub mod plate;
 pub mod plot;
 pub mod reference;
+pub mod sim;
