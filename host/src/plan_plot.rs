@@ -113,7 +113,7 @@ pub fn plan_figure(
     let size = (pw * cols as u32, ph * rows as u32 + 40);
     let root = BitMapBackend::new(path, size).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
-    let root = root.titled(title, ("sans-serif", 18)).map_err(err)?;
+    let root = root.titled(title, ("sans-serif", 15)).map_err(err)?;
     let panels = root.split_evenly((rows, cols));
     for (r, ex) in examples.iter().enumerate() {
         for (k, &m) in modes.iter().enumerate() {

@@ -384,6 +384,15 @@ impl Problem {
 
     /// Breadth-first search; returns mode indices and the predicted sets.
     pub fn search(&self, opt: &PlanOptions) -> Result<Vec<(usize, Vec<f64>)>, PlanFailure> {
+        self.search_without(opt, &[])
+    }
+
+    /// [`Self::search`] with some transitions (orientation, mode) ruled out.
+    pub fn search_without(
+        &self,
+        opt: &PlanOptions,
+        forbidden: &[(f64, usize)],
+    ) -> Result<Vec<(usize, Vec<f64>)>, PlanFailure> {
         let p = self.period;
         let mut uni: Vec<f64> = Vec::new();
         let id = |uni: &mut Vec<f64>, v: f64| -> usize {
@@ -412,7 +421,12 @@ impl Problem {
             while trans.len() < uni.len() {
                 let u = uni[trans.len()];
                 let row = (0..nm)
-                    .map(|k| self.maps[k].apply(u, opt.margin_deg).ok().map(|v| id(uni, v)))
+                    .map(|k| {
+                        if forbidden.iter().any(|&(f, fk)| fk == k && cdist(f, u, p) < 1e-3) {
+                            return None;
+                        }
+                        self.maps[k].apply(u, opt.margin_deg).ok().map(|v| id(uni, v))
+                    })
                     .collect();
                 trans.push(row);
             }
@@ -570,6 +584,24 @@ pub fn settle_time(
     (times[..kept].last().copied().unwrap_or(0.0), times.len() - kept)
 }
 
+/// Does the simulation take orientation `u` to `v` (mod `period`, within 1°) under a straight
+/// node, approaching from either side, from beyond the part's radius and from half-way across?
+pub fn confirm(body: &Body, mode: &Mode, plate: &PlateModel, u: f64, v: f64, period: f64) -> bool {
+    let field = FieldModel::new(mode, plate);
+    let FieldModel::Line { xhat, c, .. } = field else { return true };
+    let ctr = plate.center();
+    let xi0 = xhat[0] * ctr[0] + xhat[1] * ctr[1] - c;
+    let base = [ctr[0] - xi0 * xhat[0], ctr[1] - xi0 * xhat[1]];
+    let p = SimParams { speed: mode.speed_mm_s, t_limit: 3600.0, run_to_limit: false };
+    let r = body.radius;
+    [-(r + 5.0), -0.5 * r, 0.5 * r, r + 5.0].iter().all(|&xi| {
+        let start =
+            Pose { x: base[0] + xi * xhat[0], y: base[1] + xi * xhat[1], theta: u.to_radians() };
+        let end = sim::run(body, &field, p, start).pose.theta.to_degrees();
+        cdist(end, v, period) < 1.0
+    })
+}
+
 /// Plans: maps, search, durations, position.
 pub fn plan(part: &Part, plate: &PlateModel, opt: &PlanOptions) -> Result<Synthesis, PlanFailure> {
     let problem = Problem::new(part, plate, opt)?;
@@ -583,8 +615,31 @@ pub fn plan_with(
     opt: &PlanOptions,
     problem: &Problem,
 ) -> Result<Synthesis, PlanFailure> {
-    let path = problem.search(opt)?;
     let body = Body::with_samples(part, 160);
+    // Search, then check every straight-node transition of the plan dynamically (approaching
+    // the node from either side, from afar and from half-way across); a transition the
+    // simulation does not confirm is ruled out and the search repeated.
+    let mut forbidden: Vec<(f64, usize)> = Vec::new();
+    let path = loop {
+        let path = problem.search_without(opt, &forbidden)?;
+        let mut bad = Vec::new();
+        for w in path.windows(2) {
+            let (k, mode) = (w[1].0, &plate.modes[w[1].0]);
+            if !matches!(mode.node, Node::Line { .. }) {
+                continue;
+            }
+            for &u in &w[0].1 {
+                let Ok(v) = problem.maps[k].apply(u, opt.margin_deg) else { continue };
+                if !confirm(&body, mode, plate, u, v, problem.period) {
+                    bad.push((u, k));
+                }
+            }
+        }
+        if bad.is_empty() || forbidden.len() > 200 {
+            break path;
+        }
+        forbidden.extend(bad);
+    };
     let mut steps = Vec::new();
     let mut before: Vec<f64> = Vec::new();
     for (k, after) in &path {

@@ -162,9 +162,8 @@ impl PlanArgs {
                 .collect();
             let modes: Vec<usize> = syn.steps.iter().map(|s| s.mode).collect();
             let title = format!(
-                "{} on {}: {}-step plan, final θ = {:.1}° (mod {}°)",
+                "{}: {}-step plan, final θ = {:.1}° (mod {}°)",
                 part.name,
-                plate.name,
                 modes.len(),
                 syn.final_orientation_deg,
                 syn.period_deg
@@ -353,7 +352,7 @@ impl SimulateArgs {
             plan_plot::traces_figure(path, &title, &body, &plate, &modes, &traces, &ends, target)?;
             let stem = path.with_extension("");
             let fig = PathBuf::from(format!("{}-plan.png", stem.display()));
-            let title = format!("{} on {}: plan step by step", part.name, plate.name);
+            let title = format!("{}: plan step by step", part.name);
             plan_plot::plan_figure(&fig, &title, &body, &plate, &modes, &examples)?;
             if !self.json {
                 println!("plots      {} {}", path.display(), fig.display());
