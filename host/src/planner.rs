@@ -117,7 +117,11 @@ impl StepMap {
             let best = s
                 .iter()
                 .min_by(|a, b| cdist(a.0, theta, 360.0).total_cmp(&cdist(b.0, theta, 360.0)));
-            return Ok(best.map_or(theta, |b| b.1));
+            return match best {
+                Some(b) if b.1.is_nan() => Err(0.0),
+                Some(b) => Ok(b.1),
+                None => Ok(theta),
+            };
         }
         if let Some(&s) = self.stable.iter().find(|&&s| cdist(s, theta, 360.0) < 1e-3) {
             return Ok(s);
@@ -241,68 +245,81 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, S
     Ok(StepMap { stable, boundaries, neutral, sampled: None, slack: 0.0 })
 }
 
-/// Where simulated maps start the part: the hyperbola's vertex, else the plate centre.
-pub fn map_start(mode: &Mode, plate: &PlateModel) -> [f64; 2] {
-    match mode.node {
+/// Where simulated maps start the part: the hyperbola's vertex (else the plate centre) and
+/// the four plate corners inset by the part's radius, since a part may meet a curved node
+/// anywhere and the outcome can depend on where.
+pub fn map_starts(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]> {
+    let first = match mode.node {
         Node::Hyperbola { center_mm, angle_deg, a_mm, .. } => {
             let (s, c) = angle_deg.to_radians().sin_cos();
             [center_mm[0] + a_mm * c, center_mm[1] + a_mm * s]
         }
         _ => plate.center(),
-    }
+    };
+    let [w, h] = plate.size_mm;
+    let r = body.radius.min(w / 2.0).min(h / 2.0);
+    vec![first, [r, r], [w - r, r], [w - r, h - r], [r, h - r]]
 }
 
-/// A map from simulation (any node kind): `n` start orientations at [`map_start`].
+/// A map from simulation (any node kind): `n` start orientations at each of [`map_starts`].
+/// Final orientations are clustered (2°, modulo the period); an orientation whose outcome
+/// differs between start points is ambiguous and treated as lying on a basin boundary.
 pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, period: f64) -> StepMap {
     let field = FieldModel::new(mode, plate);
-    let start = map_start(mode, plate);
-    let p = SimParams { speed: mode.speed_mm_s, t_limit: 1e5, run_to_limit: false };
-    let finals: Vec<(f64, f64)> = (0..n)
-        .map(|i| {
-            let th = i as f64 * 360.0 / n as f64;
+    // Up to 500 T0 (T0: time to travel one radius at full pull); slower runs count as
+    // ending where they are.
+    let t0 = body.radius / (mode.speed_mm_s * field.max_gain());
+    let p = SimParams { speed: mode.speed_mm_s, t_limit: 500.0 * t0, run_to_limit: false };
+    let thetas: Vec<f64> = (0..n).map(|i| i as f64 * 360.0 / n as f64).collect();
+    let mut reps: Vec<(f64, f64, usize)> = Vec::new(); // (first, sum of offsets, count)
+    let mut labels: Vec<Vec<usize>> = Vec::new();
+    for start in map_starts(body, mode, plate) {
+        let mut label = Vec::with_capacity(n);
+        for &th in &thetas {
             let r = sim::run(
                 body,
                 &field,
                 p,
                 Pose { x: start[0], y: start[1], theta: th.to_radians() },
             );
-            (th, r.pose.theta.to_degrees().rem_euclid(360.0))
-        })
-        .collect();
-    // Cluster final orientations modulo the period.
-    let mut reps: Vec<(f64, f64, usize)> = Vec::new(); // (first, sum of offsets, count)
-    let mut label = Vec::with_capacity(n);
-    for &(_, f) in &finals {
-        let fc = f.rem_euclid(period);
-        let found = reps.iter().position(|r| cdist(r.0 + r.1 / r.2 as f64, fc, period) < 2.0);
-        match found {
-            Some(k) => {
-                let r = &mut reps[k];
-                let mut d = fc - r.0;
-                if d > period / 2.0 {
-                    d -= period;
-                } else if d < -period / 2.0 {
-                    d += period;
+            let fc = r.pose.theta.to_degrees().rem_euclid(period);
+            match reps.iter().position(|r| cdist(r.0 + r.1 / r.2 as f64, fc, period) < 2.0) {
+                Some(k) => {
+                    let r = &mut reps[k];
+                    let mut d = fc - r.0;
+                    if d > period / 2.0 {
+                        d -= period;
+                    } else if d < -period / 2.0 {
+                        d += period;
+                    }
+                    r.1 += d;
+                    r.2 += 1;
+                    label.push(k);
                 }
-                r.1 += d;
-                r.2 += 1;
-                label.push(k);
-            }
-            None => {
-                reps.push((fc, 0.0, 1));
-                label.push(reps.len() - 1);
+                None => {
+                    reps.push((fc, 0.0, 1));
+                    label.push(reps.len() - 1);
+                }
             }
         }
+        labels.push(label);
     }
     let rep: Vec<f64> = reps.iter().map(|r| (r.0 + r.1 / r.2 as f64).rem_euclid(period)).collect();
+    let combined: Vec<Option<usize>> = (0..n)
+        .map(|i| {
+            let l = labels[0][i];
+            labels.iter().all(|ls| ls[i] == l).then_some(l)
+        })
+        .collect();
     let mut boundaries = Vec::new();
     for i in 0..n {
         let j = (i + 1) % n;
-        if label[i] != label[j] {
-            boundaries.push((finals[i].0 + 180.0 / n as f64).rem_euclid(360.0));
+        if combined[i].is_none() || combined[i] != combined[j] {
+            boundaries.push((thetas[i] + 180.0 / n as f64).rem_euclid(360.0));
         }
     }
-    let sampled = finals.iter().zip(&label).map(|(&(th, _), &l)| (th, rep[l])).collect();
+    let sampled =
+        thetas.iter().zip(&combined).map(|(&th, l)| (th, l.map_or(f64::NAN, |l| rep[l]))).collect();
     StepMap {
         stable: rep,
         boundaries,

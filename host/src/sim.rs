@@ -189,6 +189,8 @@ pub enum FieldModel {
         law: Law,
         /// Gains inside (centre side), outside (convex side).
         k: [f64; 2],
+        /// ξ and normal tabulated over the plate (bilinear), exact outside.
+        table: std::sync::Arc<DistTable>,
     },
     /// Sampled φ.
     Grid {
@@ -265,6 +267,67 @@ fn hyperbola_t(a: f64, b: f64, u: f64, v: f64) -> f64 {
     t
 }
 
+/// Signed distance ξ (positive on the convex side) to the hyperbola branch and the unit
+/// normal towards that side, exactly (Newton on the branch parameter).
+fn hyperbola_exact(
+    center: [f64; 2],
+    axis: [f64; 2],
+    a: f64,
+    b: f64,
+    p: [f64; 2],
+) -> (f64, [f64; 2]) {
+    let (dx, dy) = (p[0] - center[0], p[1] - center[1]);
+    let u = axis[0] * dx + axis[1] * dy;
+    let v = -axis[1] * dx + axis[0] * dy;
+    let t = hyperbola_t(a, b, u, v);
+    let (qu, qv) = (a * t.cosh(), b * t.sinh());
+    let dist = (u - qu).hypot(v - qv);
+    let outside = u > 0.0 && (u / a).powi(2) - (v / b).powi(2) > 1.0;
+    let xi = if outside { dist } else { -dist };
+    let (nu, nv) = (t.cosh() / a, -t.sinh() / b);
+    let nn = nu.hypot(nv);
+    let (nu, nv) = (nu / nn, nv / nn);
+    (xi, [axis[0] * nu - axis[1] * nv, axis[1] * nu + axis[0] * nv])
+}
+
+/// A tabulated distance field (bilinear interpolation).
+#[derive(Debug, Clone)]
+pub struct DistTable {
+    lo: [f64; 2],
+    step: f64,
+    nx: usize,
+    ny: usize,
+    xi: Vec<f64>,
+    n: Vec<[f64; 2]>,
+}
+
+impl DistTable {
+    fn eval(&self, p: [f64; 2]) -> Option<(f64, [f64; 2])> {
+        let u = (p[0] - self.lo[0]) / self.step;
+        let v = (p[1] - self.lo[1]) / self.step;
+        if !(u >= 0.0 && v >= 0.0 && u < (self.nx - 1) as f64 && v < (self.ny - 1) as f64) {
+            return None;
+        }
+        let (i, j) = (u as usize, v as usize);
+        let (fu, fv) = (u - i as f64, v - j as f64);
+        let idx = |i: usize, j: usize| j * self.nx + i;
+        let wts = [
+            (idx(i, j), (1.0 - fu) * (1.0 - fv)),
+            (idx(i + 1, j), fu * (1.0 - fv)),
+            (idx(i, j + 1), (1.0 - fu) * fv),
+            (idx(i + 1, j + 1), fu * fv),
+        ];
+        let (mut xi, mut n) = (0.0, [0.0, 0.0]);
+        for (k, w) in wts {
+            xi += w * self.xi[k];
+            n[0] += w * self.n[k][0];
+            n[1] += w * self.n[k][1];
+        }
+        let nn = n[0].hypot(n[1]).max(1e-12);
+        Some((xi, [n[0] / nn, n[1] / nn]))
+    }
+}
+
 impl FieldModel {
     /// The field of a mode on a plate.
     pub fn new(mode: &Mode, plate: &PlateModel) -> FieldModel {
@@ -285,13 +348,31 @@ impl FieldModel {
             }
             Node::Hyperbola { center_mm, angle_deg, a_mm, b_mm } => {
                 let (s, c) = angle_deg.to_radians().sin_cos();
+                let (center, axis, a, b) = (*center_mm, [c, s], *a_mm, *b_mm);
+                // 1 mm (or finer for small plates) table over the plate plus 20 mm.
+                let [w, h] = plate.size_mm;
+                let step = (w.max(h) / 300.0).min(1.0);
+                let lo = [-20.0, -20.0];
+                let (nx, ny) = (((w + 40.0) / step) as usize + 2, ((h + 40.0) / step) as usize + 2);
+                let mut xi = Vec::with_capacity(nx * ny);
+                let mut n = Vec::with_capacity(nx * ny);
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let p = [lo[0] + i as f64 * step, lo[1] + j as f64 * step];
+                        let (x, nn) = hyperbola_exact(center, axis, a, b, p);
+                        xi.push(x);
+                        n.push(nn);
+                    }
+                }
+                let table = std::sync::Arc::new(DistTable { lo, step, nx, ny, xi, n });
                 FieldModel::Hyperbola {
-                    center: *center_mm,
-                    axis: [c, s],
-                    a: *a_mm,
-                    b: *b_mm,
+                    center,
+                    axis,
+                    a,
+                    b,
                     law: mode.law,
                     k: [mode.gain_left, mode.gain_right],
+                    table,
                 }
             }
             Node::Grid(g) => {
@@ -322,21 +403,10 @@ impl FieldModel {
                 let f = -k[usize::from(xi > 0.0)] * law.g(xi);
                 [f * xhat[0], f * xhat[1]]
             }
-            FieldModel::Hyperbola { center, axis, a, b, law, k } => {
-                let (dx, dy) = (p[0] - center[0], p[1] - center[1]);
-                let u = axis[0] * dx + axis[1] * dy;
-                let v = -axis[1] * dx + axis[0] * dy;
-                let t = hyperbola_t(*a, *b, u, v);
-                let (qu, qv) = (a * t.cosh(), b * t.sinh());
-                let dist = (u - qu).hypot(v - qv);
-                let outside = u > 0.0 && (u / a).powi(2) - (v / b).powi(2) > 1.0;
-                let xi = if outside { dist } else { -dist };
-                // Outward normal at q (towards the convex side), local then plate frame.
-                let (nu, nv) = (t.cosh() / a, -t.sinh() / b);
-                let nn = nu.hypot(nv);
-                let (nu, nv) = (nu / nn, nv / nn);
-                let n = [axis[0] * nu - axis[1] * nv, axis[1] * nu + axis[0] * nv];
-                let f = -k[usize::from(outside)] * law.g(xi);
+            FieldModel::Hyperbola { center, axis, a, b, law, k, table } => {
+                let (xi, n) =
+                    table.eval(p).unwrap_or_else(|| hyperbola_exact(*center, *axis, *a, *b, p));
+                let f = -k[usize::from(xi > 0.0)] * law.g(xi);
                 [f * n[0], f * n[1]]
             }
             FieldModel::Grid { grid, k } => {
