@@ -35,7 +35,7 @@ fn plate() -> PlateModel {
             "[[mode]]\nfreq_hz = {}.0\nfield = \"{law}\"\n{gains}node = {{ kind = \"line\", angle_deg = {}.0, offset_mm = {}.0 }}\n",
             40 + 10 * i,
             15 * i,
-            (i as i32 - 6) * 5
+            (i - 6) * 5
         );
     }
     PlateModel::from_file(&PlateFile::parse(&text, "bench").unwrap()).unwrap()

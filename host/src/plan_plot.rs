@@ -24,7 +24,9 @@ pub fn node_polylines(mode: &Mode, plate: &PlateModel) -> Vec<Vec<(f64, f64)>> {
         let mut out = vec![Vec::new()];
         for p in pts {
             if inside(p) {
-                out.last_mut().map(|r: &mut Vec<(f64, f64)>| r.push((p[0], p[1])));
+                if let Some(r) = out.last_mut() {
+                    r.push((p[0], p[1]));
+                }
             } else if !out.last().is_some_and(Vec::is_empty) {
                 out.push(Vec::new());
             }

@@ -156,8 +156,7 @@ pub fn symmetry_order(part: &Part) -> u32 {
     let n = part.outline.len();
     let tol = 1e-6 * body.radius.max(1e-9);
     for m in (2..=n).rev() {
-        if n % m != 0 || body.rings.iter().skip(1).any(|h| h.len() % m != 0 && body.rings.len() > 1)
-        {
+        if !n.is_multiple_of(m) {
             continue;
         }
         let (s, c) = (std::f64::consts::TAU / m as f64).sin_cos();
@@ -469,6 +468,7 @@ impl Problem {
             if nodes.len() > opt.max_states {
                 break;
             }
+            #[allow(clippy::needless_range_loop)]
             for k in 0..nm {
                 let mut img = Vec::with_capacity(nodes[i].0.len());
                 let mut ok = true;
