@@ -9,12 +9,20 @@
 //! - [`part`]: planar parts: JSON/SVG import and validation.
 //! - [`reference`]: the f64 reference implementation of the rest analysis.
 //! - [`plot`]: part, turn-function and alignment-function plots.
+//! - [`plan_file`]: the plan JSON file ⇄ the device plan.
+//! - [`plan_plot`]: plan and motion-trace figures.
+//! - [`planner`]: sensorless plan synthesis (step maps, BFS over orientation sets).
+//! - [`sim`]: quasi-static part motion under a mode's field.
 
 pub mod device;
 pub mod emulator;
 pub mod firmware;
 pub mod part;
 pub mod physics;
+pub mod plan_file;
+pub mod plan_plot;
+pub mod planner;
 pub mod plate;
 pub mod plot;
 pub mod reference;
+pub mod sim;

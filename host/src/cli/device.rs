@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use chladni::device::DeviceClient;
+use chladni::plan_file::PlanFile;
 use chladni_shared::plan::{DeviceLimits, Plan};
 use chladni_shared::runner::StatusReport;
 use clap::{Args, Subcommand};
@@ -61,7 +62,8 @@ pub enum DeviceCommand {
     RunFile {
         #[command(flatten)]
         port: PortArg,
-        /// Plan file: {"name", "repeat", "steps": [{"freq_mhz", "amplitude_q15", "duration_ms", "ramp_ms"}]}.
+        /// Plan file (as written by `chladni plan --out`): {"name", "repeat", "steps":
+        /// [{"freq_hz", "duration_ms", "amplitude" (0..1), "ramp_ms"}], ...}; see docs/plan.md.
         plan: PathBuf,
         /// Stay and show the plan's progress until the drive is idle again (exit 1 on a fault).
         #[arg(long)]
@@ -104,11 +106,10 @@ fn freq_mhz(freq: f64) -> Result<u32, InputError> {
 pub fn read_plan(path: &std::path::Path) -> Result<Plan, InputError> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| InputError(format!("cannot read plan {}: {e}", path.display())))?;
-    let plan: Plan = serde_json::from_str(&text)
-        .map_err(|e| InputError(format!("plan {} is not a valid plan: {e}", path.display())))?;
-    plan.validate(&DeviceLimits::DEFAULT)
-        .map_err(|e| InputError(format!("plan {} refused: {e}", path.display())))?;
-    Ok(plan)
+    let file =
+        PlanFile::parse(&text).map_err(|e| InputError(format!("plan {}: {e}", path.display())))?;
+    file.to_plan(&DeviceLimits::DEFAULT)
+        .map_err(|e| InputError(format!("plan {} refused: {e}", path.display())))
 }
 
 /// The `status --json` object.
@@ -291,7 +292,7 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("chladni-plan-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("p.json");
-        std::fs::write(&path, r#"{"name":"x","repeat":1,"steps":[{"freq_mhz":500,"amplitude_q15":1,"duration_ms":5,"ramp_ms":0}]}"#).unwrap();
+        std::fs::write(&path, r#"{"name":"x","repeat":1,"steps":[{"freq_hz":0.5,"amplitude":0.1,"duration_ms":5,"ramp_ms":0}]}"#).unwrap();
         assert!(read_plan(&path).unwrap_err().0.contains("step 0: frequency 0.500 Hz"));
         std::fs::write(&path, "{").unwrap();
         assert!(read_plan(&path).unwrap_err().0.contains("not a valid plan"));

@@ -9,6 +9,7 @@ mod analyze;
 mod device;
 mod emulator;
 mod physics;
+mod plan;
 mod plate;
 
 /// Bad input from the user: exit code 2.
@@ -41,6 +42,10 @@ enum Command {
     /// Plate modes from theory, node lines from Chladni photos.
     #[command(subcommand)]
     Plate(plate::PlateCommand),
+    /// Sensorless plan: the shortest mode sequence that orients a part from any start.
+    Plan(plan::PlanArgs),
+    /// Monte Carlo simulation of a plan: success rate, final pose spread, traces.
+    Simulate(plan::SimulateArgs),
     /// Physics models (particle on a vibrating string).
     #[command(subcommand)]
     Physics(physics::PhysicsCommand),
@@ -55,6 +60,8 @@ impl Cli {
             Command::Emulator(args) => args.run(),
             Command::Plate(cmd) => cmd.run(),
             Command::Physics(cmd) => cmd.run(),
+            Command::Plan(args) => args.run(),
+            Command::Simulate(args) => args.run(),
         }
     }
 }

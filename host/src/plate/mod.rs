@@ -3,6 +3,7 @@
 
 pub mod contour;
 pub mod file;
+pub mod model;
 pub mod modes_file;
 pub mod photo;
 pub mod plot;

@@ -1,0 +1,225 @@
+//! The plan JSON file, one format for people, scripts, `chladni plan --out` and
+//! `chladni device run-file`:
+//!
+//! ```json
+//! {"name": "triangle", "repeat": 1,
+//!  "steps": [{"freq_hz": 60.0, "duration_ms": 2500, "amplitude": 0.8, "ramp_ms": 20}],
+//!  "final_orientation_deg": 110.7, "period_deg": 180.0, "final_position_mm": null}
+//! ```
+//! Converted to and from [`chladni_shared::plan::Plan`] (the value the firmware stores and
+//! runs): frequency Hz → mHz and amplitude 0..1 → Q15 rounded to nearest, then validated
+//! against [`DeviceLimits`].
+
+use chladni_shared::plan::{DeviceLimits, MAX_NAME, MAX_STEPS, Plan, PlanError, Step};
+use serde::{Deserialize, Serialize};
+
+/// One step as written.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StepJson {
+    /// Drive frequency (Hz).
+    pub freq_hz: f64,
+    /// Step length (ms), ramp included.
+    pub duration_ms: u32,
+    /// Drive amplitude, fraction of full scale (0..=1).
+    pub amplitude: f64,
+    /// Amplitude ramp (ms).
+    #[serde(default)]
+    pub ramp_ms: u32,
+}
+
+/// The whole file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanFile {
+    /// Name (at most 32 bytes).
+    #[serde(default = "default_name")]
+    pub name: String,
+    /// Runs (≥ 1).
+    #[serde(default = "one")]
+    pub repeat: u16,
+    /// Steps.
+    pub steps: Vec<StepJson>,
+    /// Predicted final orientation (degrees, modulo `period_deg`), informative.
+    #[serde(default)]
+    pub final_orientation_deg: Option<f64>,
+    /// Period of the orientation (part symmetry, 180° for symmetric fields), informative.
+    #[serde(default)]
+    pub period_deg: Option<f64>,
+    /// Predicted final centroid position (mm) when the nodes fix it, informative.
+    #[serde(default)]
+    pub final_position_mm: Option<[f64; 2]>,
+}
+
+fn default_name() -> String {
+    "plan".into()
+}
+fn one() -> u16 {
+    1
+}
+
+/// Why a plan file cannot become a device plan.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanFileError {
+    /// Not JSON of the right shape.
+    #[error("not a valid plan: {0}")]
+    Json(String),
+    /// A frequency that is not a positive finite number of Hz.
+    #[error("step {step}: freq_hz {value} is not a valid frequency (give Hz, e.g. 60.0)")]
+    Frequency {
+        /// Step index.
+        step: usize,
+        /// Value.
+        value: f64,
+    },
+    /// Amplitude outside 0..=1.
+    #[error("step {step}: amplitude {value} outside 0..=1 (fraction of full scale)")]
+    Amplitude {
+        /// Step index.
+        step: usize,
+        /// Value.
+        value: f64,
+    },
+    /// Name longer than the device stores.
+    #[error("name \"{0}\" is longer than {MAX_NAME} bytes")]
+    NameTooLong(String),
+    /// More steps than a plan can hold.
+    #[error("{0} steps: a plan holds at most {MAX_STEPS}")]
+    TooManySteps(usize),
+    /// Refused by the device limits.
+    #[error("{0}")]
+    Invalid(PlanError),
+}
+
+impl PlanFile {
+    /// Parses JSON text.
+    pub fn parse(text: &str) -> Result<PlanFile, PlanFileError> {
+        serde_json::from_str(text).map_err(|e| PlanFileError::Json(e.to_string()))
+    }
+
+    /// The device plan, validated against `limits`.
+    pub fn to_plan(&self, limits: &DeviceLimits) -> Result<Plan, PlanFileError> {
+        if self.steps.len() > MAX_STEPS {
+            return Err(PlanFileError::TooManySteps(self.steps.len()));
+        }
+        let mut steps = heapless::Vec::new();
+        for (i, s) in self.steps.iter().enumerate() {
+            let mhz = s.freq_hz * 1000.0;
+            if !(mhz.is_finite() && mhz >= 0.5 && mhz < u32::MAX as f64) {
+                return Err(PlanFileError::Frequency { step: i, value: s.freq_hz });
+            }
+            if !(0.0..=1.0).contains(&s.amplitude) {
+                return Err(PlanFileError::Amplitude { step: i, value: s.amplitude });
+            }
+            let step = Step {
+                freq_mhz: mhz.round() as u32,
+                amplitude_q15: (s.amplitude * 32767.0).round() as u16,
+                duration_ms: s.duration_ms,
+                ramp_ms: s.ramp_ms,
+            };
+            // Capacity checked above.
+            let _ = steps.push(step);
+        }
+        let name = heapless::String::try_from(self.name.as_str())
+            .map_err(|_| PlanFileError::NameTooLong(self.name.clone()))?;
+        let plan = Plan { name, repeat: self.repeat, steps };
+        plan.validate(limits).map_err(PlanFileError::Invalid)?;
+        Ok(plan)
+    }
+
+    /// The file form of a device plan (no predictions).
+    pub fn from_plan(plan: &Plan) -> PlanFile {
+        PlanFile {
+            name: plan.name.to_string(),
+            repeat: plan.repeat,
+            steps: plan
+                .steps
+                .iter()
+                .map(|s| StepJson {
+                    freq_hz: s.freq_mhz as f64 / 1000.0,
+                    duration_ms: s.duration_ms,
+                    amplitude: (s.amplitude_q15 as f64 / 32767.0 * 1e6).round() / 1e6,
+                    ramp_ms: s.ramp_ms,
+                })
+                .collect(),
+            final_orientation_deg: None,
+            period_deg: None,
+            final_position_mm: None,
+        }
+    }
+
+    /// The documented JSON object: steps, final_orientation_deg, period_deg,
+    /// final_position_mm (null when not fixed), name, repeat.
+    pub fn to_json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "name": self.name,
+            "repeat": self.repeat,
+            "steps": self.steps.iter().map(|s| serde_json::json!({
+                "freq_hz": s.freq_hz, "duration_ms": s.duration_ms,
+                "amplitude": s.amplitude, "ramp_ms": s.ramp_ms,
+            })).collect::<Vec<_>>(),
+            "final_orientation_deg": self.final_orientation_deg,
+            "period_deg": self.period_deg,
+            "final_position_mm": self.final_position_mm,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trips_through_the_device_plan() {
+        let text = r#"{"name": "t", "steps": [{"freq_hz": 60.0004, "duration_ms": 500, "amplitude": 0.5, "ramp_ms": 20},
+            {"freq_hz": 181.5, "duration_ms": 700, "amplitude": 1.0}], "final_orientation_deg": 90.0,
+            "period_deg": 180.0, "final_position_mm": null}"#;
+        let f = PlanFile::parse(text).unwrap();
+        let p = f.to_plan(&DeviceLimits::DEFAULT).unwrap();
+        assert_eq!(p.repeat, 1);
+        assert_eq!(p.steps[0].freq_mhz, 60_000);
+        assert_eq!(p.steps[0].amplitude_q15, 16384);
+        assert_eq!(p.steps[1].ramp_ms, 0);
+        assert_eq!(p.steps[1].amplitude_q15, 32767);
+        let back = PlanFile::from_plan(&p);
+        assert_eq!(back.steps[1].freq_hz, 181.5);
+        assert_eq!(back.to_plan(&DeviceLimits::DEFAULT).unwrap(), p);
+        let v = f.to_json();
+        assert!(v["final_position_mm"].is_null());
+        assert_eq!(v["steps"][0].as_object().unwrap().len(), 4);
+    }
+
+    #[test]
+    fn typed_errors() {
+        let one = |s: &str| {
+            PlanFile::parse(&format!("{{\"steps\": [{s}]}}"))
+                .and_then(|f| f.to_plan(&DeviceLimits::DEFAULT))
+                .unwrap_err()
+        };
+        assert_eq!(
+            one(r#"{"freq_hz": 60.0, "duration_ms": 5, "amplitude": 1.5}"#),
+            PlanFileError::Amplitude { step: 0, value: 1.5 }
+        );
+        assert!(matches!(
+            one(r#"{"freq_hz": -1.0, "duration_ms": 5, "amplitude": 0.5}"#),
+            PlanFileError::Frequency { step: 0, .. }
+        ));
+        assert!(matches!(
+            one(r#"{"freq_hz": 0.5, "duration_ms": 5, "amplitude": 0.5}"#),
+            PlanFileError::Invalid(PlanError::FrequencyOutOfRange { step: 0, freq_mhz: 500, .. })
+        ));
+        assert!(matches!(
+            one(r#"{"freq_hz": 60.0, "duration_ms": 0, "amplitude": 0.5}"#),
+            PlanFileError::Invalid(PlanError::ZeroDuration { step: 0 })
+        ));
+        assert!(matches!(
+            one(r#"{"freq_mhz": 60000, "duration_ms": 5, "amplitude": 0.5}"#),
+            PlanFileError::Json(_)
+        ));
+        let long = format!(r#"{{"name": "{}", "steps": []}}"#, "x".repeat(40));
+        assert!(matches!(
+            PlanFile::parse(&long).unwrap().to_plan(&DeviceLimits::DEFAULT),
+            Err(PlanFileError::NameTooLong(_))
+        ));
+    }
+}

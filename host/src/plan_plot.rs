@@ -1,0 +1,300 @@
+//! Plan and simulation figures (PNG): the step-by-step plan figure like the paper's Fig. 10
+//! (rows = example start poses, columns = steps; each panel shows the plate, the step's node,
+//! the part before the step in white and after it in dark), and motion traces like Figs. 8d
+//! and 9 (centroid paths with the part drawn along them, and θ(t)).
+
+use std::path::Path;
+
+use anyhow::anyhow;
+use plotters::prelude::*;
+
+use crate::plate::contour;
+use crate::plate::model::{Mode, Node, PlateModel};
+use crate::sim::{Body, Pose};
+
+fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
+    anyhow!("plotting: {e}")
+}
+
+/// Polylines of a mode's node inside the plate (mm).
+pub fn node_polylines(mode: &Mode, plate: &PlateModel) -> Vec<Vec<(f64, f64)>> {
+    let [w, h] = plate.size_mm;
+    let inside = |p: [f64; 2]| p[0] >= 0.0 && p[0] <= w && p[1] >= 0.0 && p[1] <= h;
+    let runs = |pts: Vec<[f64; 2]>| {
+        let mut out = vec![Vec::new()];
+        for p in pts {
+            if inside(p) {
+                if let Some(r) = out.last_mut() {
+                    r.push((p[0], p[1]));
+                }
+            } else if !out.last().is_some_and(Vec::is_empty) {
+                out.push(Vec::new());
+            }
+        }
+        out.retain(|r| r.len() > 1);
+        out
+    };
+    match &mode.node {
+        Node::Line { angle_deg, offset_mm } => {
+            let (s, c) = angle_deg.to_radians().sin_cos();
+            let ctr = plate.center();
+            let base = [ctr[0] - s * offset_mm, ctr[1] + c * offset_mm];
+            let d = w.hypot(h);
+            runs(
+                (0..=800)
+                    .map(|i| {
+                        let t = -d + 2.0 * d * i as f64 / 800.0;
+                        [base[0] + t * c, base[1] + t * s]
+                    })
+                    .collect(),
+            )
+        }
+        Node::Hyperbola { center_mm, angle_deg, a_mm, b_mm } => {
+            let (s, c) = angle_deg.to_radians().sin_cos();
+            runs(
+                (0..=800)
+                    .map(|i| {
+                        let t = -5.0 + 10.0 * i as f64 / 800.0;
+                        let (u, v) = (a_mm * t.cosh(), b_mm * t.sinh());
+                        [center_mm[0] + c * u - s * v, center_mm[1] + s * u + c * v]
+                    })
+                    .collect(),
+            )
+        }
+        Node::Grid(g) => contour::node_lines(g)
+            .into_iter()
+            .map(|l| l.into_iter().map(|p| (p[0], p[1])).collect())
+            .collect(),
+    }
+}
+
+fn draw_part<DB: DrawingBackend>(
+    chart: &mut ChartContext<
+        '_,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    body: &Body,
+    pose: Pose,
+    fill: RGBColor,
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    for (i, ring) in body.placed(pose).into_iter().enumerate() {
+        let pts: Vec<(f64, f64)> = ring.iter().map(|p| (p[0], p[1])).collect();
+        let f = if i == 0 { fill } else { WHITE };
+        chart.draw_series(std::iter::once(Polygon::new(pts.clone(), f.filled()))).map_err(err)?;
+        let mut closed = pts;
+        closed.push(closed[0]);
+        chart
+            .draw_series(std::iter::once(PathElement::new(closed, BLACK.stroke_width(1))))
+            .map_err(err)?;
+    }
+    Ok(())
+}
+
+/// One example start: the pose before each step and after the last.
+pub type Example = Vec<Pose>;
+
+/// The plan figure: `examples[r][k]` is the pose before step k (and `[steps]` the end).
+pub fn plan_figure(
+    path: &Path,
+    title: &str,
+    body: &Body,
+    plate: &PlateModel,
+    modes: &[usize],
+    examples: &[Example],
+) -> anyhow::Result<()> {
+    crate::plate::plot::ensure_font();
+    let [w, h] = plate.size_mm;
+    let cols = modes.len().max(1);
+    let rows = examples.len().max(1);
+    let pw = 300u32;
+    let ph = ((pw as f64 - 20.0) * h / w + 40.0) as u32;
+    let size = (pw * cols as u32, ph * rows as u32 + 40);
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let root = root.titled(title, ("sans-serif", 15)).map_err(err)?;
+    let panels = root.split_evenly((rows, cols));
+    for (r, ex) in examples.iter().enumerate() {
+        for (k, &m) in modes.iter().enumerate() {
+            let mode = &plate.modes[m];
+            let mut chart = ChartBuilder::on(&panels[r * cols + k])
+                .caption(
+                    format!("step {}: {} ({} Hz)", k + 1, mode.name, mode.freq_hz),
+                    ("sans-serif", 13),
+                )
+                .margin(6)
+                .build_cartesian_2d(0.0..w, 0.0..h)
+                .map_err(err)?;
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(0.0, 0.0), (w, h)],
+                    RGBColor(245, 245, 240).filled(),
+                )))
+                .map_err(err)?;
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(0.0, 0.0), (w, h)],
+                    BLACK.stroke_width(1),
+                )))
+                .map_err(err)?;
+            for line in node_polylines(mode, plate) {
+                chart
+                    .draw_series(std::iter::once(PathElement::new(
+                        line,
+                        RGBColor(200, 60, 40).stroke_width(2),
+                    )))
+                    .map_err(err)?;
+            }
+            draw_part(&mut chart, body, ex[k], WHITE)?;
+            draw_part(&mut chart, body, ex[k + 1], RGBColor(60, 60, 90))?;
+            let path: Vec<(f64, f64)> = vec![(ex[k].x, ex[k].y), (ex[k + 1].x, ex[k + 1].y)];
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    path,
+                    RGBColor(120, 120, 200).stroke_width(1),
+                )))
+                .map_err(err)?;
+        }
+    }
+    root.present().map_err(err)?;
+    Ok(())
+}
+
+/// One trial's trace: (t, pose) over the whole plan.
+pub type Trace = Vec<(f64, Pose)>;
+
+/// Traces: the plate with every step's node, centroid paths with the part drawn along them;
+/// θ(t) with step boundaries and the target orientation.
+#[allow(clippy::too_many_arguments)]
+pub fn traces_figure(
+    path: &Path,
+    title: &str,
+    body: &Body,
+    plate: &PlateModel,
+    modes: &[usize],
+    traces: &[Trace],
+    step_ends: &[f64],
+    target: Option<(f64, f64)>,
+) -> anyhow::Result<()> {
+    crate::plate::plot::ensure_font();
+    let [w, h] = plate.size_mm;
+    let root = BitMapBackend::new(path, (1300, 560)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let root = root.titled(title, ("sans-serif", 18)).map_err(err)?;
+    let (left, right) = root.split_horizontally(680);
+    let palette = [
+        RGBColor(31, 119, 180),
+        RGBColor(255, 127, 14),
+        RGBColor(44, 160, 44),
+        RGBColor(214, 39, 40),
+        RGBColor(148, 103, 189),
+        RGBColor(140, 86, 75),
+    ];
+    let mut chart = ChartBuilder::on(&left)
+        .caption("part motion (white: start, dark: end of plan)", ("sans-serif", 14))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(40)
+        .build_cartesian_2d(0.0..w, 0.0..h)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("x (mm)")
+        .y_desc("y (mm)")
+        .light_line_style(WHITE)
+        .draw()
+        .map_err(err)?;
+    for (k, &m) in modes.iter().enumerate() {
+        for line in node_polylines(&plate.modes[m], plate) {
+            let c = palette[k % palette.len()].mix(0.35);
+            chart
+                .draw_series(std::iter::once(PathElement::new(line, c.stroke_width(3))))
+                .map_err(err)?;
+        }
+    }
+    for (i, tr) in traces.iter().enumerate() {
+        let col = palette[i % palette.len()];
+        let pts: Vec<(f64, f64)> = tr.iter().map(|(_, p)| (p.x, p.y)).collect();
+        chart
+            .draw_series(std::iter::once(PathElement::new(pts, col.stroke_width(2))))
+            .map_err(err)?;
+        // Snapshots: start, a few along the way, end.
+        let n = tr.len();
+        let picks = [0, n / 8, n / 4, n / 2];
+        for &j in &picks[1..] {
+            if j > 0 && j < n - 1 {
+                for ring in body.placed(tr[j].1).into_iter().take(1) {
+                    let mut pts: Vec<(f64, f64)> = ring.iter().map(|p| (p[0], p[1])).collect();
+                    pts.push(pts[0]);
+                    chart
+                        .draw_series(std::iter::once(PathElement::new(
+                            pts,
+                            col.mix(0.5).stroke_width(1),
+                        )))
+                        .map_err(err)?;
+                }
+            }
+        }
+        draw_part(&mut chart, body, tr[0].1, WHITE)?;
+        draw_part(&mut chart, body, tr[n - 1].1, col)?;
+    }
+    // θ(t).
+    let t_end = step_ends.last().copied().unwrap_or(1.0).max(1e-6);
+    let mut th = ChartBuilder::on(&right)
+        .caption("orientation θ(t)", ("sans-serif", 14))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(45)
+        .build_cartesian_2d(0.0..t_end, 0.0..360.0)
+        .map_err(err)?;
+    th.configure_mesh()
+        .x_desc("t (s)")
+        .y_desc("θ (deg)")
+        .y_labels(9)
+        .light_line_style(WHITE)
+        .draw()
+        .map_err(err)?;
+    for &t in &step_ends[..step_ends.len().saturating_sub(1)] {
+        th.draw_series(std::iter::once(PathElement::new(
+            vec![(t, 0.0), (t, 360.0)],
+            RGBColor(160, 160, 160),
+        )))
+        .map_err(err)?;
+    }
+    if let Some((target, period)) = target {
+        let mut v = target.rem_euclid(period);
+        while v < 360.0 {
+            th.draw_series(std::iter::once(PathElement::new(
+                vec![(0.0, v), (t_end, v)],
+                BLACK.mix(0.4),
+            )))
+            .map_err(err)?;
+            v += period;
+        }
+    }
+    for (i, tr) in traces.iter().enumerate() {
+        let col = palette[i % palette.len()];
+        // Break the line where θ wraps.
+        let mut piece: Vec<(f64, f64)> = Vec::new();
+        for &(t, p) in tr {
+            let d = p.theta.to_degrees().rem_euclid(360.0);
+            if let Some(&(_, pd)) = piece.last()
+                && (d - pd).abs() > 180.0
+            {
+                th.draw_series(std::iter::once(PathElement::new(
+                    std::mem::take(&mut piece),
+                    col.stroke_width(2),
+                )))
+                .map_err(err)?;
+            }
+            piece.push((t, d));
+        }
+        th.draw_series(std::iter::once(PathElement::new(piece, col.stroke_width(2))))
+            .map_err(err)?;
+    }
+    root.present().map_err(err)?;
+    Ok(())
+}

@@ -1,0 +1,745 @@
+//! Quasi-static part motion on the plate (DESIGN.md §2): velocity = μ·F/area, angular
+//! velocity = μ·M/J (J = polar moment of area about the centroid), integrated until F and M
+//! vanish. Force and moment:
+//! - straight nodes: exact, per polygon edge (split at the node, Green's theorem
+//!   ∫∫ g dA = ∮ G dη, ∫∫ η g dA = ∮ η G dη along each piece, 5-point Gauss–Legendre, exact
+//!   for the sign and linear laws);
+//! - hyperbola and grid nodes: midpoint rule over interior sample points of the part
+//!   (about [`BODY_SAMPLES`] cells); hyperbola: distance to the branch by Newton on its
+//!   parameter; grid: Catmull–Rom bicubic φ and f = −gain·∇(φ²)/max|∇(φ²)|.
+//!
+//! Units: mm, s, rad inside (degrees in [`Pose`] helpers only where named).
+
+use crate::part::Part;
+use crate::plate::model::{Law, Mode, Node, PlateModel};
+use crate::plate::solver::Grid;
+
+/// Target number of interior sample points for numerical force integration.
+pub const BODY_SAMPLES: usize = 400;
+
+/// A pose: centroid (x, y) in mm, orientation θ in radians.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Pose {
+    /// Centroid x (mm).
+    pub x: f64,
+    /// Centroid y (mm).
+    pub y: f64,
+    /// Orientation (rad).
+    pub theta: f64,
+}
+
+/// A part prepared for simulation: rings about the centroid, area, polar moment, samples.
+#[derive(Debug, Clone)]
+pub struct Body {
+    /// Rings relative to the centroid (outline CCW, holes CW).
+    pub rings: Vec<Vec<[f64; 2]>>,
+    /// Centroid of the part as drawn (mm).
+    pub centroid: [f64; 2],
+    /// Area (mm²).
+    pub area: f64,
+    /// Polar moment of area about the centroid (mm⁴).
+    pub polar: f64,
+    /// Radius about the centroid (mm).
+    pub radius: f64,
+    /// Interior sample points (relative to the centroid) and their weights (mm²).
+    pub samples: Vec<([f64; 2], f64)>,
+}
+
+fn inside(p: [f64; 2], ring: &[[f64; 2]]) -> bool {
+    let mut c = false;
+    let n = ring.len();
+    for i in 0..n {
+        let (a, b) = (ring[i], ring[(i + 1) % n]);
+        if (a[1] > p[1]) != (b[1] > p[1]) {
+            let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+            if p[0] < x {
+                c = !c;
+            }
+        }
+    }
+    c
+}
+
+impl Body {
+    /// Prepares a validated part ([`BODY_SAMPLES`] interior samples).
+    pub fn new(part: &Part) -> Body {
+        Body::with_samples(part, BODY_SAMPLES)
+    }
+
+    /// Prepares a validated part with about `target` interior samples.
+    pub fn with_samples(part: &Part, target: usize) -> Body {
+        let (mut a, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        for r in part.rings() {
+            for i in 0..r.len() {
+                let (p, q) = (r[i], r[(i + 1) % r.len()]);
+                let c = p[0] * q[1] - q[0] * p[1];
+                a += c / 2.0;
+                sx += (p[0] + q[0]) * c / 6.0;
+                sy += (p[1] + q[1]) * c / 6.0;
+            }
+        }
+        let centroid = [sx / a, sy / a];
+        let rings: Vec<Vec<[f64; 2]>> = part
+            .rings()
+            .map(|r| r.iter().map(|p| [p[0] - centroid[0], p[1] - centroid[1]]).collect())
+            .collect();
+        let mut polar = 0.0;
+        for r in &rings {
+            for i in 0..r.len() {
+                let (p, q) = (r[i], r[(i + 1) % r.len()]);
+                let c = p[0] * q[1] - q[0] * p[1];
+                polar += c
+                    * (p[0] * p[0]
+                        + p[0] * q[0]
+                        + q[0] * q[0]
+                        + p[1] * p[1]
+                        + p[1] * q[1]
+                        + q[1] * q[1])
+                    / 12.0;
+            }
+        }
+        let radius = rings.iter().flatten().map(|p| p[0].hypot(p[1])).fold(0.0, f64::max);
+        // Interior samples: cell centres of a square grid inside the outline and outside holes.
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in rings.iter().flatten() {
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let target = target.max(16);
+        let mut h = (a / target as f64).sqrt();
+        let mut samples = Vec::new();
+        for _ in 0..4 {
+            samples.clear();
+            let (nx, ny) =
+                (((hi[0] - lo[0]) / h).ceil() as usize, ((hi[1] - lo[1]) / h).ceil() as usize);
+            for j in 0..ny {
+                for i in 0..nx {
+                    let p = [lo[0] + (i as f64 + 0.5) * h, lo[1] + (j as f64 + 0.5) * h];
+                    if inside(p, &rings[0]) && !rings[1..].iter().any(|r| inside(p, r)) {
+                        samples.push(p);
+                    }
+                }
+            }
+            if samples.len() >= target / 2 {
+                break;
+            }
+            h *= 0.7;
+        }
+        // Weights: total area split evenly; shift so the samples' centroid is exact.
+        let n = samples.len().max(1) as f64;
+        let (mx, my) = (
+            samples.iter().map(|p| p[0]).sum::<f64>() / n,
+            samples.iter().map(|p| p[1]).sum::<f64>() / n,
+        );
+        let samples = samples.into_iter().map(|p| ([p[0] - mx, p[1] - my], a / n)).collect();
+        Body { rings, centroid, area: a, polar, radius, samples }
+    }
+
+    /// The part's rings at a pose (plate frame).
+    pub fn placed(&self, pose: Pose) -> Vec<Vec<[f64; 2]>> {
+        let (s, c) = pose.theta.sin_cos();
+        self.rings
+            .iter()
+            .map(|r| {
+                r.iter()
+                    .map(|p| [pose.x + c * p[0] - s * p[1], pose.y + s * p[0] + c * p[1]])
+                    .collect()
+            })
+            .collect()
+    }
+}
+
+/// 5-point Gauss–Legendre on [−1, 1].
+const GL: [(f64, f64); 5] = [
+    (0.0, 0.568_888_888_888_888_9),
+    (-0.538_469_310_105_683_1, 0.478_628_670_499_366_5),
+    (0.538_469_310_105_683_1, 0.478_628_670_499_366_5),
+    (-0.906_179_845_938_664, 0.236_926_885_056_189_08),
+    (0.906_179_845_938_664, 0.236_926_885_056_189_08),
+];
+
+/// A mode's field, ready to evaluate.
+#[derive(Debug, Clone)]
+pub enum FieldModel {
+    /// Straight node: unit normal x̂ of the node frame (towards the "right" side), the
+    /// node's value of x̂·p, direction ŷ.
+    Line {
+        /// x̂ = −n̂ (points to the right of the node direction).
+        xhat: [f64; 2],
+        /// x̂·p on the node.
+        c: f64,
+        /// Law.
+        law: Law,
+        /// Gains left (ξ < 0), right (ξ > 0).
+        k: [f64; 2],
+    },
+    /// Hyperbola branch.
+    Hyperbola {
+        /// Centre.
+        center: [f64; 2],
+        /// (cos α, sin α).
+        axis: [f64; 2],
+        /// Semi-axes.
+        a: f64,
+        /// Semi-axis b.
+        b: f64,
+        /// Law.
+        law: Law,
+        /// Gains inside (centre side), outside (convex side).
+        k: [f64; 2],
+        /// ξ and normal tabulated over the plate (bilinear), exact outside.
+        table: std::sync::Arc<DistTable>,
+    },
+    /// Sampled φ.
+    Grid {
+        /// The samples.
+        grid: Grid,
+        /// gain / max |∇φ²| for φ < 0 and φ > 0.
+        k: [f64; 2],
+    },
+}
+
+/// Force (x, y) per unit… integrated over the part, and moment about the centroid.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Wrench {
+    /// Force x.
+    pub fx: f64,
+    /// Force y.
+    pub fy: f64,
+    /// Moment (CCW positive).
+    pub m: f64,
+}
+
+fn catmull(p: [f64; 4], t: f64) -> (f64, f64) {
+    let a = -0.5 * p[0] + 1.5 * p[1] - 1.5 * p[2] + 0.5 * p[3];
+    let b = p[0] - 2.5 * p[1] + 2.0 * p[2] - 0.5 * p[3];
+    let c = -0.5 * p[0] + 0.5 * p[2];
+    let d = p[1];
+    (((a * t + b) * t + c) * t + d, (3.0 * a * t + 2.0 * b) * t + c)
+}
+
+/// φ and ∇φ at a plate point by Catmull–Rom bicubic interpolation (clamped to the plate).
+pub fn grid_eval(g: &Grid, p: [f64; 2]) -> (f64, [f64; 2]) {
+    let hx = g.size_mm[0] / (g.nx - 1) as f64;
+    let hy = g.size_mm[1] / (g.ny - 1) as f64;
+    let u = (p[0] / hx).clamp(0.0, (g.nx - 1) as f64);
+    let v = (p[1] / hy).clamp(0.0, (g.ny - 1) as f64);
+    let i = (u.floor() as usize).min(g.nx - 2);
+    let j = (v.floor() as usize).min(g.ny - 2);
+    let (tu, tv) = (u - i as f64, v - j as f64);
+    let at = |ii: isize, jj: isize| {
+        let ii = ii.clamp(0, g.nx as isize - 1) as usize;
+        let jj = jj.clamp(0, g.ny as isize - 1) as usize;
+        g.at(ii, jj)
+    };
+    let mut rows = [(0.0, 0.0); 4];
+    for (r, row) in rows.iter_mut().enumerate() {
+        let jj = j as isize - 1 + r as isize;
+        let i0 = i as isize;
+        *row = catmull([at(i0 - 1, jj), at(i0, jj), at(i0 + 1, jj), at(i0 + 2, jj)], tu);
+    }
+    let (val, dv) = catmull([rows[0].0, rows[1].0, rows[2].0, rows[3].0], tv);
+    let (du, _) = catmull([rows[0].1, rows[1].1, rows[2].1, rows[3].1], tv);
+    (val, [du / hx, dv / hy])
+}
+
+/// Closest point parameter t on the branch (a cosh t, b sinh t) to local (u, v).
+fn hyperbola_t(a: f64, b: f64, u: f64, v: f64) -> f64 {
+    let mut t = (v / b).asinh();
+    let alt = (u.max(a) / a).acosh().copysign(v);
+    let d = |t: f64| (a * t.cosh() - u).powi(2) + (b * t.sinh() - v).powi(2);
+    if d(alt) < d(t) {
+        t = alt;
+    }
+    for _ in 0..30 {
+        let (sh, ch) = (t.sinh(), t.cosh());
+        let g = (a * ch - u) * a * sh + (b * sh - v) * b * ch;
+        let h = a * a * sh * sh + (a * ch - u) * a * ch + b * b * ch * ch + (b * sh - v) * b * sh;
+        let step = if h > 0.0 { g / h } else { g.signum() * 0.1 };
+        let step = step.clamp(-0.5, 0.5);
+        t = (t - step).clamp(-12.0, 12.0);
+        if step.abs() < 1e-12 {
+            break;
+        }
+    }
+    t
+}
+
+/// Signed distance ξ (positive on the convex side) to the hyperbola branch and the unit
+/// normal towards that side, exactly (Newton on the branch parameter).
+fn hyperbola_exact(
+    center: [f64; 2],
+    axis: [f64; 2],
+    a: f64,
+    b: f64,
+    p: [f64; 2],
+) -> (f64, [f64; 2]) {
+    let (dx, dy) = (p[0] - center[0], p[1] - center[1]);
+    let u = axis[0] * dx + axis[1] * dy;
+    let v = -axis[1] * dx + axis[0] * dy;
+    let t = hyperbola_t(a, b, u, v);
+    let (qu, qv) = (a * t.cosh(), b * t.sinh());
+    let dist = (u - qu).hypot(v - qv);
+    let outside = u > 0.0 && (u / a).powi(2) - (v / b).powi(2) > 1.0;
+    let xi = if outside { dist } else { -dist };
+    let (nu, nv) = (t.cosh() / a, -t.sinh() / b);
+    let nn = nu.hypot(nv);
+    let (nu, nv) = (nu / nn, nv / nn);
+    (xi, [axis[0] * nu - axis[1] * nv, axis[1] * nu + axis[0] * nv])
+}
+
+/// A tabulated distance field (bilinear interpolation).
+#[derive(Debug, Clone)]
+pub struct DistTable {
+    lo: [f64; 2],
+    step: f64,
+    nx: usize,
+    ny: usize,
+    xi: Vec<f64>,
+    n: Vec<[f64; 2]>,
+}
+
+impl DistTable {
+    fn eval(&self, p: [f64; 2]) -> Option<(f64, [f64; 2])> {
+        let u = (p[0] - self.lo[0]) / self.step;
+        let v = (p[1] - self.lo[1]) / self.step;
+        if !(u >= 0.0 && v >= 0.0 && u < (self.nx - 1) as f64 && v < (self.ny - 1) as f64) {
+            return None;
+        }
+        let (i, j) = (u as usize, v as usize);
+        let (fu, fv) = (u - i as f64, v - j as f64);
+        let idx = |i: usize, j: usize| j * self.nx + i;
+        let wts = [
+            (idx(i, j), (1.0 - fu) * (1.0 - fv)),
+            (idx(i + 1, j), fu * (1.0 - fv)),
+            (idx(i, j + 1), (1.0 - fu) * fv),
+            (idx(i + 1, j + 1), fu * fv),
+        ];
+        let (mut xi, mut n) = (0.0, [0.0, 0.0]);
+        for (k, w) in wts {
+            xi += w * self.xi[k];
+            n[0] += w * self.n[k][0];
+            n[1] += w * self.n[k][1];
+        }
+        let nn = n[0].hypot(n[1]).max(1e-12);
+        Some((xi, [n[0] / nn, n[1] / nn]))
+    }
+}
+
+impl FieldModel {
+    /// The field of a mode on a plate.
+    pub fn new(mode: &Mode, plate: &PlateModel) -> FieldModel {
+        let ctr = plate.center();
+        match &mode.node {
+            Node::Line { angle_deg, offset_mm } => {
+                let (s, c) = angle_deg.to_radians().sin_cos();
+                let nhat = [-s, c];
+                let xhat = [s, -c];
+                // n̂·(p − ctr) = offset on the node ⇒ x̂·p = −offset − n̂·ctr... (x̂ = −n̂).
+                let cval = -(offset_mm + nhat[0] * ctr[0] + nhat[1] * ctr[1]);
+                FieldModel::Line {
+                    xhat,
+                    c: cval,
+                    law: mode.law,
+                    k: [mode.gain_left, mode.gain_right],
+                }
+            }
+            Node::Hyperbola { center_mm, angle_deg, a_mm, b_mm } => {
+                let (s, c) = angle_deg.to_radians().sin_cos();
+                let (center, axis, a, b) = (*center_mm, [c, s], *a_mm, *b_mm);
+                // 1 mm (or finer for small plates) table over the plate plus 20 mm.
+                let [w, h] = plate.size_mm;
+                let step = (w.max(h) / 300.0).min(1.0);
+                let lo = [-20.0, -20.0];
+                let (nx, ny) = (((w + 40.0) / step) as usize + 2, ((h + 40.0) / step) as usize + 2);
+                let mut xi = Vec::with_capacity(nx * ny);
+                let mut n = Vec::with_capacity(nx * ny);
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let p = [lo[0] + i as f64 * step, lo[1] + j as f64 * step];
+                        let (x, nn) = hyperbola_exact(center, axis, a, b, p);
+                        xi.push(x);
+                        n.push(nn);
+                    }
+                }
+                let table = std::sync::Arc::new(DistTable { lo, step, nx, ny, xi, n });
+                FieldModel::Hyperbola {
+                    center,
+                    axis,
+                    a,
+                    b,
+                    law: mode.law,
+                    k: [mode.gain_left, mode.gain_right],
+                    table,
+                }
+            }
+            Node::Grid(g) => {
+                let hx = g.size_mm[0] / (g.nx - 1) as f64;
+                let hy = g.size_mm[1] / (g.ny - 1) as f64;
+                let mut max = 0.0f64;
+                for j in 0..g.ny {
+                    for i in 0..g.nx {
+                        let p = [i as f64 * hx, j as f64 * hy];
+                        let (v, d) = grid_eval(g, p);
+                        max = max.max(2.0 * v.abs() * d[0].hypot(d[1]));
+                    }
+                }
+                let max = max.max(1e-12);
+                FieldModel::Grid {
+                    grid: g.clone(),
+                    k: [mode.gain_left / max, mode.gain_right / max],
+                }
+            }
+        }
+    }
+
+    /// Force per unit area at a plate point (not used for line nodes' exact integrals).
+    pub fn at(&self, p: [f64; 2]) -> [f64; 2] {
+        match self {
+            FieldModel::Line { xhat, c, law, k } => {
+                let xi = xhat[0] * p[0] + xhat[1] * p[1] - c;
+                let f = -k[usize::from(xi > 0.0)] * law.g(xi);
+                [f * xhat[0], f * xhat[1]]
+            }
+            FieldModel::Hyperbola { center, axis, a, b, law, k, table } => {
+                let (xi, n) =
+                    table.eval(p).unwrap_or_else(|| hyperbola_exact(*center, *axis, *a, *b, p));
+                let f = -k[usize::from(xi > 0.0)] * law.g(xi);
+                [f * n[0], f * n[1]]
+            }
+            FieldModel::Grid { grid, k } => {
+                let (v, d) = grid_eval(grid, p);
+                let s = -2.0 * v * k[usize::from(v > 0.0)];
+                [s * d[0], s * d[1]]
+            }
+        }
+    }
+
+    /// Total force and moment on the body at a pose.
+    pub fn wrench(&self, body: &Body, pose: Pose) -> Wrench {
+        let (s, c) = pose.theta.sin_cos();
+        match self {
+            FieldModel::Line { xhat, c: cval, law, k } => {
+                // Node frame: ξ = x̂·p − c (across), η = ŷ·p (along), ŷ = (−x̂_y... ) so that
+                // (x̂, ŷ) is right-handed: ŷ = (−x̂.y, x̂.x).
+                let yhat = [-xhat[1], xhat[0]];
+                let xi_c = xhat[0] * pose.x + xhat[1] * pose.y - cval;
+                let (mut f, mut m) = (0.0, 0.0);
+                for ring in &body.rings {
+                    let n = ring.len();
+                    let loc = |p: [f64; 2]| {
+                        let r = [c * p[0] - s * p[1], s * p[0] + c * p[1]];
+                        (xi_c + xhat[0] * r[0] + xhat[1] * r[1], yhat[0] * r[0] + yhat[1] * r[1])
+                    };
+                    let mut prev = loc(ring[n - 1]);
+                    for &p in ring {
+                        let cur = loc(p);
+                        let mut piece = |a: (f64, f64), b: (f64, f64)| {
+                            let side = usize::from(a.0 + b.0 > 0.0);
+                            let dy = 0.5 * (b.1 - a.1);
+                            if dy == 0.0 {
+                                return;
+                            }
+                            let (mut pf, mut pm) = (0.0, 0.0);
+                            for (u, w) in GL {
+                                let t = 0.5 * (u + 1.0);
+                                let x = a.0 + t * (b.0 - a.0);
+                                let y = a.1 + t * (b.1 - a.1);
+                                let gg = law.big_g(x);
+                                pf += w * gg;
+                                pm += w * y * gg;
+                            }
+                            f -= k[side] * pf * dy;
+                            m += k[side] * pm * dy;
+                        };
+                        if (prev.0 > 0.0 && cur.0 < 0.0) || (prev.0 < 0.0 && cur.0 > 0.0) {
+                            let t = prev.0 / (prev.0 - cur.0);
+                            let mid = (0.0, prev.1 + t * (cur.1 - prev.1));
+                            piece(prev, mid);
+                            piece(mid, cur);
+                        } else {
+                            piece(prev, cur);
+                        }
+                        prev = cur;
+                    }
+                }
+                Wrench { fx: f * xhat[0], fy: f * xhat[1], m }
+            }
+            _ => {
+                let mut w = Wrench::default();
+                for &(q, wt) in &body.samples {
+                    let r = [c * q[0] - s * q[1], s * q[0] + c * q[1]];
+                    let f = self.at([pose.x + r[0], pose.y + r[1]]);
+                    w.fx += wt * f[0];
+                    w.fy += wt * f[1];
+                    w.m += wt * (r[0] * f[1] - r[1] * f[0]);
+                }
+                w
+            }
+        }
+    }
+
+    /// Largest gain.
+    pub fn max_gain(&self) -> f64 {
+        match self {
+            FieldModel::Line { k, .. } | FieldModel::Hyperbola { k, .. } => k[0].max(k[1]),
+            FieldModel::Grid { .. } => 1.0,
+        }
+    }
+}
+
+/// One simulated run.
+#[derive(Debug, Clone)]
+pub struct Run {
+    /// Final pose.
+    pub pose: Pose,
+    /// Time at which the pose last left the settle band around the final pose (s).
+    pub settle_s: f64,
+    /// Simulated time (s).
+    pub t_end: f64,
+    /// (t, pose) samples.
+    pub trace: Vec<(f64, Pose)>,
+    /// Came to rest (|F|, |M| below tolerance) before the time limit.
+    pub rested: bool,
+    /// Integration steps taken.
+    pub steps: usize,
+}
+
+/// Simulation settings.
+#[derive(Debug, Clone, Copy)]
+pub struct SimParams {
+    /// Settle speed μ (mm/s per unit force per area).
+    pub speed: f64,
+    /// Stop at this time (s) even if still moving; `None`: until at rest.
+    pub t_limit: f64,
+    /// Keep running to `t_limit` after coming to rest (plans: step durations are fixed).
+    pub run_to_limit: bool,
+}
+
+/// Integrates the quasi-static motion (Heun's method, adaptive step that halves on
+/// overshoot) from `start`.
+pub fn run(body: &Body, field: &FieldModel, p: SimParams, start: Pose) -> Run {
+    let r = body.radius.max(1e-6);
+    let vel = |q: Pose| {
+        let w = field.wrench(body, q);
+        (p.speed * w.fx / body.area, p.speed * w.fy / body.area, p.speed * w.m / body.polar)
+    };
+    let t0 = r / (p.speed * field.max_gain().max(1e-9));
+    // Curved nodes let a part creep slowly along them: a creep below 10⁻³ R per T0 counts as rest.
+    let (v_tol, w_tol) = (1e-3 * r / t0, 1e-4 / t0);
+    let mut dt_cap = 0.05 * t0;
+    let mut pose = start;
+    let mut t = 0.0;
+    let mut trace = vec![(0.0, pose)];
+    let mut v0 = vel(pose);
+    let mut rested = false;
+    let mut steps = 0;
+    while t < p.t_limit && steps < 20_000 {
+        steps += 1;
+        let speed = v0.0.hypot(v0.1);
+        if speed < v_tol && v0.2.abs() < w_tol {
+            rested = true;
+            break;
+        }
+        let mut dt = dt_cap.min(0.02 * r / speed.max(1e-30)).min(0.01 / v0.2.abs().max(1e-30));
+        dt = dt.min(p.t_limit - t);
+        let mut tries = 0;
+        let (next, v1) = loop {
+            let pred = Pose {
+                x: pose.x + dt * v0.0,
+                y: pose.y + dt * v0.1,
+                theta: pose.theta + dt * v0.2,
+            };
+            let vp = vel(pred);
+            let overshoot = (speed > v_tol && vp.0 * v0.0 + vp.1 * v0.1 < -0.25 * speed * speed)
+                || (v0.2.abs() > w_tol && vp.2 * v0.2 < -0.25 * v0.2 * v0.2);
+            if overshoot && dt * speed < 1e-4 * r && dt * v0.2.abs() < 1e-5 && speed < 0.02 * r / t0
+            {
+                // Chattering about a non-smooth rest (an edge lying on the node): at rest.
+                break (pose, v0);
+            }
+            if overshoot && tries < 30 {
+                dt *= 0.5;
+                dt_cap = dt;
+                tries += 1;
+                continue;
+            }
+            let q = Pose {
+                x: pose.x + 0.5 * dt * (v0.0 + vp.0),
+                y: pose.y + 0.5 * dt * (v0.1 + vp.1),
+                theta: pose.theta + 0.5 * dt * (v0.2 + vp.2),
+            };
+            break (q, vel(q));
+        };
+        if next == pose {
+            rested = true;
+            break;
+        }
+        if tries == 0 {
+            dt_cap = (dt_cap * 1.2).min(10.0 * t0);
+        }
+        t += dt;
+        pose = next;
+        v0 = v1;
+        trace.push((t, pose));
+    }
+    if p.run_to_limit && t < p.t_limit {
+        t = p.t_limit;
+        trace.push((t, pose));
+    }
+    // Settle time: the last time the part was still moving across its node (speed above
+    // 2 % of R per T0; a slow creep along a curved node does not count) or its orientation
+    // was more than 0.5° from the final one.
+    let band_th = 0.5f64.to_radians();
+    let v_move = 0.02 * r / t0;
+    let mut settle = 0.0;
+    for k in (1..trace.len()).rev() {
+        let ((ta, a), (tb, b)) = (trace[k - 1], trace[k]);
+        let v = if tb > ta { (b.x - a.x).hypot(b.y - a.y) / (tb - ta) } else { 0.0 };
+        if v > v_move || (b.theta - pose.theta).abs() > band_th {
+            settle = tb;
+            break;
+        }
+    }
+    Run { pose, settle_s: settle, t_end: t, trace, rested, steps }
+}
+
+/// One step of a plan to simulate: the mode, how long, and the drive amplitude relative to
+/// the mode's own (speed scales with the square of the amplitude, DESIGN §2: K ∝ e·A²·ω).
+#[derive(Debug, Clone, Copy)]
+pub struct SimStep {
+    /// Index into the plate's modes.
+    pub mode: usize,
+    /// Duration (s).
+    pub duration_s: f64,
+    /// Amplitude / the mode's amplitude.
+    pub amplitude_ratio: f64,
+}
+
+/// Runs a whole plan from `start`: the pose before each step and at the end, the full trace
+/// (times continue across steps) and each step's end time.
+pub fn run_plan(
+    body: &Body,
+    plate: &PlateModel,
+    fields: &[FieldModel],
+    steps: &[SimStep],
+    start: Pose,
+) -> (Vec<Pose>, Vec<(f64, Pose)>, Vec<f64>) {
+    let mut poses = vec![start];
+    let mut trace = vec![(0.0, start)];
+    let mut ends = Vec::new();
+    let (mut t0, mut pose) = (0.0, start);
+    for s in steps {
+        let mode = &plate.modes[s.mode];
+        let p = SimParams {
+            speed: mode.speed_mm_s * s.amplitude_ratio * s.amplitude_ratio,
+            t_limit: s.duration_s,
+            run_to_limit: true,
+        };
+        let r = run(body, &fields[s.mode], p, pose);
+        trace.extend(r.trace.iter().skip(1).map(|&(t, q)| (t0 + t, q)));
+        t0 += s.duration_s;
+        pose = r.pose;
+        poses.push(pose);
+        ends.push(t0);
+    }
+    (poses, trace, ends)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plate::model::parse_mode;
+
+    fn mode(toml_text: &str) -> Mode {
+        let t: toml::Table = toml::from_str(toml_text).unwrap();
+        parse_mode(1, &t, [300.0, 200.0]).unwrap()
+    }
+
+    fn plate(m: &Mode) -> PlateModel {
+        PlateModel { name: "t".into(), size_mm: [300.0, 200.0], modes: vec![m.clone()] }
+    }
+
+    fn rect() -> Part {
+        Part::new("r".into(), vec![[0.0, 0.0], [40.0, 0.0], [40.0, 10.0], [0.0, 10.0]], vec![])
+            .unwrap()
+    }
+
+    #[test]
+    fn exact_line_wrench_matches_sampled_integral() {
+        let body = Body::new(&rect());
+        for law in ["sign", "linear"] {
+            let m = mode(&format!(
+                "freq_hz = 50.0\nfield = \"{law}\"\ngain_right = 1.7\nnode = {{ kind = \"line\", angle_deg = 30.0, offset_mm = 5.0 }}"
+            ));
+            let f = FieldModel::new(&m, &plate(&m));
+            let pose = Pose { x: 150.0, y: 100.0, theta: 0.4 };
+            let exact = f.wrench(&body, pose);
+            let mut num = Wrench::default();
+            let (s, c) = pose.theta.sin_cos();
+            for &(q, wt) in &body.samples {
+                let r = [c * q[0] - s * q[1], s * q[0] + c * q[1]];
+                let ff = f.at([pose.x + r[0], pose.y + r[1]]);
+                num.fx += wt * ff[0];
+                num.fy += wt * ff[1];
+                num.m += wt * (r[0] * ff[1] - r[1] * ff[0]);
+            }
+            let scale = body.area * (1.0 + body.radius / 10.0);
+            assert!((exact.fx - num.fx).abs() < 0.03 * scale, "{law} {exact:?} {num:?}");
+            assert!((exact.fy - num.fy).abs() < 0.03 * scale, "{law} {exact:?} {num:?}");
+            assert!(
+                (exact.m - num.m).abs() < 0.03 * scale * body.radius,
+                "{law} {exact:?} {num:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn rectangle_settles_long_side_on_a_vertical_node() {
+        let body = Body::new(&rect());
+        let m = mode(
+            "freq_hz = 50.0\nfield = \"sign\"\nnode = { kind = \"line\", angle_deg = 90.0, offset_mm = 0.0 }",
+        );
+        let f = FieldModel::new(&m, &plate(&m));
+        let p = SimParams { speed: 10.0, t_limit: 1e4, run_to_limit: false };
+        let r = run(&body, &f, p, Pose { x: 100.0, y: 80.0, theta: 0.3 });
+        eprintln!("line: {} steps, t = {}, rested {}", r.steps, r.t_end, r.rested);
+        assert!(r.rested);
+        assert!((r.pose.x - 150.0).abs() < 0.05, "{:?}", r.pose);
+        assert!((r.pose.y - 80.0).abs() < 1e-9);
+        assert!((r.pose.theta.to_degrees() - 90.0).abs() < 0.5, "{:?}", r.pose);
+        assert!(r.settle_s > 4.0 && r.settle_s < r.t_end + 1e-9);
+    }
+
+    #[test]
+    fn hyperbola_and_grid_pull_parts_onto_their_nodes() {
+        let body = Body::new(&rect());
+        let m = mode(
+            "freq_hz = 50.0\nnode = { kind = \"hyperbola\", center_mm = [100.0, 100.0], angle_deg = 0.0, a_mm = 50.0, b_mm = 50.0 }",
+        );
+        let f = FieldModel::new(&m, &plate(&m));
+        let p = SimParams { speed: 10.0, t_limit: 1e4, run_to_limit: false };
+        let r = run(&body, &f, p, Pose { x: 200.0, y: 120.0, theta: 0.0 });
+        eprintln!("hyperbola: {} steps, t = {}, rested {}", r.steps, r.t_end, r.rested);
+        let (u, v) = (r.pose.x - 100.0, r.pose.y - 100.0);
+        let on = (u / 50.0).powi(2) - (v / 50.0).powi(2);
+        assert!((on - 1.0).abs() < 0.2, "{:?} {on}", r.pose);
+        // φ = cos(πx/W): node at x = W/2.
+        let (nx, ny) = (31, 21);
+        let values = (0..ny)
+            .flat_map(|_| {
+                (0..nx).map(move |i| (std::f64::consts::PI * i as f64 / (nx - 1) as f64).cos())
+            })
+            .collect();
+        let g = Grid { nx, ny, size_mm: [300.0, 200.0], values };
+        let mut m = m.clone();
+        m.node = Node::Grid(g);
+        let f = FieldModel::new(&m, &plate(&m));
+        let r = run(&body, &f, p, Pose { x: 120.0, y: 100.0, theta: 0.3 });
+        eprintln!("grid: {} steps, t = {}, rested {}", r.steps, r.t_end, r.rested);
+        assert!((r.pose.x - 150.0).abs() < 1.0, "{:?}", r.pose);
+        assert!((r.pose.theta.to_degrees().rem_euclid(180.0) - 90.0).abs() < 2.0, "{:?}", r.pose);
+    }
+}

@@ -1,0 +1,183 @@
+//! `chladni plan` and `chladni simulate` end to end: JSON shape, files, exit codes, plots.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn chladni(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
+}
+
+fn ex(rel: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples").join(rel).display().to_string()
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("chladni-plan-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[test]
+fn plan_json_is_the_documented_object_and_simulates_to_100_percent() {
+    let out_file = tmp("tri.json");
+    let out = chladni(&[
+        "plan",
+        &ex("parts/triangle.json"),
+        "--plate",
+        &ex("plates/four-lines.toml"),
+        "--json",
+        "--out",
+        out_file.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let mut keys: Vec<&str> = v.as_object().unwrap().keys().map(String::as_str).collect();
+    keys.sort_unstable();
+    assert_eq!(
+        keys,
+        ["final_orientation_deg", "final_position_mm", "name", "period_deg", "repeat", "steps"]
+    );
+    let steps = v["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), 2);
+    for s in steps {
+        let mut k: Vec<&str> = s.as_object().unwrap().keys().map(String::as_str).collect();
+        k.sort_unstable();
+        assert_eq!(k, ["amplitude", "duration_ms", "freq_hz", "ramp_ms"]);
+    }
+    assert_eq!(steps[0]["freq_hz"], 100.0);
+    assert_eq!(steps[1]["freq_hz"], 60.0);
+    assert_eq!(v["period_deg"], 360.0);
+    assert!((v["final_orientation_deg"].as_f64().unwrap() - 110.7066).abs() < 1e-3);
+    assert_eq!(v["final_position_mm"].as_array().unwrap().len(), 2);
+    // The written file is the same object.
+    let file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out_file).unwrap()).unwrap();
+    assert_eq!(file, v);
+    // Simulate it.
+    let plot = tmp("tri-sim.png");
+    let out = chladni(&[
+        "simulate",
+        &ex("parts/triangle.json"),
+        "--plate",
+        &ex("plates/four-lines.toml"),
+        "--plan",
+        out_file.to_str().unwrap(),
+        "--trials",
+        "40",
+        "--seed",
+        "3",
+        "--json",
+        "--plot",
+        plot.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(s["success_rate"], 1.0);
+    assert_eq!(s["trials"], 40);
+    assert!(s["orientation_error_deg"]["max"].as_f64().unwrap() < 0.5);
+    assert!(s["position_error_mm"]["max"].as_f64().unwrap() < 1.0);
+    for p in [plot.clone(), tmp("tri-sim-plan.png")] {
+        let bytes = std::fs::read(&p).unwrap();
+        assert_eq!(&bytes[1..4], b"PNG", "{}", p.display());
+    }
+}
+
+#[test]
+fn plan_without_solution_exits_1_and_says_why() {
+    let out =
+        chladni(&["plan", &ex("parts/trapezoid.json"), "--plate", &ex("plates/four-lines.toml")]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no plan with these modes") && err.contains("stay apart"), "{err}");
+}
+
+#[test]
+fn bad_input_exits_2_with_named_errors() {
+    let plate = tmp("bad.toml");
+    std::fs::write(
+        &plate,
+        "[plate]\nname = \"b\"\nsize_mm = [300.0, 200.0]\n[[mode]]\nfreq_hz = 60.0\nfield = \"cosine\"\nnode = { kind = \"line\", angle_deg = 0.0 }\n",
+    )
+    .unwrap();
+    let out = chladni(&["plan", &ex("parts/triangle.json"), "--plate", plate.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("field = \"cosine\"") && err.contains("sign"), "{err}");
+    let out = chladni(&[
+        "plan",
+        &ex("parts/triangle.json"),
+        "--plate",
+        &ex("plates/four-lines.toml"),
+        "--margin-deg",
+        "-1",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    // A plan whose frequency is not a mode of the plate.
+    let plan = tmp("p.json");
+    std::fs::write(
+        &plan,
+        r#"{"steps": [{"freq_hz": 77.0, "duration_ms": 100, "amplitude": 0.5, "ramp_ms": 0}]}"#,
+    )
+    .unwrap();
+    let out = chladni(&[
+        "simulate",
+        &ex("parts/triangle.json"),
+        "--plate",
+        &ex("plates/four-lines.toml"),
+        "--plan",
+        plan.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("no mode"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::write(
+        &plan,
+        r#"{"steps": [{"freq_hz": 60.0, "duration_ms": 100, "amplitude": 1.5}]}"#,
+    )
+    .unwrap();
+    let out = chladni(&[
+        "simulate",
+        &ex("parts/triangle.json"),
+        "--plate",
+        &ex("plates/four-lines.toml"),
+        "--plan",
+        plan.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("amplitude 1.5"));
+}
+
+#[test]
+fn example_plans_parse_as_device_plans_and_match_the_planner() {
+    use chladni::plan_file::PlanFile;
+    use chladni_shared::plan::DeviceLimits;
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/plans");
+    let mut n = 0;
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let path = e.unwrap().path();
+        if path.extension().and_then(|x| x.to_str()) != Some("json") {
+            continue;
+        }
+        let f = PlanFile::parse(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        f.to_plan(&DeviceLimits::DEFAULT).unwrap();
+        n += 1;
+    }
+    assert!(n >= 4, "{n} example plans");
+    // The triangle example is exactly what the planner writes today.
+    let out = chladni(&[
+        "plan",
+        &ex("parts/triangle.json"),
+        "--plate",
+        &ex("plates/four-lines.toml"),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let file: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("triangle-four-lines.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(v, file);
+}
