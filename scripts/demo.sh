@@ -1,30 +1,53 @@
 #!/usr/bin/env bash
-# The main job on a fresh machine: install what is missing, build, start the controller in QEMU
-# (`chladni emulator`), and talk to it from the host (`chladni device …`).
+# The main job on a fresh machine: install what is missing, build, then
+#   1. analyse where a triangle rests at a straight node,
+#   2. plan a sensorless sequence of plate modes that orients it from any start,
+#   3. check the plan by Monte Carlo simulation,
+#   4. start the controller in QEMU (`chladni emulator`), upload the plan and run it,
+#      watching the drive step through it, as it would on the real feeder.
+# Outputs (plan file, figures, logs) go to target/demo/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh
 cargo build --release --bin chladni
 chladni=target/release/chladni
+out=target/demo
+mkdir -p "$out"
+part=examples/parts/triangle.json
+plate=examples/plates/four-lines.toml
+say() { printf '\n$ %s\n' "$*"; }
 
-log=$(mktemp -d)/emulator
-$chladni emulator --log "$log.defmt" --time-limit-s 600 >"$log.out" 2>"$log.err" &
+say chladni analyze $part --field sign --plot $out/analysis.png
+$chladni analyze $part --field sign --plot $out/analysis.png
+
+say chladni plan $part --plate $plate --out $out/plan.json --plot $out/plan.png
+$chladni plan $part --plate $plate --out $out/plan.json --plot $out/plan.png
+
+say chladni simulate $part --plate $plate --plan $out/plan.json --trials 200 --plot $out/traces.png
+$chladni simulate $part --plate $plate --plan $out/plan.json --trials 200 --plot $out/traces.png
+
+# The controller: the firmware in QEMU, its link on a TCP port, its flash in a file.
+$chladni emulator --flash-file $out/flash.bin --log $out/firmware.log --time-limit-s 900 \
+  >"$out/emulator.out" 2>"$out/emulator.err" &
 emu=$!
 trap 'kill $emu 2>/dev/null; wait $emu 2>/dev/null || true' EXIT
-for _ in $(seq 1 600); do
-  port=$(grep -o 'tcp://[0-9.:]*' "$log.out" | head -n 1 || true)
+port=""
+for _ in $(seq 1 1500); do
+  port=$(grep -o 'tcp://[0-9.:]*' "$out/emulator.out" | head -n 1 || true)
   [ -n "$port" ] && break
-  kill -0 $emu 2>/dev/null || { cat "$log.err"; exit 1; }
+  kill -0 $emu 2>/dev/null || { cat "$out/emulator.err"; exit 1; }
   sleep 0.2
 done
-[ -n "$port" ] || { echo "emulator did not come up"; cat "$log.err"; exit 1; }
-echo "controller (QEMU) on $port"
+[ -n "$port" ] || { echo "the emulator did not come up"; cat "$out/emulator.err"; exit 1; }
 
-echo; echo "\$ chladni device info --port $port"
+say chladni device info --port $port
 $chladni device info --port "$port"
-echo; echo "\$ chladni device info --port $port --json"
-$chladni device info --port "$port" --json
-echo; echo "\$ chladni device ping --port $port --count 100"
-$chladni device ping --port "$port" --count 100
 
-echo; echo "firmware log:"; cat "$log.defmt"
+say chladni device run-file --port $port $out/plan.json --wait
+$chladni device run-file --port "$port" "$out/plan.json" --wait
+
+say chladni device status --port $port --json
+$chladni device status --port "$port" --json
+
+echo
+echo "figures: $out/analysis.png $out/plan.png $out/traces.png; firmware log: $out/firmware.log"
