@@ -442,7 +442,7 @@ fn transform_of(node: roxmltree::Node<'_, '_>) -> Result<svgtypes::Transform, St
 }
 
 /// Point strictly inside a ring (even–odd rule).
-fn inside(p: [f64; 2], ring: &[[f64; 2]]) -> bool {
+pub(crate) fn inside(p: [f64; 2], ring: &[[f64; 2]]) -> bool {
     let n = ring.len();
     let mut c = false;
     for i in 0..n {

@@ -216,15 +216,7 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, S
             }
         }
         Backend::F64 => {
-            let law = match mode.law {
-                Law::Sign => reference::Law::Sign,
-                Law::Linear => reference::Law::Linear,
-                Law::Sine { wavelength_mm } => reference::Law::Sine(wavelength_mm),
-            };
-            let r = Reference::new(
-                part,
-                RefField { law, gain_left: mode.gain_left, gain_right: mode.gain_right },
-            );
+            let r = reference_for(part, mode);
             let (rests, neutral) = r.rests();
             if neutral {
                 return Ok(StepMap {
@@ -694,20 +686,21 @@ pub fn plan_with(
     Ok(Synthesis { steps, final_orientation_deg, period_deg: problem.period, final_position_mm })
 }
 
-/// Centroid offset across a straight node at a rest orientation (mm, along x̂ = −n̂ from the
-/// node line), by the f64 balance in the node frame.
-fn balance_offset(part: &Part, mode: &Mode, theta_deg: f64) -> f64 {
-    let Node::Line { angle_deg, .. } = mode.node else { return 0.0 };
+/// The f64 reference analysis of `part` under a straight-node mode's field law and gains.
+fn reference_for(part: &Part, mode: &Mode) -> Reference {
     let law = match mode.law {
         Law::Sign => reference::Law::Sign,
         Law::Linear => reference::Law::Linear,
         Law::Sine { wavelength_mm } => reference::Law::Sine(wavelength_mm),
     };
-    let r = Reference::new(
-        part,
-        RefField { law, gain_left: mode.gain_left, gain_right: mode.gain_right },
-    );
-    r.balance(theta_deg - angle_deg + 90.0).0
+    Reference::new(part, RefField { law, gain_left: mode.gain_left, gain_right: mode.gain_right })
+}
+
+/// Centroid offset across a straight node at a rest orientation (mm, along x̂ = −n̂ from the
+/// node line), by the f64 balance in the node frame.
+fn balance_offset(part: &Part, mode: &Mode, theta_deg: f64) -> f64 {
+    let Node::Line { angle_deg, .. } = mode.node else { return 0.0 };
+    reference_for(part, mode).balance(theta_deg - angle_deg + 90.0).0
 }
 
 fn final_position(

@@ -47,8 +47,8 @@ pub struct Reference {
     scale: f64,
 }
 
-// 5-point Gauss–Legendre on [−1, 1].
-const GL: [(f64, f64); 5] = [
+/// 5-point Gauss–Legendre nodes and weights on [−1, 1].
+pub(crate) const GL: [(f64, f64); 5] = [
     (0.0, 0.568_888_888_888_888_9),
     (-0.538_469_310_105_683_1, 0.478_628_670_499_366_5),
     (0.538_469_310_105_683_1, 0.478_628_670_499_366_5),

@@ -10,9 +10,10 @@
 //!
 //! Units: mm, s, rad inside (degrees in [`Pose`] helpers only where named).
 
-use crate::part::Part;
+use crate::part::{Part, inside};
 use crate::plate::model::{Law, Mode, Node, PlateModel};
 use crate::plate::solver::Grid;
+use crate::reference::GL;
 
 /// Target number of interior sample points for numerical force integration.
 pub const BODY_SAMPLES: usize = 400;
@@ -43,21 +44,6 @@ pub struct Body {
     pub radius: f64,
     /// Interior sample points (relative to the centroid) and their weights (mm²).
     pub samples: Vec<([f64; 2], f64)>,
-}
-
-fn inside(p: [f64; 2], ring: &[[f64; 2]]) -> bool {
-    let mut c = false;
-    let n = ring.len();
-    for i in 0..n {
-        let (a, b) = (ring[i], ring[(i + 1) % n]);
-        if (a[1] > p[1]) != (b[1] > p[1]) {
-            let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
-            if p[0] < x {
-                c = !c;
-            }
-        }
-    }
-    c
 }
 
 impl Body {
@@ -150,15 +136,6 @@ impl Body {
             .collect()
     }
 }
-
-/// 5-point Gauss–Legendre on [−1, 1].
-const GL: [(f64, f64); 5] = [
-    (0.0, 0.568_888_888_888_888_9),
-    (-0.538_469_310_105_683_1, 0.478_628_670_499_366_5),
-    (0.538_469_310_105_683_1, 0.478_628_670_499_366_5),
-    (-0.906_179_845_938_664, 0.236_926_885_056_189_08),
-    (0.906_179_845_938_664, 0.236_926_885_056_189_08),
-];
 
 /// A mode's field, ready to evaluate.
 #[derive(Debug, Clone)]
