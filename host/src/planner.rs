@@ -739,6 +739,18 @@ fn final_position(
 }
 
 impl Synthesis {
+    /// The steps as the simulator runs them (each at its mode's own amplitude).
+    pub fn sim_steps(&self) -> Vec<sim::SimStep> {
+        self.steps
+            .iter()
+            .map(|s| sim::SimStep {
+                mode: s.mode,
+                duration_s: s.duration_ms as f64 / 1000.0,
+                amplitude_ratio: 1.0,
+            })
+            .collect()
+    }
+
     /// The plan file (device steps plus predictions).
     pub fn to_file(&self, plate: &PlateModel, name: &str) -> PlanFile {
         let mut name: String = name.chars().take(32).collect();

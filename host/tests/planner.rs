@@ -46,15 +46,7 @@ fn verify(p: &Part, plate: &PlateModel, opt: &PlanOptions, step_deg: f64) -> (f6
     let syn = planner::plan_with(p, plate, opt, &problem).unwrap();
     let body = Body::new(p);
     let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
-    let steps: Vec<SimStep> = syn
-        .steps
-        .iter()
-        .map(|s| SimStep {
-            mode: s.mode,
-            duration_s: s.duration_ms as f64 / 1000.0,
-            amplitude_ratio: 1.0,
-        })
-        .collect();
+    let steps: Vec<SimStep> = syn.sim_steps();
     let first = &problem.maps[syn.steps[0].mode];
     let (mut worst, mut runs) = (0.0f64, 0);
     let [w, h] = plate.size_mm;

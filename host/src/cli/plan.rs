@@ -145,15 +145,7 @@ impl PlanArgs {
             let body = Body::new(&part);
             let fields: Vec<FieldModel> =
                 plate.modes.iter().map(|m| FieldModel::new(m, &plate)).collect();
-            let steps: Vec<SimStep> = syn
-                .steps
-                .iter()
-                .map(|s| SimStep {
-                    mode: s.mode,
-                    duration_s: s.duration_ms as f64 / 1000.0,
-                    amplitude_ratio: 1.0,
-                })
-                .collect();
+            let steps: Vec<SimStep> = syn.sim_steps();
             let mut rng = Rng(1);
             let examples: Vec<Vec<Pose>> = (0..3)
                 .map(|_| {
