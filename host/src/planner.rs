@@ -271,10 +271,11 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
     let field = FieldModel::new(mode, plate);
     let t0 = body.radius / (mode.speed_mm_s * field.max_gain());
     let p = SimParams { speed: mode.speed_mm_s, t_limit: 5000.0 * t0, run_to_limit: false };
-    // Half a step off 0°: a start point on the node (the plate centre often is) would
+    // 0.3 of a step off 0° (so also off 45°, 90°, ... for n = 36, 90, 360): a start point on
+    // the node (the plate centre often is) would
     // otherwise sample the symmetric unstable rests (0°, 90°, ...) exactly and report them as
     // rests.
-    let thetas: Vec<f64> = (0..n).map(|i| (i as f64 + 0.5) * 360.0 / n as f64).collect();
+    let thetas: Vec<f64> = (0..n).map(|i| (i as f64 + 0.3) * 360.0 / n as f64).collect();
     let mut reps: Vec<(f64, f64, usize)> = Vec::new(); // (first, sum of offsets, count)
     let mut labels: Vec<Vec<Option<usize>>> = Vec::new();
     let on_edge = |q: Pose| on_plate_edge(body, plate, q);
@@ -344,11 +345,11 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
     }
 }
 
-/// Does a part that ended at `q` sit on the plate's edge (centroid within half its radius of
+/// Does a part that ended at `q` sit on the plate's edge (centroid within its radius of
 /// it) rather than on an interior node?
 fn on_plate_edge(body: &Body, plate: &PlateModel, q: Pose) -> bool {
     let [w, h] = plate.size_mm;
-    let edge = 0.5 * body.radius;
+    let edge = body.radius;
     q.x < edge || q.y < edge || q.x > w - edge || q.y > h - edge
 }
 
