@@ -89,6 +89,9 @@ pub struct StepMap {
     sampled: Option<Vec<(f64, f64)>>,
     /// Extra distance to boundaries for sampled maps (half the start spacing).
     slack: f64,
+    /// Simulated grid maps: start points outside the mode's feed region (no interior node
+    /// reached; see [`sampled_map`]).
+    pub dead_starts: usize,
 }
 
 /// Circular distance on a circle of circumference `p`.
@@ -208,6 +211,7 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, S
                     neutral: true,
                     sampled: None,
                     slack: 0.0,
+                    dead_starts: 0,
                 });
             }
             for r in &a.rests {
@@ -225,6 +229,7 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, S
                     neutral: true,
                     sampled: None,
                     slack: 0.0,
+                    dead_starts: 0,
                 });
             }
             for x in rests {
@@ -233,7 +238,7 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, S
             }
         }
     }
-    Ok(StepMap { stable, boundaries, neutral, sampled: None, slack: 0.0 })
+    Ok(StepMap { stable, boundaries, neutral, sampled: None, slack: 0.0, dead_starts: 0 })
 }
 
 /// Where simulated maps start the part: the hyperbola's vertex (else the plate centre) and
@@ -254,25 +259,44 @@ pub fn map_starts(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]>
 
 /// A map from simulation (any node kind): `n` start orientations at each of [`map_starts`].
 /// Final orientations are clustered (2°, modulo the period); an orientation whose outcome
-/// differs between start points is ambiguous and treated as lying on a basin boundary.
+/// differs between start points is ambiguous and treated as lying on a basin boundary, and
+/// so is one whose run does not come to rest within 5000 T₀ (T₀: time to travel one radius
+/// at full pull).
+///
+/// Grid modes only: a start point from which some run ends with the centroid within half the
+/// part's radius of the plate edge reached no interior node (near a clamped edge φ and ∂φ/∂x
+/// vanish, the pull falls off like x³ and parts drift onto the clamp); it lies outside the
+/// mode's feed region, is left out of the map and counted in [`StepMap::dead_starts`].
 pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, period: f64) -> StepMap {
     let field = FieldModel::new(mode, plate);
-    // Up to 500 T0 (T0: time to travel one radius at full pull); slower runs count as
-    // ending where they are.
     let t0 = body.radius / (mode.speed_mm_s * field.max_gain());
-    let p = SimParams { speed: mode.speed_mm_s, t_limit: 500.0 * t0, run_to_limit: false };
-    let thetas: Vec<f64> = (0..n).map(|i| i as f64 * 360.0 / n as f64).collect();
+    let p = SimParams { speed: mode.speed_mm_s, t_limit: 5000.0 * t0, run_to_limit: false };
+    // 0.3 of a step off 0° (so also off 45°, 90°, ... for n = 36, 90, 360): a start point on
+    // the node (the plate centre often is) would
+    // otherwise sample the symmetric unstable rests (0°, 90°, ...) exactly and report them as
+    // rests.
+    let thetas: Vec<f64> = (0..n).map(|i| (i as f64 + 0.3) * 360.0 / n as f64).collect();
     let mut reps: Vec<(f64, f64, usize)> = Vec::new(); // (first, sum of offsets, count)
-    let mut labels: Vec<Vec<usize>> = Vec::new();
+    let mut labels: Vec<Vec<Option<usize>>> = Vec::new();
+    let on_edge = |q: Pose| on_plate_edge(body, plate, q);
+    let mut dead_starts = 0;
     for start in map_starts(body, mode, plate) {
+        let runs: Vec<sim::Run> = thetas
+            .iter()
+            .map(|&th| {
+                sim::run(body, &field, p, Pose { x: start[0], y: start[1], theta: th.to_radians() })
+            })
+            .collect();
+        if matches!(mode.node, Node::Grid(_)) && runs.iter().any(|r| on_edge(r.pose)) {
+            dead_starts += 1;
+            continue;
+        }
         let mut label = Vec::with_capacity(n);
-        for &th in &thetas {
-            let r = sim::run(
-                body,
-                &field,
-                p,
-                Pose { x: start[0], y: start[1], theta: th.to_radians() },
-            );
+        for r in &runs {
+            if !r.rested {
+                label.push(None);
+                continue;
+            }
             let fc = r.pose.theta.to_degrees().rem_euclid(period);
             match reps.iter().position(|r| cdist(r.0 + r.1 / r.2 as f64, fc, period) < 2.0) {
                 Some(k) => {
@@ -285,11 +309,11 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
                     }
                     r.1 += d;
                     r.2 += 1;
-                    label.push(k);
+                    label.push(Some(k));
                 }
                 None => {
                     reps.push((fc, 0.0, 1));
-                    label.push(reps.len() - 1);
+                    label.push(Some(reps.len() - 1));
                 }
             }
         }
@@ -298,8 +322,8 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
     let rep: Vec<f64> = reps.iter().map(|r| (r.0 + r.1 / r.2 as f64).rem_euclid(period)).collect();
     let combined: Vec<Option<usize>> = (0..n)
         .map(|i| {
-            let l = labels[0][i];
-            labels.iter().all(|ls| ls[i] == l).then_some(l)
+            let l = labels.first()?[i];
+            labels.iter().all(|ls| ls[i] == l).then_some(l)?
         })
         .collect();
     let mut boundaries = Vec::new();
@@ -317,7 +341,16 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
         neutral: false,
         sampled: Some(sampled),
         slack: 180.0 / n as f64,
+        dead_starts,
     }
+}
+
+/// Does a part that ended at `q` sit on the plate's edge (centroid within its radius of
+/// it) rather than on an interior node?
+fn on_plate_edge(body: &Body, plate: &PlateModel, q: Pose) -> bool {
+    let [w, h] = plate.size_mm;
+    let edge = body.radius;
+    q.x < edge || q.y < edge || q.x > w - edge || q.y > h - edge
 }
 
 /// One planned step.
@@ -553,7 +586,7 @@ impl Problem {
 }
 
 /// Inset plate corners (by the part radius) farthest from a straight node on each side, or
-/// all four for curved nodes.
+/// the corners, edge midpoints and centre for curved and grid nodes.
 fn start_points(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]> {
     let [w, h] = plate.size_mm;
     let r = body.radius.min(w / 2.0).min(h / 2.0);
@@ -565,7 +598,13 @@ fn start_points(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]> {
             let hi = corners.iter().max_by(|a, b| xi(a).total_cmp(&xi(b))).copied();
             lo.into_iter().chain(hi).collect()
         }
-        _ => corners.to_vec(),
+        // Curved and grid nodes: corners, edge midpoints and the centre (the pull, and so
+        // the settle time, varies over the plate).
+        _ => {
+            let mid =
+                [[w / 2.0, r], [w - r, h / 2.0], [w / 2.0, h - r], [r, h / 2.0], plate.center()];
+            corners.iter().chain(&mid).copied().collect()
+        }
     }
 }
 
@@ -582,10 +621,20 @@ pub fn settle_time(
     let p = SimParams { speed: mode.speed_mm_s, t_limit: 3600.0, run_to_limit: false };
     let mut times = Vec::new();
     for pt in start_points(body, mode, plate) {
-        for &th in orientations {
-            let r = sim::run(body, &field, p, Pose { x: pt[0], y: pt[1], theta: th.to_radians() });
-            times.push(r.settle_s);
+        let runs: Vec<sim::Run> = orientations
+            .iter()
+            .map(|&th| {
+                sim::run(body, &field, p, Pose { x: pt[0], y: pt[1], theta: th.to_radians() })
+            })
+            .collect();
+        // Grid modes: a corner outside the feed region (see [`sampled_map`]) never reaches a
+        // node; its drift onto the clamp is no settle time.
+        if matches!(mode.node, Node::Grid(_))
+            && runs.iter().any(|r| on_plate_edge(body, plate, r.pose))
+        {
+            continue;
         }
+        times.extend(runs.iter().map(|r| r.settle_s));
     }
     times.sort_by(f64::total_cmp);
     let median = times.get(times.len() / 2).copied().unwrap_or(0.0);
