@@ -94,6 +94,20 @@ pub struct StepMap {
     pub dead_starts: usize,
 }
 
+impl StepMap {
+    /// The map of a mode under which every orientation is at rest (e.g. a square, linear field).
+    fn neutral() -> Self {
+        StepMap {
+            stable: Vec::new(),
+            boundaries: Vec::new(),
+            neutral: true,
+            sampled: None,
+            slack: 0.0,
+            dead_starts: 0,
+        }
+    }
+}
+
 /// Circular distance on a circle of circumference `p`.
 pub fn cdist(a: f64, b: f64, p: f64) -> f64 {
     let d = (a - b).rem_euclid(p);
@@ -205,14 +219,7 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, S
                 .map_err(|e| format!("{}: cannot analyse: {e:?}", mode.name))?;
             let a = an.analyze().map_err(|e| format!("{}: analysis failed: {e:?}", mode.name))?;
             if a.neutral {
-                return Ok(StepMap {
-                    stable,
-                    boundaries,
-                    neutral: true,
-                    sampled: None,
-                    slack: 0.0,
-                    dead_starts: 0,
-                });
+                return Ok(StepMap::neutral());
             }
             for r in &a.rests {
                 let d = to_plate(deg(r.angle));
@@ -223,14 +230,7 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, S
             let r = reference_for(part, mode);
             let (rests, neutral) = r.rests();
             if neutral {
-                return Ok(StepMap {
-                    stable,
-                    boundaries,
-                    neutral: true,
-                    sampled: None,
-                    slack: 0.0,
-                    dead_starts: 0,
-                });
+                return Ok(StepMap::neutral());
             }
             for x in rests {
                 let d = to_plate(x.deg);

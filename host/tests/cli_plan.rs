@@ -119,14 +119,7 @@ fn bad_input_exits_2_with_named_errors() {
         r#"{"steps": [{"freq_hz": 77.0, "duration_ms": 100, "amplitude": 0.5, "ramp_ms": 0}]}"#,
     )
     .unwrap();
-    let out = chladni(&[
-        "simulate",
-        &ex("parts/triangle.json"),
-        "--plate",
-        &ex("plates/four-lines.toml"),
-        "--plan",
-        plan.to_str().unwrap(),
-    ]);
+    let out = simulate_triangle(&plan);
     assert_eq!(out.status.code(), Some(2));
     assert!(
         String::from_utf8_lossy(&out.stderr).contains("no mode"),
@@ -138,14 +131,7 @@ fn bad_input_exits_2_with_named_errors() {
         r#"{"steps": [{"freq_hz": 60.0, "duration_ms": 100, "amplitude": 1.5}]}"#,
     )
     .unwrap();
-    let out = chladni(&[
-        "simulate",
-        &ex("parts/triangle.json"),
-        "--plate",
-        &ex("plates/four-lines.toml"),
-        "--plan",
-        plan.to_str().unwrap(),
-    ]);
+    let out = simulate_triangle(&plan);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("amplitude 1.5"));
 }
@@ -180,4 +166,16 @@ fn example_plans_parse_as_device_plans_and_match_the_planner() {
     )
     .unwrap();
     assert_eq!(v, file);
+}
+
+/// `chladni simulate` of the triangle on the four-line plate with the plan file `plan`.
+fn simulate_triangle(plan: &std::path::Path) -> std::process::Output {
+    chladni(&[
+        "simulate",
+        &ex("parts/triangle.json"),
+        "--plate",
+        &ex("plates/four-lines.toml"),
+        "--plan",
+        plan.to_str().unwrap(),
+    ])
 }
