@@ -12,11 +12,12 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use chladni_shared::link::Board;
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 
 use crate::device::{DeviceClient, DeviceError};
-use crate::firmware::{self, BoardKind, FirmwareError};
+use crate::firmware::{self, FirmwareError};
 
 /// How to start the emulated controller.
 #[derive(Debug, Clone, Default)]
@@ -87,7 +88,7 @@ impl Emulator {
     pub fn start(config: &EmulatorConfig) -> Result<Self, EmulatorError> {
         let elf = match &config.firmware {
             Some(path) => path.clone(),
-            None => firmware::build(BoardKind::Qemu)?,
+            None => firmware::build(Board::Qemu)?,
         };
         if !elf.is_file() {
             return Err(EmulatorError::NoImage(elf));

@@ -6,24 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// The boards the firmware supports.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum BoardKind {
-    /// `qemu-system-arm -M b-l475e-iot01a`.
-    Qemu,
-    /// The B-L475E-IOT01A board.
-    Stm32l475,
-}
-
-impl BoardKind {
-    /// The board's name as scripts/firmware.sh takes it.
-    pub fn name(self) -> &'static str {
-        match self {
-            BoardKind::Qemu => "qemu",
-            BoardKind::Stm32l475 => "stm32l475",
-        }
-    }
-}
+use chladni_shared::link::Board;
 
 /// Why an image could not be had.
 #[derive(Debug, thiserror::Error)]
@@ -55,7 +38,7 @@ pub fn source_root() -> Option<PathBuf> {
 }
 
 /// Builds the image for `board` if it is missing or stale (cargo decides) and returns its path.
-pub fn build(board: BoardKind) -> Result<PathBuf, FirmwareError> {
+pub fn build(board: Board) -> Result<PathBuf, FirmwareError> {
     let root = source_root()
         .ok_or_else(|| FirmwareError::NoSourceTree(PathBuf::from(env!("CARGO_MANIFEST_DIR"))))?;
     let out = Command::new(root.join("scripts/firmware.sh"))
