@@ -362,13 +362,10 @@ pub struct PlannedStep {
     pub before: Vec<f64>,
     /// Orientations after it.
     pub after: Vec<f64>,
-    /// Slowest simulated settle time (s).
-    pub settle_s: f64,
     /// Step duration (ms), ramp included.
     pub duration_ms: u32,
-    /// Simulated starts left out of the settle time: slower than 10× the median (they
-    /// linger near an unstable rest).
-    pub lingering: usize,
+    /// What the settle simulation measured (all zero without `PlanOptions::durations`).
+    pub settle: Settle,
 }
 
 /// A synthesised plan.
@@ -608,19 +605,31 @@ fn start_points(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]> {
     }
 }
 
-/// Simulated settle time (s) of a step from the given orientations (deg) and start points:
-/// the slowest start, except starts slower than 10× the median, which linger near an
-/// unstable rest (metastable; their time is unbounded in the model); returns their count too.
-pub fn settle_time(
-    body: &Body,
-    mode: &Mode,
-    plate: &PlateModel,
-    orientations: &[f64],
-) -> (f64, usize) {
+/// What [`settle_time`] measured.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Settle {
+    /// The slowest start (s), lingering ones left out.
+    pub settle_s: f64,
+    /// Starts slower than 10× the median: they linger near an unstable rest (metastable;
+    /// their time is unbounded in the model).
+    pub lingering: usize,
+    /// Start points simulated.
+    pub points: usize,
+    /// Grid modes: start points outside the feed region, from which the part ended on the
+    /// plate edge instead of a node (left out of the settle time).
+    pub outside_feed: Vec<[f64; 2]>,
+}
+
+/// Simulated settle time of a step from the given orientations (deg), from the start points
+/// of [`start_points`]: the slowest start, except lingering ones and those outside the
+/// mode's feed region (see [`Settle`]).
+pub fn settle_time(body: &Body, mode: &Mode, plate: &PlateModel, orientations: &[f64]) -> Settle {
     let field = FieldModel::new(mode, plate);
     let p = SimParams { speed: mode.speed_mm_s, t_limit: 3600.0, run_to_limit: false };
     let mut times = Vec::new();
-    for pt in start_points(body, mode, plate) {
+    let points = start_points(body, mode, plate);
+    let mut outside_feed = Vec::new();
+    for &pt in &points {
         let runs: Vec<sim::Run> = orientations
             .iter()
             .map(|&th| {
@@ -632,6 +641,7 @@ pub fn settle_time(
         if matches!(mode.node, Node::Grid(_))
             && runs.iter().any(|r| on_plate_edge(body, plate, r.pose))
         {
+            outside_feed.push(pt);
             continue;
         }
         times.extend(runs.iter().map(|r| r.settle_s));
@@ -639,7 +649,12 @@ pub fn settle_time(
     times.sort_by(f64::total_cmp);
     let median = times.get(times.len() / 2).copied().unwrap_or(0.0);
     let kept = times.iter().filter(|&&t| t <= 10.0 * median.max(1e-3)).count();
-    (times[..kept].last().copied().unwrap_or(0.0), times.len() - kept)
+    Settle {
+        settle_s: times[..kept].last().copied().unwrap_or(0.0),
+        lingering: times.len() - kept,
+        points: points.len(),
+        outside_feed,
+    }
 }
 
 /// Does the simulation take orientation `u` to `v` (mod `period`, within 1°) under a straight
@@ -702,8 +717,7 @@ pub fn plan_with(
     let mut before: Vec<f64> = Vec::new();
     for (k, after) in &path {
         let mode = &plate.modes[*k];
-        let mut lingering = 0;
-        let (settle_s, duration_ms) = if opt.durations {
+        let settle = if opt.durations {
             let starts: Vec<f64> = if before.is_empty() {
                 let map = &problem.maps[*k];
                 (0..24)
@@ -713,20 +727,22 @@ pub fn plan_with(
             } else {
                 before.clone()
             };
-            let (s, slow) = settle_time(&body, mode, plate, &starts);
-            lingering = slow;
-            let ms = (s * opt.safety * 1000.0 / 10.0).ceil() as u32 * 10 + mode.ramp_ms;
-            (s, ms.max(100))
+            settle_time(&body, mode, plate, &starts)
         } else {
-            (0.0, 1000)
+            Settle::default()
+        };
+        let duration_ms = if opt.durations {
+            let ms = (settle.settle_s * opt.safety * 1000.0 / 10.0).ceil() as u32 * 10;
+            (ms + mode.ramp_ms).max(100)
+        } else {
+            1000
         };
         steps.push(PlannedStep {
             mode: *k,
             before: before.clone(),
             after: after.clone(),
-            settle_s,
             duration_ms,
-            lingering,
+            settle,
         });
         before = after.clone();
     }

@@ -49,6 +49,12 @@ fn rectangle_plan_on_solver_made_cantilever_modes_holds_in_simulation() {
     assert_eq!(syn.period_deg, 180.0);
     assert!(cdist(syn.final_orientation_deg, 0.0, 180.0) < 0.5, "{}", syn.final_orientation_deg);
     assert!(syn.steps[0].duration_ms < 3_600_000);
+    // `chladni plan` reports the feed region: the two clamp-side corners of the 9 settle
+    // start points end on the clamp edge.
+    let settle = &syn.steps[0].settle;
+    assert_eq!(settle.points, 9);
+    assert_eq!(settle.outside_feed.len(), 2, "{settle:?}");
+    assert!(settle.outside_feed.iter().all(|p| p[0] < 50.0), "{settle:?}");
 
     // Independent check: start poses on a grid over the feed region, every 30°.
     let body = Body::new(&part);
@@ -71,4 +77,80 @@ fn rectangle_plan_on_solver_made_cantilever_modes_holds_in_simulation() {
     }
     assert_eq!(runs, 96);
     assert!(worst < 1.0, "worst final orientation error {worst}°");
+}
+
+/// Runs `chladni plate modes` with `args` on the hinged-rod example.
+fn hinged_rod_modes(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_chladni"))
+        .args(["plate", "modes"])
+        .arg(root().join("examples/plate-hinged-rod.toml"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+// The paper's setup 2: below the first elastic mode the rod rocks the plate rigidly about the
+// hinge. `--write-modes` puts that forced rocking first, as a straight linear-field node on
+// the hinge line, and the rectangle gets a one-step plan on it that holds from anywhere.
+#[test]
+fn hinged_rod_plate_plans_on_its_forced_rocking_about_the_hinge() {
+    let out = std::env::temp_dir().join(format!("chladni-hinged-{}.toml", std::process::id()));
+    let st = hinged_rod_modes(&[
+        "--count",
+        "1",
+        "--rocking-hz",
+        "12",
+        "--write-modes",
+        out.to_str().unwrap(),
+    ]);
+    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    assert!(String::from_utf8_lossy(&st.stdout).contains("rigid rocking about the hinge at 12 Hz"));
+    let plate = PlateModel::load(&out).unwrap();
+    let _ = std::fs::remove_file(&out);
+    assert_eq!(plate.modes.len(), 2);
+    let rocking = &plate.modes[0];
+    assert_eq!(
+        (rocking.name.as_str(), rocking.freq_hz, rocking.law.name()),
+        ("rocking (forced)", 12.0, "linear")
+    );
+    match rocking.node {
+        Node::Line { angle_deg, offset_mm } => assert_eq!((angle_deg, offset_mm), (90.0, 0.0)),
+        ref n => panic!("rocking node should be the hinge line, got {n:?}"),
+    }
+    assert!(matches!(plate.modes[1].node, Node::Grid(_)));
+
+    let part = Part::load(&root().join("examples/parts/rectangle.json")).unwrap();
+    let opt = PlanOptions { sim_starts: 36, ..Default::default() };
+    let syn = planner::plan(&part, &plate, &opt).unwrap();
+    assert_eq!(syn.steps.iter().map(|s| s.mode).collect::<Vec<_>>(), [0]);
+    assert!(cdist(syn.final_orientation_deg, 90.0, 180.0) < 0.5, "{}", syn.final_orientation_deg);
+
+    // Independent check over the whole plate (both sides of the hinge), every 30°.
+    let body = Body::new(&part);
+    let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, &plate)).collect();
+    let steps = syn.sim_steps();
+    let mut worst = 0.0f64;
+    for x in [40.0, 100.0, 200.0, 260.0] {
+        for y in [40.0, 100.0, 160.0] {
+            for k in 0..6 {
+                let start = Pose { x, y, theta: (15.0 + 30.0 * k as f64).to_radians() };
+                let (poses, _, _) = run_plan(&body, &plate, &fields, &steps, start);
+                let end = poses.last().unwrap();
+                assert!((end.x - 150.0).abs() < 2.0, "start {start:?} ended at {end:?}");
+                worst = worst.max(cdist(end.theta.to_degrees(), syn.final_orientation_deg, 180.0));
+            }
+        }
+    }
+    assert!(worst < 1.0, "worst final orientation error {worst}°");
+}
+
+#[test]
+fn rocking_frequency_must_stay_below_the_first_elastic_mode() {
+    let st = hinged_rod_modes(&["--count", "1", "--rocking-hz", "40"]);
+    assert_eq!(st.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(
+        err.contains("--rocking-hz must be in [1, 29.2] Hz") && err.contains("got 40"),
+        "{err}"
+    );
 }

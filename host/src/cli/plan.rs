@@ -123,12 +123,26 @@ impl PlanArgs {
                     m.freq_hz,
                     m.amplitude,
                     s.duration_ms,
-                    s.settle_s
+                    s.settle.settle_s
                 );
-                if s.lingering > 0 {
+                if s.settle.lingering > 0 {
                     println!(
                         "           ({} simulated start(s) lingered near an unstable rest; not counted)",
-                        s.lingering
+                        s.settle.lingering
+                    );
+                }
+                if !s.settle.outside_feed.is_empty() {
+                    let at = s
+                        .settle
+                        .outside_feed
+                        .iter()
+                        .map(|p| format!("({:.0}, {:.0})", p[0], p[1]))
+                        .collect::<Vec<_>>()
+                        .join(", ");
+                    println!(
+                        "           feed region: {} of {} simulated start points reach a node; from {at} mm the part ends on the plate edge — place parts away from there",
+                        s.settle.points - s.settle.outside_feed.len(),
+                        s.settle.points
                     );
                 }
             }

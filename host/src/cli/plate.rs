@@ -10,7 +10,7 @@ use serde_json::json;
 
 use super::InputError;
 use chladni::plate::contour::{node_lines, total_length};
-use chladni::plate::file::PlateFile;
+use chladni::plate::file::{Boundary, Plate, PlateFile};
 use chladni::plate::{modes_file, photo, plot, solver};
 
 #[derive(Debug, Subcommand)]
@@ -53,6 +53,11 @@ pub struct ModesArgs {
     /// Legendre polynomials per direction in the Ritz basis (terms² unknowns).
     #[arg(long, default_value_t = solver::DEFAULT_TERMS)]
     terms: usize,
+    /// Hinged-rod plates: drive frequency (Hz) of the rigid rocking about the hinge that the
+    /// rod forces below the first elastic mode (the paper's setup 2 ran it at 10 Hz); written
+    /// by `--write-modes` as a straight `line` node on the hinge, ahead of the elastic modes.
+    #[arg(long, value_name = "HZ", default_value_t = 10.0)]
+    rocking_hz: f64,
 }
 
 fn grid_dims(nx: usize, size: [f64; 2]) -> (usize, usize) {
@@ -112,10 +117,13 @@ impl ModesArgs {
             }
             bar.finish_and_clear();
         }
+        let rocking = self.rocking_mode(&plate, &sol)?;
         if let Some(out) = &self.write_modes {
             let (nx, ny) = grid_dims(self.grid, plate.size_mm);
-            let entries = (0..sol.modes.len())
-                .map(|k| {
+            let entries = rocking
+                .iter()
+                .cloned()
+                .chain((0..sol.modes.len()).map(|k| {
                     let m = &sol.modes[k];
                     modes_file::grid_mode(
                         &format!("mode {}", k + 1),
@@ -123,7 +131,7 @@ impl ModesArgs {
                         m.lambda,
                         &sol.sample(k, nx, ny),
                     )
-                })
+                }))
                 .collect();
             let text = modes_file::render(&file.plate, entries)?;
             write(out, &text)?;
@@ -157,8 +165,48 @@ impl ModesArgs {
                     total_length(&lines) + 0.0
                 );
             }
+            if rocking.is_some() {
+                println!(
+                    "forced: rigid rocking about the hinge at {} Hz, node = the hinge line x = {:.1} mm (linear field){}",
+                    self.rocking_hz,
+                    plate.hinge_x_mm,
+                    if self.write_modes.is_some() { ", written as the first mode" } else { "" }
+                );
+            }
         }
         Ok(ExitCode::SUCCESS)
+    }
+
+    /// The hinged-rod plate's forced rocking as a `[[mode]]` entry: below the first elastic
+    /// mode the rod turns the plate rigidly about the hinge, w ∝ (x − hinge_x), so the node is
+    /// the hinge line and the pull grows linearly with the distance from it (DESIGN §2,
+    /// `linear`). `None` for other boundaries.
+    fn rocking_mode(
+        &self,
+        plate: &Plate,
+        sol: &solver::ModalSolution,
+    ) -> Result<Option<toml::Table>, InputError> {
+        if plate.boundary != Boundary::HingedRod {
+            return Ok(None);
+        }
+        let first = sol.modes.first().map_or(f64::INFINITY, |m| m.freq_hz);
+        // Half the first resonance keeps the elastic response small against the rigid
+        // rocking (dynamic amplification of mode 1 ≤ 1/(1 − 0.5²) ≈ 1.33).
+        let limit = (0.5 * first).min(2000.0);
+        if !(self.rocking_hz.is_finite() && self.rocking_hz >= 1.0 && self.rocking_hz <= limit) {
+            return Err(InputError(format!(
+                "--rocking-hz must be in [1, {limit:.1}] Hz (half the first elastic mode at {first:.1} Hz, so the plate rocks rigidly), got {}",
+                self.rocking_hz
+            )));
+        }
+        let mut m = modes_file::line_mode(
+            "rocking (forced)",
+            Some(self.rocking_hz),
+            90.0,
+            plate.hinge_x_mm - plate.size_mm[0] / 2.0,
+        );
+        m.insert("field".into(), "linear".into());
+        Ok(Some(m))
     }
 }
 
