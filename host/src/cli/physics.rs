@@ -122,9 +122,11 @@ impl StringArgs {
         bar.finish_and_clear();
         let fit = string::fit_sin2x(&p, &profile);
         let x_end = traj.samples.last().map_or(self.x0, |s| s.1);
+        let threshold = string::bounce_threshold(p.e);
+        let stop = string::stop_position(&p);
 
         if let Some(path) = &self.plot {
-            plot(path, &p, &traj, &profile, &fit)
+            plot(path, &p, &traj, &profile, &fit, stop)
                 .with_context(|| format!("plotting {}", path.display()))?;
         }
         if self.json {
@@ -138,6 +140,7 @@ impl StringArgs {
                                    "samples": traj.samples.iter().step_by(10).map(|s| [s.0, s.1]).collect::<Vec<_>>()},
                     "force": profile.iter().map(|(x, f)| [*x, *f]).collect::<Vec<_>>(),
                     "fit": {"model": "F = -c sin 2x", "c": fit.c, "r2": fit.r2, "c_per_e_a2_omega": fit.per_e_a2_omega},
+                    "bouncing": {"threshold_gamma_sin_x": threshold, "stop_x": stop},
                 })
             );
         } else {
@@ -162,6 +165,20 @@ impl StringArgs {
                 "averaged force ≈ −c·sin 2x: c = {:.4} m/s², R² = {:.3}, c/(e A² ω) = {:.3}",
                 fit.c, fit.r2, fit.per_e_a2_omega
             );
+            match stop {
+                Some(x) => println!(
+                    "bouncing needs Γ sin x ≥ π(1−e)/(1+e) = {threshold:.3}: the drift towards the nodes stops at x = {x:.3} and {:.3}",
+                    std::f64::consts::PI - x
+                ),
+                None => {
+                    // Γ ∝ f²: the frequency at which the start x0 can just keep bouncing.
+                    let f_min = p.freq_hz * (threshold / (p.gamma() * self.x0.sin())).sqrt();
+                    println!(
+                        "bouncing needs Γ sin x ≥ π(1−e)/(1+e) = {threshold:.3} > Γ: the particle locks onto the string everywhere (from x0 = {} it needs --freq-hz > {f_min:.2})",
+                        self.x0
+                    );
+                }
+            }
         }
         Ok(ExitCode::SUCCESS)
     }
@@ -173,6 +190,7 @@ fn plot(
     traj: &string::Trajectory,
     profile: &[(f64, f64)],
     fit: &string::Fit,
+    stop: Option<f64>,
 ) -> anyhow::Result<()> {
     ensure_font();
     let root = BitMapBackend::new(path, (900, 360)).into_drawing_area();
@@ -180,13 +198,25 @@ fn plot(
     let (left, right) = root.split_horizontally(450);
     let t_end = traj.samples.last().map_or(1.0, |s| s.0);
     let mut c = ChartBuilder::on(&left)
-        .caption(format!("particle on a string, e = {}", p.e), ("sans-serif", 16))
+        .caption(
+            format!("particle on a string, e = {}, Γ = {:.2}", p.e, p.gamma()),
+            ("sans-serif", 16),
+        )
         .margin(8)
         .x_label_area_size(30)
         .y_label_area_size(40)
         .build_cartesian_2d(0.0..t_end, 0.0..std::f64::consts::PI)?;
     c.configure_mesh().x_desc("time (s)").y_desc("x").label_style(("sans-serif", 11)).draw()?;
     c.draw_series(LineSeries::new(traj.samples.iter().copied(), BLUE.stroke_width(2)))?;
+    // Where bouncing ends (Γ sin x = π(1−e)/(1+e)): the drift stops on these lines.
+    for x in stop.into_iter().flat_map(|x| [x, std::f64::consts::PI - x]) {
+        c.draw_series(DashedLineSeries::new(
+            [(0.0, x), (t_end, x)],
+            6,
+            4,
+            RGBColor(120, 120, 120).stroke_width(1),
+        ))?;
+    }
     let fmax = profile.iter().map(|(_, f)| f.abs()).fold(fit.c.abs(), f64::max).max(1e-9) * 1.1;
     let mut c = ChartBuilder::on(&right)
         .caption(
