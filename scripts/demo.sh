@@ -3,7 +3,9 @@
 #   1. analyse where a triangle rests at a straight node,
 #   2. plan a sensorless sequence of plate modes that orients it from any start,
 #   3. check the plan by Monte Carlo simulation,
-#   4. start the controller in QEMU (`chladni emulator`), upload the plan and run it,
+#   4. from plate dimensions alone (the paper's setup 2, hinged and driven by a rod): solve its
+#      modes, draw its Chladni figures, and plan for a rectangle on them,
+#   5. start the controller in QEMU (`chladni emulator`), upload the plan and run it,
 #      watching the drive step through it, as it would on the real feeder.
 # Outputs (plan file, figures, logs) go to target/demo/.
 set -euo pipefail
@@ -25,6 +27,12 @@ $chladni plan $part --plate $plate --out $out/plan.json --plot $out/plan.png
 
 say chladni simulate $part --plate $plate --plan $out/plan.json --trials 200 --plot $out/traces.png
 $chladni simulate $part --plate $plate --plan $out/plan.json --trials 200 --plot $out/traces.png
+
+say chladni plate modes examples/plate-hinged-rod.toml --count 4 --plot $out/modes --write-modes $out/hinged-rod.toml
+$chladni plate modes examples/plate-hinged-rod.toml --count 4 --plot $out/modes --write-modes $out/hinged-rod.toml
+
+say chladni plan examples/parts/rectangle.json --plate $out/hinged-rod.toml --out $out/rectangle-plan.json
+$chladni plan examples/parts/rectangle.json --plate $out/hinged-rod.toml --out $out/rectangle-plan.json
 
 # The controller: the firmware in QEMU, its link on a TCP port, its flash in a file.
 $chladni emulator --flash-file $out/flash.bin --log $out/firmware.log --time-limit-s 900 \
@@ -50,4 +58,4 @@ say chladni device status --port $port --json
 $chladni device status --port "$port" --json
 
 echo
-echo "figures: $out/analysis.png $out/plan.png $out/traces.png; firmware log: $out/firmware.log"
+echo "figures: $out/analysis.png $out/plan.png $out/traces.png $out/modes/; firmware log: $out/firmware.log"
