@@ -179,3 +179,39 @@ fn simulate_triangle(plan: &std::path::Path) -> std::process::Output {
         plan.to_str().unwrap(),
     ])
 }
+
+// A plan too short for the parts to settle misses; simulate counts the misses and lists
+// their start poses (JSON) and their range (text).
+#[test]
+fn simulate_lists_the_starts_of_missed_trials() {
+    let plan = tmp("short.json");
+    std::fs::write(
+        &plan,
+        r#"{"steps": [{"freq_hz": 60.0, "duration_ms": 100, "amplitude": 0.8, "ramp_ms": 0}],
+            "final_orientation_deg": 110.707, "period_deg": 360.0}"#,
+    )
+    .unwrap();
+    let out = chladni(&[
+        "simulate",
+        &ex("parts/triangle.json"),
+        "--plate",
+        &ex("plates/four-lines.toml"),
+        "--plan",
+        plan.to_str().unwrap(),
+        "--trials",
+        "30",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let missed = s["missed"].as_u64().unwrap();
+    assert!(missed >= 20, "{s}");
+    assert_eq!(s["missed_starts"].as_array().unwrap().len() as u64, missed);
+    let rate = s["success_rate"].as_f64().unwrap();
+    assert!((rate - (1.0 - missed as f64 / 30.0)).abs() < 1e-6, "{s}");
+    let first = &s["missed_starts"][0];
+    assert!((0.0..=300.0).contains(&first[0].as_f64().unwrap()), "{first}");
+    let out = simulate_triangle(&plan);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("misses     ") && text.contains("started in x ∈ ["), "{text}");
+}

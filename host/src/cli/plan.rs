@@ -183,6 +183,9 @@ impl PlanArgs {
     }
 }
 
+/// Missed trials listed by `chladni simulate --json` (all are counted).
+const MAX_LISTED_MISSES: usize = 100;
+
 /// Monte Carlo simulation of a plan: success rate and final pose spread.
 #[derive(Debug, Args)]
 pub struct SimulateArgs {
@@ -259,6 +262,7 @@ impl SimulateArgs {
         } else {
             indicatif::ProgressBar::hidden()
         };
+        let mut starts = Vec::with_capacity(self.trials as usize);
         let mut finals = Vec::with_capacity(self.trials as usize);
         let mut traces = Vec::new();
         let mut examples = Vec::new();
@@ -266,6 +270,7 @@ impl SimulateArgs {
         for i in 0..self.trials {
             let start = random_pose(&mut rng, &body, &plate);
             let (poses, trace, e) = run_plan(&body, &plate, &fields, &steps, start);
+            starts.push(start);
             finals.push(*poses.last().unwrap_or(&start));
             if i < 6 {
                 traces.push(trace);
@@ -279,6 +284,9 @@ impl SimulateArgs {
         bar.finish_and_clear();
         let target = file.final_orientation_deg.zip(file.period_deg);
         let n = finals.len() as f64;
+        // Start poses of the trials that missed the predicted orientation: where a plan's
+        // feed region ends (e.g. near a cantilever's clamp) shows in them.
+        let mut misses: Vec<Pose> = Vec::new();
         let (success, orient) = match target {
             Some((t, p)) => {
                 let errs: Vec<f64> = finals
@@ -288,7 +296,13 @@ impl SimulateArgs {
                         if d > p / 2.0 { d - p } else { d }
                     })
                     .collect();
-                let ok = errs.iter().filter(|e| e.abs() <= self.tol_deg).count() as f64 / n;
+                misses = starts
+                    .iter()
+                    .zip(&errs)
+                    .filter(|(_, e)| e.abs() > self.tol_deg)
+                    .map(|(s, _)| *s)
+                    .collect();
+                let ok = 1.0 - misses.len() as f64 / n;
                 let rms = (errs.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
                 let max = errs.iter().fold(0.0f64, |m, e| m.max(e.abs()));
                 (Some(ok), Some((rms, max)))
@@ -321,6 +335,8 @@ impl SimulateArgs {
                 "orientation_error_deg": orient.map(|(rms, max)| serde_json::json!({"rms": r6(rms), "max": r6(max)})),
                 "position_error_mm": pos.map(|(rms, max)| serde_json::json!({"rms": r6(rms), "max": r6(max)})),
                 "position_spread_mm": r6(spread),
+                "missed": misses.len(),
+                "missed_starts": misses.iter().take(MAX_LISTED_MISSES).map(|q| [r6(q.x), r6(q.y), r6(q.theta.to_degrees())]).collect::<Vec<_>>(),
             });
             println!("{v}");
         } else {
@@ -339,6 +355,19 @@ impl SimulateArgs {
                         self.tol_deg
                     );
                     println!("θ error    rms {rms:.3}°, max {max:.3}°");
+                    if !misses.is_empty() {
+                        let range = |f: fn(&Pose) -> f64| {
+                            let lo = misses.iter().map(f).fold(f64::INFINITY, f64::min);
+                            let hi = misses.iter().map(f).fold(f64::NEG_INFINITY, f64::max);
+                            format!("[{lo:.0}, {hi:.0}]")
+                        };
+                        println!(
+                            "misses     {} started in x ∈ {} mm, y ∈ {} mm",
+                            misses.len(),
+                            range(|q| q.x),
+                            range(|q| q.y)
+                        );
+                    }
                 }
                 _ => println!("success    - (the plan file predicts no final orientation)"),
             }
