@@ -10,6 +10,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         px: (450, 300),
         size_mm: [300.0, 200.0],
         lines: vec![(90.0, 40.0), (20.0, -30.0)],
+        curves: vec![],
         sand_sigma_mm: 3.0,
         density: 0.6,
         stray: 0.03,
