@@ -288,3 +288,79 @@ pub fn node_field(
     grid.values = values.into_iter().map(|v| v / peak).collect();
     Ok(NodeField { grid, signed: colours.is_ok(), regions: count, note: colours.err() })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plate::contour::{distance_to, node_lines};
+
+    const SIZE: [f64; 2] = [300.0, 200.0];
+
+    fn circle(c: [f64; 2], r: f64) -> Polyline {
+        (0..=120)
+            .map(|k| {
+                let a = std::f64::consts::TAU * k as f64 / 120.0;
+                [c[0] + r * a.cos(), c[1] + r * a.sin()]
+            })
+            .collect()
+    }
+
+    /// Worst distance from the grid's zero set to `truth`, and from `truth` to the zero set.
+    fn zero_set_error(field: &NodeField, truth: &[Polyline]) -> (f64, f64) {
+        let zero = node_lines(&field.grid);
+        let worst = |a: &[Polyline], b: &[Polyline]| {
+            a.iter().flatten().map(|&p| distance_to(p, b)).fold(0.0, f64::max)
+        };
+        (worst(&zero, truth), worst(truth, &zero))
+    }
+
+    #[test]
+    fn circle_and_crossing_lines_are_signed_and_their_zero_set_is_the_nodes() {
+        let nodes = vec![circle([150.0, 100.0], 50.0)];
+        let f = node_field(&nodes, SIZE, 61, 41).unwrap();
+        assert!(f.signed && f.regions == 2, "{:?}", f.note);
+        // Inside and outside differ in sign; |φ| is the distance, normalised.
+        let (inside, outside) = (f.grid.at(30, 20), f.grid.at(0, 0));
+        assert!(inside * outside < 0.0);
+        let peak = f.grid.values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!((peak - 1.0).abs() < 1e-12);
+        let far = 150.0f64.hypot(100.0) - 50.0;
+        // (The 120-gon's sides sit up to 0.02 mm inside the circle.)
+        assert!((outside.abs() - 1.0).abs() < 1e-9 && (inside.abs() - 50.0 / far).abs() < 1e-3);
+        let (e1, e2) = zero_set_error(&f, &nodes);
+        assert!(e1 < 0.3 && e2 < 0.3, "{e1} {e2}");
+
+        let cross = vec![vec![[0.0, 80.0], [300.0, 130.0]], vec![[120.0, 0.0], [180.0, 200.0]]];
+        let f = node_field(&cross, SIZE, 61, 41).unwrap();
+        assert!(f.signed && f.regions == 4, "{:?}", f.note);
+        let (e1, e2) = zero_set_error(&f, &cross);
+        println!("crossing lines: zero set → nodes {e1:.2} mm, nodes → zero set {e2:.2} mm");
+        assert!(e1 < 2.5 && e2 < 5.0, "{e1} {e2}");
+    }
+
+    #[test]
+    fn a_node_ending_inside_the_plate_gives_the_unsigned_distance() {
+        let nodes = vec![vec![[50.0, 100.0], [200.0, 100.0]]];
+        let f = node_field(&nodes, SIZE, 31, 21).unwrap();
+        assert!(!f.signed && f.regions == 1);
+        assert!(f.note.as_deref().is_some_and(|n| n.contains("both sides")), "{:?}", f.note);
+        assert!(f.grid.values.iter().all(|&v| v >= 0.0));
+        // Snapping ends within 60 mm of the edge joins it to both sides: now it separates.
+        let snapped = snap_ends(&nodes, SIZE, 60.0);
+        assert_eq!(snapped[0].first(), Some(&[0.0, 100.0]));
+        assert_eq!(snapped[0].last(), Some(&[200.0, 100.0]));
+        let snapped = snap_ends(&nodes, SIZE, 100.0);
+        assert_eq!(snapped[0].last(), Some(&[300.0, 100.0]));
+        assert!(node_field(&snapped, SIZE, 31, 21).unwrap().signed);
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        let nodes = vec![circle([150.0, 100.0], 50.0)];
+        assert_eq!(node_field(&[], SIZE, 31, 21).unwrap_err(), FieldError::NoNodes);
+        assert_eq!(node_field(&[vec![]], SIZE, 31, 21).unwrap_err(), FieldError::NoNodes);
+        assert_eq!(node_field(&nodes, SIZE, 1, 21).unwrap_err(), FieldError::Size(1, 21));
+        let bad = [f64::NAN, 200.0];
+        assert!(matches!(node_field(&nodes, bad, 31, 21), Err(FieldError::Plate(_))));
+    }
+}

@@ -537,14 +537,11 @@ impl Found {
     }
 }
 
-/// The photo in grey with `nodes` (plate coordinates, mm) drawn over it in red, 2 px wide:
-/// for checking a result by eye.
-pub fn overlay(img: &GrayImage, nodes: &[Polyline], size_mm: [f64; 2]) -> image::RgbImage {
+/// The photo at half brightness with `nodes` (plate coordinates, mm) drawn over it in white,
+/// 2 px wide: for checking a result by eye (grey, so the PNG stays small).
+pub fn overlay(img: &GrayImage, nodes: &[Polyline], size_mm: [f64; 2]) -> GrayImage {
     let (w, h) = img.dimensions();
-    let mut out = image::RgbImage::from_fn(w, h, |x, y| {
-        let v = img.get_pixel(x, y)[0] / 2 + 40;
-        image::Rgb([v, v, v])
-    });
+    let mut out = GrayImage::from_fn(w, h, |x, y| image::Luma([img.get_pixel(x, y)[0] / 2]));
     let (sx, sy) = (w as f64 / size_mm[0], h as f64 / size_mm[1]);
     for seg in nodes.iter().flat_map(|l| l.windows(2)) {
         let (a, b) = (
@@ -558,7 +555,7 @@ pub fn overlay(img: &GrayImage, nodes: &[Polyline], size_mm: [f64; 2]) -> image:
             for (dx, dy) in [(0.0, 0.0), (0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)] {
                 let (px, py) = ((x + dx).floor(), (y + dy).floor());
                 if px >= 0.0 && py >= 0.0 && px < w as f64 && py < h as f64 {
-                    out.put_pixel(px as u32, py as u32, image::Rgb([255, 40, 40]));
+                    out.put_pixel(px as u32, py as u32, image::Luma([255]));
                 }
             }
         }
