@@ -5,6 +5,8 @@ use super::synth::{Scene, arc, hyperbola, render};
 use super::*;
 use crate::plate::contour::{distance_to, node_lines};
 use crate::plate::file::PlateFile;
+use crate::plate::model::PlateModel;
+use crate::plate::modes_file;
 use crate::plate::node_field::node_field;
 use crate::plate::solver;
 
@@ -162,6 +164,12 @@ fn recovers_the_nodes_of_a_solver_mode() {
     let found = recover("free mode 5", &truth, &scene(truth.clone(), vec![], 14));
     assert_eq!((found.lines.len(), found.curves.len()), (1, 2), "{found:?}");
     grid_zero_set("free mode 5", &truth, &found, true);
+    // The grid entry, appended to the plate file, is a mode the planner's model accepts.
+    let field = node_field(&found.nodes(DEFAULT_SNAP), SIZE, 61, 41).unwrap();
+    let entry = modes_file::sampled_mode("photo nodes", Some(250.0), &field.grid);
+    let text = modes_file::render(&file.plate, vec![entry]).unwrap();
+    let model = PlateModel::from_file(&PlateFile::parse(&text, "out").unwrap()).unwrap();
+    assert_eq!(model.modes[0].node.kind(), "grid");
 }
 
 #[test]
