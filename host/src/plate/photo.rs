@@ -1,11 +1,13 @@
-//! Chladni photo → straight node lines.
+//! Chladni photo → node lines: straight lines, then curved nodes as polylines.
 //!
 //! Pipeline: box blur (merges sand-grain texture) minus a wide box blur (uneven lighting) →
 //! Otsu threshold → sand = the minority class
 //! (so light sand on a dark plate and dark sand on a light plate both work) → morphological
 //! opening (drops stray grains) and closing (fills gaps) → Zhang–Suen skeleton → Hough
 //! transform on the skeleton in plate coordinates → each peak refined by total least squares
-//! over the skeleton pixels within a band, its pixels removed, repeat.
+//! over the skeleton pixels within a band, its pixels removed, repeat (a bowed candidate is a
+//! piece of a curve and is skipped) → the skeleton pixels left over traced into chains,
+//! simplified by Douglas–Peucker ([`curves`]).
 //!
 //! The image must show exactly the plate, cropped to its edges and not rotated: image
 //! columns map to x ∈ [0, W], rows to y ∈ [H, 0] (the top row is y = H).
