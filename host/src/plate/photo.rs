@@ -7,7 +7,7 @@
 //! transform on the skeleton in plate coordinates → each peak refined by total least squares
 //! over the skeleton pixels within a band, its pixels removed, repeat (a bowed candidate is a
 //! piece of a curve and is skipped) → the skeleton pixels left over traced into chains,
-//! simplified by Douglas–Peucker ([`curves`]).
+//! simplified by Douglas–Peucker (submodule `curves`).
 //!
 //! The image must show exactly the plate, cropped to its edges and not rotated: image
 //! columns map to x ∈ [0, W], rows to y ∈ [H, 0] (the top row is y = H).
