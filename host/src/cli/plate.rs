@@ -11,13 +11,13 @@ use serde_json::json;
 use super::InputError;
 use chladni::plate::contour::{node_lines, total_length};
 use chladni::plate::file::{Boundary, Plate, PlateFile};
-use chladni::plate::{modes_file, photo, plot, solver};
+use chladni::plate::{modes_file, node_field, photo, plot, solver};
 
 #[derive(Debug, Subcommand)]
 pub enum PlateCommand {
     /// Natural frequencies, node lines (Chladni figures) and `[[mode]]` entries of a plate.
     Modes(ModesArgs),
-    /// Straight node lines from a photo of sand gathered on the nodes of a vibrating plate.
+    /// Node lines and curves from a photo of sand gathered on the nodes of a vibrating plate.
     FromPhoto(FromPhotoArgs),
 }
 
@@ -224,16 +224,57 @@ pub struct FromPhotoArgs {
     /// Drive frequency the photo was taken at (written as freq_hz).
     #[arg(long)]
     freq_hz: Option<f64>,
-    /// Print the recovered lines as JSON.
+    /// Print the recovered lines and curves as JSON.
     #[arg(long)]
     json: bool,
-    /// Write `[[mode]]` entries (one per straight node line) to this TOML file.
+    /// Write `[[mode]]` entries to this TOML file: one `line` entry per straight node, or,
+    /// when curved nodes were found (or with --as-grid), one `grid` entry for all nodes.
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
+    /// Describe the nodes by one grid entry (signed distance to them) even if all are
+    /// straight.
+    #[arg(long)]
+    as_grid: bool,
+    /// Grid points along x for the grid entry (y follows the aspect ratio).
+    #[arg(long, default_value_t = 121)]
+    grid: usize,
 }
+
+/// The grid entry's φ, or why there is none.
+type PhotoGrid = Result<node_field::NodeField, node_field::FieldError>;
 
 impl FromPhotoArgs {
     fn run(&self) -> anyhow::Result<ExitCode> {
+        let size = self.validate()?;
+        let img = image::open(&self.image)
+            .map_err(|e| InputError(format!("cannot read image {}: {e}", self.image.display())))?;
+        let found = photo::find_lines(&img.to_luma8(), size, &photo::Params::default());
+        let grid = (self.as_grid || !found.curves.is_empty()).then(|| {
+            let (nx, ny) = grid_dims(self.grid, size);
+            node_field::node_field(&found.nodes(photo::DEFAULT_SNAP), size, nx, ny)
+        });
+        if let Some(out) = &self.out {
+            let mut doc = toml::Table::new();
+            doc.insert(
+                "mode".into(),
+                toml::Value::Array(
+                    self.entries(&found, grid.as_ref())
+                        .into_iter()
+                        .map(toml::Value::Table)
+                        .collect(),
+                ),
+            );
+            write(out, &toml::to_string(&doc)?)?;
+        }
+        if self.json {
+            println!("{}", photo_json(&found, grid.as_ref()));
+        } else {
+            print_photo(&found, grid.as_ref());
+        }
+        Ok(ExitCode::SUCCESS)
+    }
+
+    fn validate(&self) -> anyhow::Result<[f64; 2]> {
         let size = [self.size_mm[0], self.size_mm[1]];
         if !size.iter().all(|v| v.is_finite() && *v > 0.0) {
             return Err(InputError(format!(
@@ -246,11 +287,20 @@ impl FromPhotoArgs {
         {
             return Err(InputError(format!("--freq-hz must be positive, got {f}")).into());
         }
-        let img = image::open(&self.image)
-            .map_err(|e| InputError(format!("cannot read image {}: {e}", self.image.display())))?;
-        let found = photo::find_lines(&img.to_luma8(), size, &photo::Params::default());
-        if let Some(out) = &self.out {
-            let entries = found
+        if !(3..=401).contains(&self.grid) {
+            return Err(InputError(format!("--grid must be in 3..=401, got {}", self.grid)).into());
+        }
+        Ok(size)
+    }
+
+    /// The `[[mode]]` entries: one grid entry if there is a grid, else one line entry each.
+    fn entries(&self, found: &photo::Found, grid: Option<&PhotoGrid>) -> Vec<toml::Table> {
+        match grid {
+            Some(Ok(field)) => {
+                vec![modes_file::sampled_mode("photo nodes", self.freq_hz, &field.grid)]
+            }
+            Some(Err(_)) => Vec::new(),
+            None => found
                 .lines
                 .iter()
                 .enumerate()
@@ -262,51 +312,87 @@ impl FromPhotoArgs {
                         l.offset_mm,
                     )
                 })
-                .collect::<Vec<_>>();
-            let mut doc = toml::Table::new();
-            doc.insert(
-                "mode".into(),
-                toml::Value::Array(entries.into_iter().map(toml::Value::Table).collect()),
-            );
-            write(out, &toml::to_string(&doc)?)?;
+                .collect(),
         }
-        if self.json {
-            let lines: Vec<_> = found
-                .lines
-                .iter()
-                .map(|l| {
-                    json!({"angle_deg": l.angle_deg, "offset_mm": l.offset_mm, "rms_mm": l.rms_mm,
-                           "length_mm": l.length_mm, "pixels": l.pixels})
-                })
-                .collect();
-            println!(
-                "{}",
-                json!({"threshold": found.threshold, "sand_is_dark": found.sand_is_dark,
-                       "skeleton_pixels": found.skeleton_pixels, "unexplained_pixels": found.unexplained_pixels,
-                       "lines": lines})
-            );
-        } else {
-            println!(
-                "threshold {} ({} sand), {} skeleton pixels, {} not on a straight line",
-                found.threshold,
-                if found.sand_is_dark { "dark" } else { "light" },
-                found.skeleton_pixels,
-                found.unexplained_pixels
-            );
-            for (k, l) in found.lines.iter().enumerate() {
-                println!(
-                    "line {}: angle {:.2}°, offset {:+.2} mm, length {:.0} mm, rms {:.2} mm",
-                    k + 1,
-                    l.angle_deg,
-                    l.offset_mm,
-                    l.length_mm,
-                    l.rms_mm
-                );
-            }
-            if found.lines.is_empty() {
-                println!("no straight node line found");
-            }
-        }
-        Ok(ExitCode::SUCCESS)
+    }
+}
+
+fn photo_json(found: &photo::Found, grid: Option<&PhotoGrid>) -> serde_json::Value {
+    let lines: Vec<_> = found
+        .lines
+        .iter()
+        .map(|l| {
+            json!({"angle_deg": l.angle_deg, "offset_mm": l.offset_mm, "rms_mm": l.rms_mm,
+                   "length_mm": l.length_mm, "pixels": l.pixels, "ends_mm": l.ends_mm})
+        })
+        .collect();
+    let curves: Vec<_> = found
+        .curves
+        .iter()
+        .map(|c| {
+            json!({"points": c.points, "length_mm": c.length_mm, "rms_mm": c.rms_mm,
+                   "pixels": c.pixels})
+        })
+        .collect();
+    let grid = match grid {
+        None => serde_json::Value::Null,
+        Some(Ok(f)) => json!({"nx": f.grid.nx, "ny": f.grid.ny, "signed": f.signed,
+                              "regions": f.regions, "note": f.note}),
+        Some(Err(e)) => json!({"error": e.to_string()}),
+    };
+    json!({"threshold": found.threshold, "sand_is_dark": found.sand_is_dark,
+           "skeleton_pixels": found.skeleton_pixels, "unexplained_pixels": found.unexplained_pixels,
+           "lines": lines, "curves": curves, "grid": grid})
+}
+
+fn print_photo(found: &photo::Found, grid: Option<&PhotoGrid>) {
+    println!(
+        "threshold {} ({} sand), {} skeleton pixels, {} on no line or curve",
+        found.threshold,
+        if found.sand_is_dark { "dark" } else { "light" },
+        found.skeleton_pixels,
+        found.unexplained_pixels
+    );
+    for (k, l) in found.lines.iter().enumerate() {
+        println!(
+            "line {}: angle {:.2}°, offset {:+.2} mm, length {:.0} mm, rms {:.2} mm",
+            k + 1,
+            l.angle_deg,
+            l.offset_mm,
+            l.length_mm,
+            l.rms_mm
+        );
+    }
+    for (k, c) in found.curves.iter().enumerate() {
+        let (a, b) = (c.points[0], c.points[c.points.len() - 1]);
+        println!(
+            "curve {}: {} points from ({:.1}, {:.1}) to ({:.1}, {:.1}) mm, length {:.0} mm, \
+             rms {:.2} mm",
+            k + 1,
+            c.points.len(),
+            a[0],
+            a[1],
+            b[0],
+            b[1],
+            c.length_mm,
+            c.rms_mm
+        );
+    }
+    if found.lines.is_empty() && found.curves.is_empty() {
+        println!("no node line found");
+    }
+    match grid {
+        None => {}
+        Some(Ok(f)) if f.signed => println!(
+            "grid node {}×{}: signed distance, {} regions",
+            f.grid.nx, f.grid.ny, f.regions
+        ),
+        Some(Ok(f)) => println!(
+            "grid node {}×{}: UNSIGNED distance ({})",
+            f.grid.nx,
+            f.grid.ny,
+            f.note.as_deref().unwrap_or("regions not 2-colourable")
+        ),
+        Some(Err(e)) => println!("no grid node: {e}"),
     }
 }

@@ -117,6 +117,32 @@ pub fn total_length(lines: &[Polyline]) -> f64 {
         .sum()
 }
 
+/// Nearest point to `p` on the segment `a`–`b` and its distance (a point if `a == b`).
+pub fn segment_foot(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> ([f64; 2], f64) {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 {
+        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let f = [a[0] + t * dx, a[1] + t * dy];
+    (f, (p[0] - f[0]).hypot(p[1] - f[1]))
+}
+
+/// Distance from `p` to the nearest of `lines` (∞ if there are none); a one-point polyline
+/// counts as that point.
+pub fn distance_to(p: [f64; 2], lines: &[Polyline]) -> f64 {
+    lines
+        .iter()
+        .flat_map(|l| {
+            let segs = l.windows(2).map(move |w| segment_foot(p, w[0], w[1]).1);
+            let single = (l.len() == 1).then(|| (p[0] - l[0][0]).hypot(p[1] - l[0][1]));
+            segs.chain(single)
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -151,6 +177,11 @@ mod tests {
         assert_eq!(l.first(), l.last());
         let len = total_length(&lines);
         assert!((len - 2.0 * std::f64::consts::PI * 15.0).abs() < 0.5, "length {len}");
+        // Every contour point lies on the circle; the centre is 15 mm from it.
+        assert!(l.iter().all(|p| ((p[0] - 50.0).hypot(p[1] - 25.0) - 15.0).abs() < 0.1));
+        assert!((distance_to([50.0, 25.0], &lines) - 15.0).abs() < 0.1);
+        assert_eq!(distance_to([0.0, 0.0], &[]), f64::INFINITY);
+        assert_eq!(segment_foot([3.0, 4.0], [0.0, 0.0], [0.0, 0.0]), ([0.0, 0.0], 5.0));
     }
 
     #[test]

@@ -5,6 +5,7 @@ pub mod contour;
 pub mod file;
 pub mod model;
 pub mod modes_file;
+pub mod node_field;
 pub mod photo;
 pub mod plot;
 pub mod solver;

@@ -1,5 +1,6 @@
 //! `[[mode]]` entries for plate files: solver modes as sampled mode shapes (`node.kind =
-//! "grid"`), photo-derived straight nodes (`node.kind = "line"`). Schema in docs/plate.md.
+//! "grid"`), photo-derived straight nodes (`node.kind = "line"`) and photo-derived curved
+//! nodes as a sampled signed distance (`node.kind = "grid"`). Schema in docs/plate.md.
 
 use toml::{Table, Value};
 
@@ -14,6 +15,28 @@ fn round(v: f64, digits: i32) -> f64 {
 
 /// A `[[mode]]` entry holding a sampled mode shape.
 pub fn grid_mode(name: &str, freq_hz: f64, lambda: f64, grid: &Grid) -> Table {
+    let mut m = Table::new();
+    m.insert("name".into(), name.into());
+    m.insert("freq_hz".into(), Value::Float(round(freq_hz, 4)));
+    m.insert("lambda".into(), Value::Float(round(lambda, 5)));
+    m.insert("node".into(), Value::Table(grid_node(grid)));
+    m
+}
+
+/// A `[[mode]]` entry holding a grid node that is not a solver mode (no λ; the frequency only
+/// if known), e.g. the signed distance to the nodes seen in a photo.
+pub fn sampled_mode(name: &str, freq_hz: Option<f64>, grid: &Grid) -> Table {
+    let mut m = Table::new();
+    m.insert("name".into(), name.into());
+    if let Some(f) = freq_hz {
+        m.insert("freq_hz".into(), Value::Float(f));
+    }
+    m.insert("node".into(), Value::Table(grid_node(grid)));
+    m
+}
+
+/// `node = { kind = "grid", nx, ny, values }`.
+fn grid_node(grid: &Grid) -> Table {
     let mut node = Table::new();
     node.insert("kind".into(), "grid".into());
     node.insert("nx".into(), Value::Integer(grid.nx as i64));
@@ -22,12 +45,7 @@ pub fn grid_mode(name: &str, freq_hz: f64, lambda: f64, grid: &Grid) -> Table {
         "values".into(),
         Value::Array(grid.values.iter().map(|&v| Value::Float(round(v, 5))).collect()),
     );
-    let mut m = Table::new();
-    m.insert("name".into(), name.into());
-    m.insert("freq_hz".into(), Value::Float(round(freq_hz, 4)));
-    m.insert("lambda".into(), Value::Float(round(lambda, 5)));
-    m.insert("node".into(), Value::Table(node));
-    m
+    node
 }
 
 /// A `[[mode]]` entry holding a straight node line.
@@ -88,6 +106,9 @@ mod tests {
         let g = grid_of(&back.mode[0], plate.size_mm).unwrap();
         assert_eq!((g.nx, g.ny), (31, 21));
         assert!(g.values.iter().zip(&grid.values).all(|(a, b)| (a - b).abs() <= 5e-6));
+        let photo = sampled_mode("photo nodes", None, &grid);
+        assert!(photo.get("freq_hz").is_none() && photo.get("lambda").is_none());
+        assert_eq!(grid_of(&photo, plate.size_mm).unwrap().values.len(), 31 * 21);
         let line = line_mode("l", Some(60.0), 90.0, -12.5);
         assert_eq!(line["node"]["kind"].as_str(), Some("line"));
         assert!(grid_of(&line, plate.size_mm).is_none());

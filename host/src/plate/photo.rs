@@ -1,11 +1,13 @@
-//! Chladni photo → straight node lines.
+//! Chladni photo → node lines: straight lines, then curved nodes as polylines.
 //!
 //! Pipeline: box blur (merges sand-grain texture) minus a wide box blur (uneven lighting) →
 //! Otsu threshold → sand = the minority class
 //! (so light sand on a dark plate and dark sand on a light plate both work) → morphological
 //! opening (drops stray grains) and closing (fills gaps) → Zhang–Suen skeleton → Hough
 //! transform on the skeleton in plate coordinates → each peak refined by total least squares
-//! over the skeleton pixels within a band, its pixels removed, repeat.
+//! over the skeleton pixels within a band, its pixels removed, repeat (a bowed candidate is a
+//! piece of a curve and is skipped) → the skeleton pixels left over traced into chains,
+//! simplified by Douglas–Peucker (submodule `curves`).
 //!
 //! The image must show exactly the plate, cropped to its edges and not rotated: image
 //! columns map to x ∈ [0, W], rows to y ∈ [H, 0] (the top row is y = H).
@@ -14,6 +16,13 @@
 //! n̂ = (−sin α, cos α) the direction turned +90°.
 
 use image::GrayImage;
+
+use super::contour::Polyline;
+
+#[cfg(test)]
+mod curve_tests;
+mod curves;
+pub use curves::{Curve, douglas_peucker, turning};
 
 /// Tuning of the pipeline.
 #[derive(Debug, Clone)]
@@ -32,6 +41,17 @@ pub struct Params {
     pub band_px: f64,
     /// Most lines looked for.
     pub max_lines: usize,
+    /// Largest bow (pixels) of a line candidate's pixels about the fitted line; a bigger bow
+    /// means a curved node, which is left for the curve tracer.
+    pub max_sagitta_px: f64,
+    /// Douglas–Peucker tolerance (pixels) when simplifying a curved node's pixel chain.
+    pub simplify_px: f64,
+    /// Side branches of the skeleton shorter than this (pixels) are sand lumps, not nodes.
+    pub spur_px: usize,
+    /// Tightest mean bend radius of a curved node, as a fraction of the plate's smaller side:
+    /// chains that turn more per length (measured on the chain simplified at twice
+    /// `simplify_px`) zig-zag through scattered grains.
+    pub min_radius: f64,
 }
 
 impl Default for Params {
@@ -44,6 +64,10 @@ impl Default for Params {
             min_length: 0.25,
             band_px: 3.0,
             max_lines: 6,
+            max_sagitta_px: 1.0,
+            simplify_px: 1.5,
+            spur_px: 10,
+            min_radius: 0.1,
         }
     }
 }
@@ -61,6 +85,8 @@ pub struct Line {
     pub rms_mm: f64,
     /// Number of skeleton pixels on the line.
     pub pixels: usize,
+    /// Ends of the stretch its pixels cover (plate coordinates, mm).
+    pub ends_mm: [[f64; 2]; 2],
 }
 
 /// Everything the pipeline found.
@@ -72,10 +98,16 @@ pub struct Found {
     pub sand_is_dark: bool,
     /// Skeleton pixel count.
     pub skeleton_pixels: usize,
-    /// Skeleton pixels not on any reported line (curved nodes, debris).
+    /// Skeleton pixels on no reported line or curve (debris, short bits, side branches).
     pub unexplained_pixels: usize,
     /// Lines, strongest first.
     pub lines: Vec<Line>,
+    /// Curved nodes (skeleton chains off the lines), longest first.
+    pub curves: Vec<Curve>,
+    /// Plate size (mm).
+    pub size_mm: [f64; 2],
+    /// Mean pixel size (mm).
+    pub pixel_mm: f64,
 }
 
 /// Binary image: `true` = set.
@@ -284,27 +316,69 @@ fn tls(pts: &[[f64; 2]]) -> ([f64; 2], [f64; 2], f64) {
     ([cx, cy], d, rms)
 }
 
-/// Finds straight node lines in a photo of the plate (`size_mm` = [W, H]).
+/// Pixel ↔ plate geometry of an image covering the plate exactly.
+#[derive(Debug, Clone, Copy)]
+struct Frame {
+    w: usize,
+    h: usize,
+    size_mm: [f64; 2],
+    /// Mean pixel size (mm).
+    pix: f64,
+}
+
+impl Frame {
+    fn new(w: usize, h: usize, size_mm: [f64; 2]) -> Frame {
+        let pix = 0.5 * (size_mm[0] / w as f64 + size_mm[1] / h as f64);
+        Frame { w, h, size_mm, pix }
+    }
+    /// Plate coordinates (mm, origin at the bottom-left corner) of pixel `i`'s centre.
+    fn plate(&self, i: usize) -> [f64; 2] {
+        let (x, y) = ((i % self.w) as f64 + 0.5, (i / self.w) as f64 + 0.5);
+        [x * self.size_mm[0] / self.w as f64, self.size_mm[1] - y * self.size_mm[1] / self.h as f64]
+    }
+    /// Shortest node accepted (mm).
+    fn min_length_mm(&self, p: &Params) -> f64 {
+        p.min_length * self.size_mm[0].min(self.size_mm[1])
+    }
+}
+
+/// Finds straight node lines, then curved nodes (as polylines) among the skeleton pixels left
+/// over, in a photo of the plate (`size_mm` = [W, H]).
 pub fn find_lines(img: &GrayImage, size_mm: [f64; 2], p: &Params) -> Found {
     let (mask, threshold, sand_is_dark) = sand_mask(img, p);
     let sk = skeleton(&clean(&mask, p.open_px, p.close_px));
-    let (w, h) = (sk.w, sk.h);
-    let (sx, sy) = (size_mm[0] / w as f64, size_mm[1] / h as f64);
-    let pix = 0.5 * (sx + sy);
-    let centre = [size_mm[0] / 2.0, size_mm[1] / 2.0];
-    // Skeleton points in plate coordinates relative to the centre.
-    let mut pts: Vec<[f64; 2]> = Vec::new();
-    for y in 0..h {
-        for x in 0..w {
-            if sk.px[y * w + x] {
-                pts.push([
-                    (x as f64 + 0.5) * sx - centre[0],
-                    size_mm[1] - (y as f64 + 0.5) * sy - centre[1],
-                ]);
-            }
-        }
+    let frame = Frame::new(sk.w, sk.h, size_mm);
+    let (lines, rest) = straight_lines(&sk, &frame, p);
+    let curves = curves::trace(&rest, &frame, p);
+    let on_curves: usize = curves.iter().map(|c| c.pixels).sum();
+    Found {
+        threshold,
+        sand_is_dark,
+        skeleton_pixels: sk.count(),
+        unexplained_pixels: rest.count().saturating_sub(on_curves),
+        lines,
+        curves,
+        size_mm,
+        pixel_mm: frame.pix,
     }
-    let skeleton_pixels = pts.len();
+}
+
+/// Hough + total least squares on the skeleton: the straight lines, and the skeleton with
+/// their pixels removed.
+fn straight_lines(sk: &Mask, frame: &Frame, p: &Params) -> (Vec<Line>, Mask) {
+    let size_mm = frame.size_mm;
+    let pix = frame.pix;
+    let centre = [size_mm[0] / 2.0, size_mm[1] / 2.0];
+    // Skeleton points in plate coordinates relative to the centre, with their pixel index.
+    let mut ids: Vec<usize> = (0..sk.px.len()).filter(|&i| sk.px[i]).collect();
+    let mut pts: Vec<[f64; 2]> = ids
+        .iter()
+        .map(|&i| {
+            let q = frame.plate(i);
+            [q[0] - centre[0], q[1] - centre[1]]
+        })
+        .collect();
+    let mut rest = sk.clone();
     let n_theta = 360usize;
     let rho_max = 0.5 * size_mm[0].hypot(size_mm[1]);
     let n_rho = (2.0 * rho_max / pix).ceil() as usize + 1;
@@ -314,10 +388,14 @@ pub fn find_lines(img: &GrayImage, size_mm: [f64; 2], p: &Params) -> Found {
             (a.sin(), a.cos())
         })
         .collect();
-    let min_pixels = (p.min_length * size_mm[0].min(size_mm[1]) / pix) as usize;
+    let min_pixels = (frame.min_length_mm(p) / pix) as usize;
     let band = p.band_px * pix;
     let mut lines = Vec::new();
-    while lines.len() < p.max_lines && pts.len() >= min_pixels.max(2) {
+    // Curved candidates are dropped from the vote without ending the search; the cap keeps
+    // the loop finite however many there are.
+    let mut tries = 0;
+    while lines.len() < p.max_lines && tries < 4 * p.max_lines && pts.len() >= min_pixels.max(2) {
+        tries += 1;
         // Hough: line at direction α has normal n̂ = (−sin α, cos α), offset ρ = n̂·p.
         let mut acc = vec![0u32; n_theta * n_rho];
         for q in &pts {
@@ -352,43 +430,147 @@ pub fn find_lines(img: &GrayImage, size_mm: [f64; 2], p: &Params) -> Found {
         if inliers.len() < min_pixels {
             break;
         }
-        let proj: Vec<f64> =
-            inliers.iter().map(|&i| pts[i][0] * dir[0] + pts[i][1] * dir[1]).collect();
-        let length = proj.iter().copied().fold(f64::MIN, f64::max)
-            - proj.iter().copied().fold(f64::MAX, f64::min);
-        let mut alpha = dir[1].atan2(dir[0]).to_degrees();
-        if alpha < 0.0 {
-            alpha += 180.0;
+        let sel: Vec<[f64; 2]> = inliers.iter().map(|&i| pts[i]).collect();
+        let straight = sagitta(&sel, origin, dir) <= p.max_sagitta_px * pix;
+        if straight {
+            lines.push(line_of(&sel, origin, dir, rms, centre));
         }
-        if alpha >= 180.0 {
-            alpha -= 180.0;
-        }
-        let ar = alpha.to_radians();
-        let offset = -ar.sin() * origin[0] + ar.cos() * origin[1];
-        lines.push(Line {
-            angle_deg: alpha,
-            offset_mm: offset,
-            length_mm: length,
-            rms_mm: rms,
-            pixels: inliers.len(),
-        });
         let mut keep = vec![true; pts.len()];
-        for i in inliers {
+        for &i in &inliers {
             keep[i] = false;
+            if straight {
+                rest.px[ids[i]] = false;
+            }
         }
         let mut k = 0;
         pts.retain(|_| {
             k += 1;
             keep[k - 1]
         });
+        let mut k = 0;
+        ids.retain(|_| {
+            k += 1;
+            keep[k - 1]
+        });
     }
-    Found { threshold, sand_is_dark, skeleton_pixels, unexplained_pixels: pts.len(), lines }
+    (lines, rest)
+}
+
+/// Bow of points about a fitted line: the least-squares parabola e = a + b·s + c·s² of their
+/// offsets e against their positions s along the line, evaluated as |c|·(L/2)² over their
+/// extent L. A tangent band of a curved node has a bow of a pixel or more, a straight node
+/// only its pixel noise.
+fn sagitta(pts: &[[f64; 2]], origin: [f64; 2], dir: [f64; 2]) -> f64 {
+    let se: Vec<(f64, f64)> = pts
+        .iter()
+        .map(|q| {
+            let (dx, dy) = (q[0] - origin[0], q[1] - origin[1]);
+            (dx * dir[0] + dy * dir[1], -dx * dir[1] + dy * dir[0])
+        })
+        .collect();
+    let lo = se.iter().map(|v| v.0).fold(f64::MAX, f64::min);
+    let hi = se.iter().map(|v| v.0).fold(f64::MIN, f64::max);
+    let half = 0.5 * (hi - lo);
+    if half <= 0.0 {
+        return 0.0;
+    }
+    // Fit in u = (s − mid)/half ∈ [−1, 1] for conditioning; then the bow is |c_u|.
+    let mid = 0.5 * (hi + lo);
+    let mut m = nalgebra::Matrix3::<f64>::zeros();
+    let mut r = nalgebra::Vector3::<f64>::zeros();
+    for &(s, e) in &se {
+        let u = (s - mid) / half;
+        let b = nalgebra::Vector3::new(1.0, u, u * u);
+        m += b * b.transpose();
+        r += b * e;
+    }
+    m.lu().solve(&r).map_or(0.0, |c| c[2].abs())
+}
+
+/// The reported line of a fit (centre-relative `origin`, unit `dir`) and its pixels.
+fn line_of(sel: &[[f64; 2]], origin: [f64; 2], dir: [f64; 2], rms: f64, centre: [f64; 2]) -> Line {
+    let proj: Vec<f64> = sel.iter().map(|q| q[0] * dir[0] + q[1] * dir[1]).collect();
+    let lo = proj.iter().copied().fold(f64::MAX, f64::min);
+    let hi = proj.iter().copied().fold(f64::MIN, f64::max);
+    let o = origin[0] * dir[0] + origin[1] * dir[1];
+    let end = |t: f64| {
+        [origin[0] + (t - o) * dir[0] + centre[0], origin[1] + (t - o) * dir[1] + centre[1]]
+    };
+    let mut alpha = dir[1].atan2(dir[0]).to_degrees();
+    if alpha < 0.0 {
+        alpha += 180.0;
+    }
+    if alpha >= 180.0 {
+        alpha -= 180.0;
+    }
+    let ar = alpha.to_radians();
+    let offset = -ar.sin() * origin[0] + ar.cos() * origin[1];
+    Line {
+        angle_deg: alpha,
+        offset_mm: offset,
+        length_mm: hi - lo,
+        rms_mm: rms,
+        pixels: sel.len(),
+        ends_mm: [end(lo), end(hi)],
+    }
+}
+
+/// Default gap closed by [`Found::nodes`], as a fraction of the plate's smaller side.
+pub const DEFAULT_SNAP: f64 = 0.1;
+
+impl Found {
+    /// Node geometry as polylines (plate coordinates, mm): each line as the segment its pixels
+    /// cover, each curve as found; an open end within `snap` (fraction of the plate's smaller
+    /// side) of the plate edge or of another node is joined to its nearest point there. Line
+    /// bands, the image border and thin patches of sand leave such gaps, and a real node never
+    /// ends inside the plate.
+    pub fn nodes(&self, snap: f64) -> Vec<Polyline> {
+        let raw: Vec<Polyline> = self
+            .lines
+            .iter()
+            .map(|l| l.ends_mm.to_vec())
+            .chain(self.curves.iter().map(|c| c.points.clone()))
+            .collect();
+        super::node_field::snap_ends(
+            &raw,
+            self.size_mm,
+            snap * self.size_mm[0].min(self.size_mm[1]),
+        )
+    }
+}
+
+/// The photo at half brightness with `nodes` (plate coordinates, mm) drawn over it in white,
+/// 2 px wide: for checking a result by eye (grey, so the PNG stays small).
+pub fn overlay(img: &GrayImage, nodes: &[Polyline], size_mm: [f64; 2]) -> GrayImage {
+    let (w, h) = img.dimensions();
+    let mut out = GrayImage::from_fn(w, h, |x, y| image::Luma([img.get_pixel(x, y)[0] / 2]));
+    let (sx, sy) = (w as f64 / size_mm[0], h as f64 / size_mm[1]);
+    for seg in nodes.iter().flat_map(|l| l.windows(2)) {
+        let (a, b) = (
+            [seg[0][0] * sx, (size_mm[1] - seg[0][1]) * sy],
+            [seg[1][0] * sx, (size_mm[1] - seg[1][1]) * sy],
+        );
+        let n = ((b[0] - a[0]).hypot(b[1] - a[1]) * 2.0).ceil() as usize + 1;
+        for k in 0..=n {
+            let t = k as f64 / n as f64;
+            let (x, y) = (a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]));
+            for (dx, dy) in [(0.0, 0.0), (0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)] {
+                let (px, py) = ((x + dx).floor(), (y + dy).floor());
+                if px >= 0.0 && py >= 0.0 && px < w as f64 && py < h as f64 {
+                    out.put_pixel(px as u32, py as u32, image::Luma([255]));
+                }
+            }
+        }
+    }
+    out
 }
 
 /// Synthetic Chladni photos for tests and docs: sand grains scattered around known node lines
-/// on a plate with uneven lighting and sensor noise.
+/// and curves on a plate with uneven lighting and sensor noise.
 pub mod synth {
     use image::{GrayImage, Luma};
+
+    use crate::plate::contour::{Polyline, distance_to};
 
     /// Small deterministic PRNG (SplitMix64).
     #[derive(Debug, Clone)]
@@ -417,6 +599,8 @@ pub mod synth {
         pub size_mm: [f64; 2],
         /// Node lines (angle_deg, offset_mm) in the convention of [`super::Line`].
         pub lines: Vec<(f64, f64)>,
+        /// Curved nodes: polylines in plate coordinates (mm, origin at the bottom-left corner).
+        pub curves: Vec<Polyline>,
         /// Width (1σ, mm) of the sand band around a node.
         pub sand_sigma_mm: f64,
         /// Peak grain density on a node (grains per pixel).
@@ -448,7 +632,8 @@ pub mod synth {
                         let a = a.to_radians();
                         (-a.sin() * x + a.cos() * y - o).abs()
                     })
-                    .fold(f64::MAX, f64::min);
+                    .fold(f64::MAX, f64::min)
+                    .min(distance_to([x + s.size_mm[0] / 2.0, y + s.size_mm[1] / 2.0], &s.curves));
                 let p = s.density * (-0.5 * (d / s.sand_sigma_mm).powi(2)).exp() + s.stray;
                 // Lighting gradient across the plate plus noise.
                 let light = 70.0 + 30.0 * (col as f64 / w as f64) - 15.0 * (row as f64 / h as f64);
@@ -465,6 +650,36 @@ pub mod synth {
         }
         img
     }
+
+    /// Circle arc about `centre` (mm) of radius `r` from `from_deg` to `to_deg` (CCW), as `n`
+    /// segments.
+    pub fn arc(centre: [f64; 2], r: f64, from_deg: f64, to_deg: f64, n: usize) -> Polyline {
+        (0..=n)
+            .map(|k| {
+                let a = (from_deg + (to_deg - from_deg) * k as f64 / n as f64).to_radians();
+                [centre[0] + r * a.cos(), centre[1] + r * a.sin()]
+            })
+            .collect()
+    }
+
+    /// Branch c + R(α)·(a cosh t, b sinh t), t ∈ [−t_max, t_max], as `n` segments (the
+    /// hyperbola node of plate/model.rs).
+    pub fn hyperbola(
+        centre: [f64; 2],
+        angle_deg: f64,
+        ab: [f64; 2],
+        t_max: f64,
+        n: usize,
+    ) -> Polyline {
+        let (s, c) = angle_deg.to_radians().sin_cos();
+        (0..=n)
+            .map(|k| {
+                let t = -t_max + 2.0 * t_max * k as f64 / n as f64;
+                let (u, v) = (ab[0] * t.cosh(), ab[1] * t.sinh());
+                [centre[0] + c * u - s * v, centre[1] + s * u + c * v]
+            })
+            .collect()
+    }
 }
 
 #[cfg(test)]
@@ -477,6 +692,7 @@ mod tests {
             px: (360, 240),
             size_mm: [300.0, 200.0],
             lines,
+            curves: vec![],
             sand_sigma_mm: 3.0,
             density: 0.6,
             stray: 0.02,
