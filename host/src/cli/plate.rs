@@ -10,7 +10,7 @@ use serde_json::json;
 
 use super::InputError;
 use chladni::plate::contour::{node_lines, total_length};
-use chladni::plate::file::{Boundary, Plate, PlateFile};
+use chladni::plate::file::{Boundary, Plate, PlateFile, PlateTable};
 use chladni::plate::{modes_file, node_field, photo, plot, solver};
 
 #[derive(Debug, Subcommand)]
@@ -227,10 +227,15 @@ pub struct FromPhotoArgs {
     /// Print the recovered lines and curves as JSON.
     #[arg(long)]
     json: bool,
-    /// Write `[[mode]]` entries to this TOML file: one `line` entry per straight node, or,
-    /// when curved nodes were found (or with --as-grid), one `grid` entry for all nodes.
+    /// Write a plate file (`[plate]` name and size, then `[[mode]]` entries): one `line`
+    /// entry per straight node, or, when curved nodes were found (or with --as-grid), one
+    /// `grid` entry for all nodes.
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
+    /// Add the entries to the plate file given by --out instead of replacing it (one photo
+    /// per drive frequency calibrates a plate mode by mode); its size must match --size-mm.
+    #[arg(long, requires = "out")]
+    append: bool,
     /// Describe the nodes by one grid entry (signed distance to them) even if all are
     /// straight.
     #[arg(long)]
@@ -254,17 +259,29 @@ impl FromPhotoArgs {
             node_field::node_field(&found.nodes(photo::DEFAULT_SNAP), size, nx, ny)
         });
         if let Some(out) = &self.out {
-            let mut doc = toml::Table::new();
-            doc.insert(
-                "mode".into(),
-                toml::Value::Array(
-                    self.entries(&found, grid.as_ref())
-                        .into_iter()
-                        .map(toml::Value::Table)
-                        .collect(),
-                ),
-            );
-            write(out, &toml::to_string(&doc)?)?;
+            let entries = self.entries(&found, grid.as_ref());
+            let file = if self.append && out.exists() {
+                let mut file = PlateFile::load(out).map_err(|e| InputError(e.to_string()))?;
+                if file.plate.size_mm != Some(size) {
+                    return Err(InputError(format!(
+                        "--append: {} is a {:?} mm plate, the photo is {size:?} mm",
+                        out.display(),
+                        file.plate.size_mm
+                    ))
+                    .into());
+                }
+                file.mode.extend(entries);
+                file
+            } else {
+                let stem = self.image.file_stem().map_or("photo".into(), |s| s.to_string_lossy());
+                let plate = PlateTable {
+                    name: format!("from photo {stem}"),
+                    size_mm: Some(size),
+                    ..PlateTable::default()
+                };
+                PlateFile { plate, mode: entries }
+            };
+            write(out, &modes_file::render(&file.plate, file.mode)?)?;
         }
         if self.json {
             println!("{}", photo_json(&found, grid.as_ref()));
@@ -293,11 +310,19 @@ impl FromPhotoArgs {
         Ok(size)
     }
 
+    /// A mode name that tells photos of different frequencies apart in one plate file.
+    fn entry_name(&self, what: &str) -> String {
+        match self.freq_hz {
+            Some(f) => format!("photo {f} Hz {what}"),
+            None => format!("photo {what}"),
+        }
+    }
+
     /// The `[[mode]]` entries: one grid entry if there is a grid, else one line entry each.
     fn entries(&self, found: &photo::Found, grid: Option<&PhotoGrid>) -> Vec<toml::Table> {
         match grid {
             Some(Ok(field)) => {
-                vec![modes_file::sampled_mode("photo nodes", self.freq_hz, &field.grid)]
+                vec![modes_file::sampled_mode(&self.entry_name("nodes"), self.freq_hz, &field.grid)]
             }
             Some(Err(_)) => Vec::new(),
             None => found
@@ -306,7 +331,7 @@ impl FromPhotoArgs {
                 .enumerate()
                 .map(|(k, l)| {
                     modes_file::line_mode(
-                        &format!("photo line {}", k + 1),
+                        &self.entry_name(&format!("line {}", k + 1)),
                         self.freq_hz,
                         l.angle_deg,
                         l.offset_mm,

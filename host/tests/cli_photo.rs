@@ -1,0 +1,120 @@
+//! `chladni plate from-photo` end to end: synthetic Chladni photos (one curved, one straight,
+//! at two drive frequencies) calibrate a plate file mode by mode, and the planner reads it.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use chladni::plate::model::{Node, PlateModel};
+use chladni::plate::photo::synth::{Scene, arc, render};
+
+fn chladni(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
+}
+
+fn tmp(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("chladni-photo-{}-{name}", std::process::id()))
+}
+
+/// A 360×240 px photo of a 300×200 mm plate with sand on the given nodes, saved as PNG.
+fn photo(name: &str, lines: Vec<(f64, f64)>, curves: Vec<Vec<[f64; 2]>>) -> PathBuf {
+    let img = render(&Scene {
+        px: (360, 240),
+        size_mm: [300.0, 200.0],
+        lines,
+        curves,
+        sand_sigma_mm: 3.0,
+        density: 0.6,
+        stray: 0.02,
+        noise: 25.0,
+        dark_sand: false,
+        seed: 11,
+    });
+    let path = tmp(name);
+    img.save(&path).unwrap();
+    path
+}
+
+fn from_photo(img: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["plate", "from-photo", img.to_str().unwrap(), "--size-mm", "300", "200"];
+    args.extend_from_slice(extra);
+    chladni(&args)
+}
+
+#[test]
+fn two_photos_calibrate_a_plate_file_that_the_planner_reads() {
+    let plate = tmp("plate.toml");
+    // 120 Hz: a quarter circle about the corner (0, 0), edge to edge.
+    let curved = photo("curved.png", vec![], vec![arc([0.0, 0.0], 130.0, 0.0, 90.0, 90)]);
+    let out =
+        from_photo(&curved, &["--freq-hz", "120", "--json", "--out", plate.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["curves"].as_array().unwrap().len(), 1, "{v}");
+    assert_eq!(v["grid"]["signed"], true, "{v}");
+    // 60 Hz: one straight node across the plate, appended.
+    let straight = photo("straight.png", vec![(0.0, 20.0)], vec![]);
+    let out =
+        from_photo(&straight, &["--freq-hz", "60", "--append", "--out", plate.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+
+    let model = PlateModel::load(&plate).unwrap();
+    assert_eq!(
+        model.name,
+        "from photo chladni-photo-".to_string() + &format!("{}-curved", std::process::id())
+    );
+    assert_eq!(model.size_mm, [300.0, 200.0]);
+    let names: Vec<&str> = model.modes.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names, ["photo 120 Hz nodes", "photo 60 Hz line 1"]);
+    assert!(matches!(model.modes[0].node, Node::Grid(_)));
+    match model.modes[1].node {
+        Node::Line { angle_deg, offset_mm } => {
+            assert!(angle_deg.min(180.0 - angle_deg) < 1.0, "{angle_deg}");
+            // Near 180° the same line has its normal, and so its offset, reversed.
+            let offset = if angle_deg > 90.0 { -offset_mm } else { offset_mm };
+            assert!((offset - 20.0).abs() < 2.0, "{angle_deg}° {offset_mm}");
+        }
+        ref n => panic!("expected a line, got {n:?}"),
+    }
+    // The planner takes the calibrated plate: the rectangle lies along the straight node.
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/parts/rectangle.json");
+    let out = chladni(&["plan", root, "--plate", plate.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let p: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(p["steps"].as_array().unwrap().len(), 1, "{p}");
+
+    // Appending a photo of another plate size is refused and names both sizes.
+    let out = chladni(&[
+        "plate",
+        "from-photo",
+        straight.to_str().unwrap(),
+        "--size-mm",
+        "200",
+        "200",
+        "--append",
+        "--out",
+        plate.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("is a Some([300.0, 200.0]) mm plate, the photo is [200.0, 200.0] mm"),
+        "{err}"
+    );
+    for f in [plate, curved, straight] {
+        let _ = std::fs::remove_file(f);
+    }
+}
+
+#[test]
+fn bad_arguments_exit_2_with_the_value() {
+    let img = photo("bad.png", vec![(90.0, 0.0)], vec![]);
+    let out = from_photo(&img, &["--grid", "2", "--as-grid", "--json"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--grid must be in 3..=401, got 2"));
+    let out = chladni(&["plate", "from-photo", "/nonexistent.png", "--size-mm", "300", "200"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("cannot read image /nonexistent.png"));
+    let out = from_photo(&img, &["--append"]);
+    assert_eq!(out.status.code(), Some(2), "--append needs --out");
+    let _ = std::fs::remove_file(img);
+}
