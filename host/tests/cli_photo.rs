@@ -118,3 +118,46 @@ fn bad_arguments_exit_2_with_the_value() {
     assert_eq!(out.status.code(), Some(2), "--append needs --out");
     let _ = std::fs::remove_file(img);
 }
+
+// A photo taken at an angle: with the plate's corners marked, the straight node is found as
+// drawn; a corner outside the image is refused with its value.
+#[test]
+fn oblique_photo_is_rectified_by_its_corners() {
+    use chladni::plate::photo::rectify::{Homography, warp};
+    let square = photo("square.png", vec![(90.0, 40.0)], vec![]);
+    let plate = image::open(&square).unwrap().to_luma8();
+    let corners = [[38.0, 352.0], [452.0, 372.0], [405.0, 58.0], [88.0, 44.0]];
+    let to_plate =
+        Homography::from_points(corners, [[0.0, 240.0], [360.0, 240.0], [360.0, 0.0], [0.0, 0.0]])
+            .unwrap();
+    let oblique = tmp("oblique.png");
+    warp(&plate, &to_plate, 500, 420, 90).save(&oblique).unwrap();
+    let flat: Vec<String> = corners.iter().flatten().map(|v| v.to_string()).collect();
+    let rectified = tmp("rectified.png");
+    let mut args = vec!["--json", "--save-rectified", rectified.to_str().unwrap(), "--corners"];
+    args.extend(flat.iter().map(String::as_str));
+    let out = from_photo(&oblique, &args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let lines = v["lines"].as_array().unwrap();
+    assert_eq!(lines.len(), 1, "{v}");
+    assert!((lines[0]["angle_deg"].as_f64().unwrap() - 90.0).abs() < 1.0, "{v}");
+    assert!((lines[0]["offset_mm"].as_f64().unwrap() - 40.0).abs() < 2.0, "{v}");
+    let saved = image::open(&rectified).unwrap();
+    assert!(saved.width() > 350 && saved.height() > 280, "{}×{}", saved.width(), saved.height());
+
+    let mut bad = flat.clone();
+    bad[2] = "900".into();
+    let mut args = vec!["--corners"];
+    args.extend(bad.iter().map(String::as_str));
+    let out = from_photo(&oblique, &args);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--corners: corner 1 (900.0, 372.0) px lies outside the 500×420 px image"),
+        "{err}"
+    );
+    for f in [square, oblique, rectified] {
+        let _ = std::fs::remove_file(f);
+    }
+}

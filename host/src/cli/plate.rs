@@ -11,6 +11,7 @@ use serde_json::json;
 use super::InputError;
 use chladni::plate::contour::{node_lines, total_length};
 use chladni::plate::file::{Boundary, Plate, PlateFile, PlateTable};
+use chladni::plate::photo::rectify::rectify;
 use chladni::plate::{modes_file, node_field, photo, plot, solver};
 
 #[derive(Debug, Subcommand)]
@@ -243,6 +244,14 @@ pub struct FromPhotoArgs {
     /// Grid points along x for the grid entry (y follows the aspect ratio).
     #[arg(long, default_value_t = 121)]
     grid: usize,
+    /// Photo taken at an angle: pixel positions (x right, y down) of the plate's corners
+    /// (0, 0), (W, 0), (W, H), (0, H) — bottom-left, bottom-right, top-right, top-left.
+    /// The photo is rectified to the square-on view first.
+    #[arg(long, num_args = 8, value_names = ["X0", "Y0", "X1", "Y1", "X2", "Y2", "X3", "Y3"])]
+    corners: Option<Vec<f64>>,
+    /// Write the rectified photo (PNG) to check the corners.
+    #[arg(long, value_name = "FILE", requires = "corners")]
+    save_rectified: Option<PathBuf>,
 }
 
 /// The grid entry's φ, or why there is none.
@@ -253,7 +262,15 @@ impl FromPhotoArgs {
         let size = self.validate()?;
         let img = image::open(&self.image)
             .map_err(|e| InputError(format!("cannot read image {}: {e}", self.image.display())))?;
-        let found = photo::find_lines(&img.to_luma8(), size, &photo::Params::default());
+        let mut img = img.to_luma8();
+        if let Some(c) = &self.corners {
+            let corners = [[c[0], c[1]], [c[2], c[3]], [c[4], c[5]], [c[6], c[7]]];
+            img = rectify(&img, corners).map_err(|e| InputError(format!("--corners: {e}")))?;
+            if let Some(path) = &self.save_rectified {
+                img.save(path).with_context(|| format!("writing {}", path.display()))?;
+            }
+        }
+        let found = photo::find_lines(&img, size, &photo::Params::default());
         let grid = (self.as_grid || !found.curves.is_empty()).then(|| {
             let (nx, ny) = grid_dims(self.grid, size);
             node_field::node_field(&found.nodes(photo::DEFAULT_SNAP), size, nx, ny)
@@ -306,6 +323,11 @@ impl FromPhotoArgs {
         }
         if !(3..=401).contains(&self.grid) {
             return Err(InputError(format!("--grid must be in 3..=401, got {}", self.grid)).into());
+        }
+        if let Some(c) = &self.corners
+            && !c.iter().all(|v| v.is_finite())
+        {
+            return Err(InputError(format!("--corners must be 8 finite numbers, got {c:?}")).into());
         }
         Ok(size)
     }

@@ -22,6 +22,7 @@ use super::contour::Polyline;
 #[cfg(test)]
 mod curve_tests;
 mod curves;
+pub mod rectify;
 pub use curves::{Curve, douglas_peucker, turning};
 
 /// Tuning of the pipeline.
