@@ -116,7 +116,16 @@ fn bad_arguments_exit_2_with_the_value() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("cannot read image /nonexistent.png"));
     let out = from_photo(&img, &["--append"]);
     assert_eq!(out.status.code(), Some(2), "--append needs --out");
-    let _ = std::fs::remove_file(img);
+    // A photo with no sand on nodes: exit 1, and no empty plate file left behind.
+    let blank = photo("blank.png", vec![], vec![]);
+    let plate = tmp("blank.toml");
+    let out = from_photo(&blank, &["--out", plate.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no node found in"));
+    assert!(!plate.exists());
+    for f in [img, blank] {
+        let _ = std::fs::remove_file(f);
+    }
 }
 
 // A photo taken at an angle: with the plate's corners marked, the straight node is found as

@@ -275,8 +275,9 @@ impl FromPhotoArgs {
             let (nx, ny) = grid_dims(self.grid, size);
             node_field::node_field(&found.nodes(photo::DEFAULT_SNAP), size, nx, ny)
         });
-        if let Some(out) = &self.out {
-            let entries = self.entries(&found, grid.as_ref());
+        let entries = self.entries(&found, grid.as_ref());
+        let nothing_to_write = entries.is_empty();
+        if let Some(out) = self.out.as_ref().filter(|_| !nothing_to_write) {
             let file = if self.append && out.exists() {
                 let mut file = PlateFile::load(out).map_err(|e| InputError(e.to_string()))?;
                 if file.plate.size_mm != Some(size) {
@@ -304,6 +305,13 @@ impl FromPhotoArgs {
             println!("{}", photo_json(&found, grid.as_ref()));
         } else {
             print_photo(&found, grid.as_ref());
+        }
+        if let Some(out) = self.out.as_ref().filter(|_| nothing_to_write) {
+            anyhow::bail!(
+                "no node found in {}: nothing written to {} (is the sand visible against the plate?)",
+                self.image.display(),
+                out.display()
+            );
         }
         Ok(ExitCode::SUCCESS)
     }
