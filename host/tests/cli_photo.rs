@@ -15,20 +15,9 @@ fn tmp(name: &str) -> PathBuf {
     std::env::temp_dir().join(format!("chladni-photo-{}-{name}", std::process::id()))
 }
 
-/// A 360×240 px photo of a 300×200 mm plate with sand on the given nodes, saved as PNG.
+/// The standard synthetic photo (360×240 px, 300×200 mm plate) of the given nodes, as PNG.
 fn photo(name: &str, lines: Vec<(f64, f64)>, curves: Vec<Vec<[f64; 2]>>) -> PathBuf {
-    let img = render(&Scene {
-        px: (360, 240),
-        size_mm: [300.0, 200.0],
-        lines,
-        curves,
-        sand_sigma_mm: 3.0,
-        density: 0.6,
-        stray: 0.02,
-        noise: 25.0,
-        dark_sand: false,
-        seed: 11,
-    });
+    let img = render(&Scene::standard(lines, curves, 11));
     let path = tmp(name);
     img.save(&path).unwrap();
     path

@@ -55,21 +55,10 @@ fn plan_json_is_the_documented_object_and_simulates_to_100_percent() {
     assert_eq!(file, v);
     // Simulate it.
     let plot = tmp("tri-sim.png");
-    let out = chladni(&[
-        "simulate",
-        &ex("parts/triangle.json"),
-        "--plate",
-        &ex("plates/four-lines.toml"),
-        "--plan",
-        out_file.to_str().unwrap(),
-        "--trials",
-        "40",
-        "--seed",
-        "3",
-        "--json",
-        "--plot",
-        plot.to_str().unwrap(),
-    ]);
+    let out = simulate_triangle_with(
+        &out_file,
+        &["--trials", "40", "--seed", "3", "--json", "--plot", plot.to_str().unwrap()],
+    );
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let s: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(s["success_rate"], 1.0);
@@ -170,14 +159,15 @@ fn example_plans_parse_as_device_plans_and_match_the_planner() {
 
 /// `chladni simulate` of the triangle on the four-line plate with the plan file `plan`.
 fn simulate_triangle(plan: &std::path::Path) -> std::process::Output {
-    chladni(&[
-        "simulate",
-        &ex("parts/triangle.json"),
-        "--plate",
-        &ex("plates/four-lines.toml"),
-        "--plan",
-        plan.to_str().unwrap(),
-    ])
+    simulate_triangle_with(plan, &[])
+}
+
+/// [`simulate_triangle`] with more arguments.
+fn simulate_triangle_with(plan: &std::path::Path, extra: &[&str]) -> std::process::Output {
+    let (part, plate) = (ex("parts/triangle.json"), ex("plates/four-lines.toml"));
+    let mut args = vec!["simulate", &part, "--plate", &plate, "--plan", plan.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    chladni(&args)
 }
 
 // A plan too short for the parts to settle misses; simulate counts the misses and lists
@@ -191,17 +181,7 @@ fn simulate_lists_the_starts_of_missed_trials() {
             "final_orientation_deg": 110.707, "period_deg": 360.0}"#,
     )
     .unwrap();
-    let out = chladni(&[
-        "simulate",
-        &ex("parts/triangle.json"),
-        "--plate",
-        &ex("plates/four-lines.toml"),
-        "--plan",
-        plan.to_str().unwrap(),
-        "--trials",
-        "30",
-        "--json",
-    ]);
+    let out = simulate_triangle_with(&plan, &["--trials", "30", "--json"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let s: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let missed = s["missed"].as_u64().unwrap();

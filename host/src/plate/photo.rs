@@ -616,6 +616,25 @@ pub mod synth {
         pub seed: u64,
     }
 
+    impl Scene {
+        /// The tests' standard photo: 360×240 px of a 300×200 mm plate, light sand in a
+        /// 3 mm band (σ) around the nodes, 2 % stray grains, ±25 grey levels of noise.
+        pub fn standard(lines: Vec<(f64, f64)>, curves: Vec<Polyline>, seed: u64) -> Scene {
+            Scene {
+                px: (360, 240),
+                size_mm: [300.0, 200.0],
+                lines,
+                curves,
+                sand_sigma_mm: 3.0,
+                density: 0.6,
+                stray: 0.02,
+                noise: 25.0,
+                dark_sand: false,
+                seed,
+            }
+        }
+    }
+
     /// Renders the scene.
     pub fn render(s: &Scene) -> GrayImage {
         let mut rng = Rng(s.seed);
@@ -689,18 +708,7 @@ mod tests {
     use super::*;
 
     fn scene(lines: Vec<(f64, f64)>, dark_sand: bool, seed: u64) -> Scene {
-        Scene {
-            px: (360, 240),
-            size_mm: [300.0, 200.0],
-            lines,
-            curves: vec![],
-            sand_sigma_mm: 3.0,
-            density: 0.6,
-            stray: 0.02,
-            noise: 25.0,
-            dark_sand,
-            seed,
-        }
+        Scene { dark_sand, ..Scene::standard(lines, vec![], seed) }
     }
 
     /// Angle difference modulo 180°, with the offset sign following the direction flip.

@@ -16,18 +16,7 @@ const MEAN_BOUND: f64 = 0.01;
 const MAX_BOUND: f64 = 0.03;
 
 fn scene(curves: Vec<Polyline>, lines: Vec<(f64, f64)>, seed: u64) -> Scene {
-    Scene {
-        px: (360, 240),
-        size_mm: SIZE,
-        lines,
-        curves,
-        sand_sigma_mm: 3.0,
-        density: 0.6,
-        stray: 0.02,
-        noise: 25.0,
-        dark_sand: false,
-        seed,
-    }
+    Scene::standard(lines, curves, seed)
 }
 
 /// Points every `step` mm along a polyline, kept only inside the plate.

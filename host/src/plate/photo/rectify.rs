@@ -190,18 +190,7 @@ mod tests {
     #[test]
     fn oblique_photo_rectified_by_its_corners_gives_the_drawn_lines() {
         let truth = [(90.0, 40.0), (20.0, -30.0)];
-        let plate = render(&Scene {
-            px: (360, 240),
-            size_mm: [300.0, 200.0],
-            lines: truth.to_vec(),
-            curves: vec![],
-            sand_sigma_mm: 3.0,
-            density: 0.6,
-            stray: 0.02,
-            noise: 25.0,
-            dark_sand: false,
-            seed: 5,
-        });
+        let plate = render(&Scene::standard(truth.to_vec(), vec![], 5));
         let corners = [[38.0, 352.0], [452.0, 372.0], [405.0, 58.0], [88.0, 44.0]];
         let photo = oblique(&plate, corners, 500, 420);
         // Unrectified, the lines come out wrong (the keystone bends the plate's geometry).
