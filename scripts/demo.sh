@@ -54,6 +54,9 @@ $chladni device info --port "$port"
 say chladni device run-file --port $port $out/plan.json --wait
 $chladni device run-file --port "$port" "$out/plan.json" --wait
 
+say chladni device run-file --port $port $out/rectangle-plan.json --wait
+$chladni device run-file --port "$port" "$out/rectangle-plan.json" --wait
+
 say chladni device status --port $port --json
 $chladni device status --port "$port" --json
 
