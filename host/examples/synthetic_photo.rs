@@ -39,7 +39,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("{out}");
     if let Some(overlay) = args.get(2).filter(|_| curved) {
         let found = photo::find_lines(&img, scene.size_mm, &Params::default());
-        photo::overlay(&img, &found.nodes(DEFAULT_SNAP), scene.size_mm).save(overlay)?;
+        // Side by side: the photo, and the recovered nodes drawn over it (dimmed).
+        let drawn = photo::overlay(&img, &found.nodes(DEFAULT_SNAP), scene.size_mm);
+        let (w, h) = img.dimensions();
+        let gap = 8;
+        let both = image::GrayImage::from_fn(2 * w + gap, h, |x, y| match x {
+            x if x < w => *img.get_pixel(x, y),
+            x if x < w + gap => image::Luma([255]),
+            x => *drawn.get_pixel(x - w - gap, y),
+        });
+        both.save(overlay)?;
         println!("{overlay}: {} lines, {} curves", found.lines.len(), found.curves.len());
     }
     Ok(())
