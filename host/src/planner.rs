@@ -23,6 +23,10 @@
 //! 5. **Position.** A straight node fixes the centroid's coordinate across it; if the last
 //!    two steps are perpendicular straight nodes and the earlier one leaves all predicted
 //!    orientations at the same offset, the centroid is fixed where they cross.
+//!
+//! With a feed region ([`PlanOptions::feed`]) planning tracks poses instead ([`feed`]): on
+//! plates with several curved node lines the rest depends on the start position, which the
+//! orientation-set search can only treat as ambiguity.
 
 use std::collections::{HashMap, VecDeque};
 
