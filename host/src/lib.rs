@@ -11,7 +11,8 @@
 //! - [`plot`]: part, turn-function and alignment-function plots.
 //! - [`plan_file`]: the plan JSON file ⇄ the device plan.
 //! - [`plan_plot`]: plan and motion-trace figures.
-//! - [`planner`]: sensorless plan synthesis (step maps, BFS over orientation sets).
+//! - [`planner`]: sensorless plan synthesis (step maps, BFS over orientation sets; feed-region
+//!   plans by tracking simulated poses, [`planner::feed`]).
 //! - [`sim`]: quasi-static part motion under a mode's field.
 
 pub mod device;

@@ -23,6 +23,10 @@
 //! 5. **Position.** A straight node fixes the centroid's coordinate across it; if the last
 //!    two steps are perpendicular straight nodes and the earlier one leaves all predicted
 //!    orientations at the same offset, the centroid is fixed where they cross.
+//!
+//! With a feed region ([`PlanOptions::feed`]) planning tracks poses instead ([`feed`]): on
+//! plates with several curved node lines the rest depends on the start position, which the
+//! orientation-set search can only treat as ambiguity.
 
 use std::collections::{HashMap, VecDeque};
 
@@ -36,6 +40,8 @@ use crate::plan_file::{PlanFile, StepJson};
 use crate::plate::model::{Law, Mode, Node, PlateModel};
 use crate::reference::{self, RefField, Reference};
 use crate::sim::{self, Body, FieldModel, Pose, SimParams};
+
+pub mod feed;
 
 /// Which model computes straight-node maps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -61,6 +67,11 @@ pub struct PlanOptions {
     pub durations: bool,
     /// Most sets the search visits.
     pub max_states: usize,
+    /// Where parts are dropped: plan by tracking poses from there ([`feed`]) instead of
+    /// over orientation sets.
+    pub feed: Option<feed::FeedRegion>,
+    /// Settings of the feed-region search.
+    pub feed_search: feed::FeedSearch,
 }
 
 impl Default for PlanOptions {
@@ -72,6 +83,8 @@ impl Default for PlanOptions {
             sim_starts: 90,
             durations: true,
             max_states: 200_000,
+            feed: None,
+            feed_search: feed::FeedSearch::default(),
         }
     }
 }
@@ -347,7 +360,7 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
 
 /// Does a part that ended at `q` sit on the plate's edge (centroid within its radius of
 /// it) rather than on an interior node?
-fn on_plate_edge(body: &Body, plate: &PlateModel, q: Pose) -> bool {
+pub(crate) fn on_plate_edge(body: &Body, plate: &PlateModel, q: Pose) -> bool {
     let [w, h] = plate.size_mm;
     let edge = body.radius;
     q.x < edge || q.y < edge || q.x > w - edge || q.y > h - edge
@@ -379,6 +392,8 @@ pub struct Synthesis {
     pub period_deg: f64,
     /// Final centroid position when fixed.
     pub final_position_mm: Option<[f64; 2]>,
+    /// Feed-region plans: what their confirmation measured.
+    pub feed: Option<feed::FeedCheck>,
 }
 
 /// Why no plan was found.
@@ -390,6 +405,15 @@ pub enum PlanFailure {
     /// A mode cannot be analysed for this part.
     #[error("{0}")]
     Model(String),
+}
+
+/// The period P = 360°/m orientations are taken modulo: m = the part's rotational symmetry
+/// order, doubled (lcm with 2) when every mode is a straight node with equal gains.
+pub fn plan_period(part: &Part, plate: &PlateModel) -> f64 {
+    let m_part = symmetry_order(part);
+    let all_sym = plate.modes.iter().all(Mode::is_symmetric_line);
+    let m = if all_sym { m_part * 2 / gcd(m_part, 2) } else { m_part };
+    360.0 / m as f64
 }
 
 /// Everything the search needs, computed once per part and plate.
@@ -404,10 +428,7 @@ pub struct Problem {
 impl Problem {
     /// Builds the maps of every mode.
     pub fn new(part: &Part, plate: &PlateModel, opt: &PlanOptions) -> Result<Problem, PlanFailure> {
-        let m_part = symmetry_order(part);
-        let all_sym = plate.modes.iter().all(Mode::is_symmetric_line);
-        let m = if all_sym { m_part * 2 / gcd(m_part, 2) } else { m_part };
-        let period = 360.0 / m as f64;
+        let period = plan_period(part, plate);
         let body = Body::with_samples(part, 160);
         let maps = plate
             .modes
@@ -646,15 +667,24 @@ pub fn settle_time(body: &Body, mode: &Mode, plate: &PlateModel, orientations: &
         }
         times.extend(runs.iter().map(|r| r.settle_s));
     }
+    let (settle_s, lingering) = slowest_settled(times);
+    Settle { settle_s, lingering, points: points.len(), outside_feed }
+}
+
+/// The slowest of some settle times (s) and how many were left out as lingering (slower than
+/// 10× the median: near an unstable rest, where the model's time is unbounded).
+pub(crate) fn slowest_settled(mut times: Vec<f64>) -> (f64, usize) {
     times.sort_by(f64::total_cmp);
     let median = times.get(times.len() / 2).copied().unwrap_or(0.0);
     let kept = times.iter().filter(|&&t| t <= 10.0 * median.max(1e-3)).count();
-    Settle {
-        settle_s: times[..kept].last().copied().unwrap_or(0.0),
-        lingering: times.len() - kept,
-        points: points.len(),
-        outside_feed,
-    }
+    (times[..kept].last().copied().unwrap_or(0.0), times.len() - kept)
+}
+
+/// A step's duration (ms): settle time × safety, rounded up to 10 ms, plus the ramp; at
+/// least 100 ms.
+pub(crate) fn step_duration_ms(settle_s: f64, safety: f64, ramp_ms: u32) -> u32 {
+    let ms = (settle_s * safety * 1000.0 / 10.0).ceil() as u32 * 10;
+    (ms + ramp_ms).max(100)
 }
 
 /// Does the simulation take orientation `u` to `v` (mod `period`, within 1°) under a straight
@@ -675,8 +705,12 @@ pub fn confirm(body: &Body, mode: &Mode, plate: &PlateModel, u: f64, v: f64, per
     })
 }
 
-/// Plans: maps, search, durations, position.
+/// Plans: maps, search, durations, position; with a feed region, by tracking poses from it
+/// ([`feed::plan`], no progress shown).
 pub fn plan(part: &Part, plate: &PlateModel, opt: &PlanOptions) -> Result<Synthesis, PlanFailure> {
+    if let Some(region) = &opt.feed {
+        return feed::plan(part, plate, opt, region, &indicatif::ProgressBar::hidden());
+    }
     let problem = Problem::new(part, plate, opt)?;
     plan_with(part, plate, opt, &problem)
 }
@@ -732,8 +766,7 @@ pub fn plan_with(
             Settle::default()
         };
         let duration_ms = if opt.durations {
-            let ms = (settle.settle_s * opt.safety * 1000.0 / 10.0).ceil() as u32 * 10;
-            (ms + mode.ramp_ms).max(100)
+            step_duration_ms(settle.settle_s, opt.safety, mode.ramp_ms)
         } else {
             1000
         };
@@ -748,7 +781,13 @@ pub fn plan_with(
     }
     let final_orientation_deg = path.last().map_or(0.0, |p| p.1[0]).rem_euclid(problem.period);
     let final_position_mm = final_position(part, plate, &steps, final_orientation_deg);
-    Ok(Synthesis { steps, final_orientation_deg, period_deg: problem.period, final_position_mm })
+    Ok(Synthesis {
+        steps,
+        final_orientation_deg,
+        period_deg: problem.period,
+        final_position_mm,
+        feed: None,
+    })
 }
 
 /// The f64 reference analysis of `part` under a straight-node mode's field law and gains.

@@ -195,3 +195,53 @@ fn simulate_lists_the_starts_of_missed_trials() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("misses     ") && text.contains("started in x ∈ ["), "{text}");
 }
+
+#[test]
+fn bad_feed_regions_exit_2_naming_the_values() {
+    let (part, plate) = (ex("parts/triangle.json"), ex("plates/four-lines.toml"));
+    let plan = |feed: &[&str]| {
+        let mut args = vec!["plan", part.as_str(), "--plate", plate.as_str(), "--feed"];
+        args.extend_from_slice(feed);
+        chladni(&args)
+    };
+    for (feed, want) in [
+        (["10", "20", "5", "40"], "feed region 10 20 5 40 mm is empty"),
+        (["10", "20", "50", "20"], "feed region 10 20 50 20 mm is empty"),
+        (
+            ["250", "150", "320", "190"],
+            "feed region 250 150 320 190 mm is not inside the 300 × 200 mm plate",
+        ),
+        (["-5", "0", "40", "40"], "feed region -5 0 40 40 mm is not inside"),
+        (
+            ["nan", "0", "40", "40"],
+            "feed region NaN 0 40 40 mm: every coordinate must be a finite number",
+        ),
+    ] {
+        let out = plan(&feed);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{feed:?}: {err}");
+        assert!(err.contains("--feed") && err.contains(want), "{feed:?}: {err}");
+    }
+    // Three numbers, or one that is not a number: clap's own errors, also exit 2.
+    for feed in [&["10", "20", "50"][..], &["10", "20", "x", "40"]] {
+        let out = plan(feed);
+        assert_eq!(out.status.code(), Some(2), "{feed:?}");
+    }
+    // `chladni simulate --feed` checks the region the same way (before reading the plan).
+    let out = chladni(&[
+        "simulate",
+        &part,
+        "--plate",
+        &plate,
+        "--plan",
+        &ex("plans/triangle-four-lines.json"),
+        "--feed",
+        "0",
+        "0",
+        "400",
+        "40",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("feed region 0 0 400 40 mm is not inside"), "{err}");
+}

@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use chladni::part::Part;
 use chladni::plan_file::PlanFile;
 use chladni::plan_plot;
+use chladni::planner::feed::{self, FeedRegion};
 use chladni::planner::{self, PlanOptions};
 use chladni::plate::model::PlateModel;
 use chladni::sim::{Body, FieldModel, Pose, SimStep, run_plan};
@@ -48,15 +49,41 @@ impl Rng {
     }
 }
 
-/// A random pose on the plate (centroid at least the part's radius from the edges).
-fn random_pose(rng: &mut Rng, body: &Body, plate: &PlateModel) -> Pose {
+/// A random pose on the plate, or in the feed region when given (centroid at least the
+/// part's radius from the plate's edges).
+fn random_pose(rng: &mut Rng, body: &Body, plate: &PlateModel, feed: Option<&FeedRegion>) -> Pose {
     let [w, h] = plate.size_mm;
     let r = body.radius.min(w / 2.0).min(h / 2.0);
-    Pose {
-        x: r + (w - 2.0 * r) * rng.next(),
-        y: r + (h - 2.0 * r) * rng.next(),
-        theta: std::f64::consts::TAU * rng.next(),
+    let (u, v) = (rng.next(), rng.next());
+    let [x, y] = match feed {
+        Some(f) => f.at(u, v, r, plate),
+        None => [r + (w - 2.0 * r) * u, r + (h - 2.0 * r) * v],
+    };
+    Pose { x, y, theta: std::f64::consts::TAU * rng.next() }
+}
+
+/// The `--feed X0 Y0 X1 Y1` region, checked against the plate.
+fn feed_region(c: &Option<Vec<f64>>, plate: &PlateModel) -> anyhow::Result<Option<FeedRegion>> {
+    let Some(c) = c else { return Ok(None) };
+    let c: [f64; 4] = c
+        .as_slice()
+        .try_into()
+        .map_err(|_| bad(format!("--feed takes 4 numbers X0 Y0 X1 Y1, got {}", c.len())))?;
+    FeedRegion::new(c, plate).map(Some).map_err(|e| bad(format!("--feed: {e}")))
+}
+
+/// The feed-region search's progress bar (hidden for JSON output).
+fn search_bar(hidden: bool) -> indicatif::ProgressBar {
+    if hidden {
+        return indicatif::ProgressBar::hidden();
     }
+    let bar = indicatif::ProgressBar::new(0);
+    if let Ok(style) =
+        indicatif::ProgressStyle::with_template("{msg} {wide_bar} {pos}/{len} [{elapsed}]")
+    {
+        bar.set_style(style);
+    }
+    bar
 }
 
 /// Sensorless plan: the shortest mode sequence bringing every start orientation to one.
@@ -82,6 +109,9 @@ pub struct PlanArgs {
     /// Draw the step-by-step plan figure (PNG) for a few example starts.
     #[arg(long, value_name = "FILE.png")]
     plot: Option<PathBuf>,
+    /// Parts are dropped in this rectangle (mm): plan by tracking poses from it.
+    #[arg(long, num_args = 4, value_names = ["X0", "Y0", "X1", "Y1"], allow_negative_numbers = true)]
+    feed: Option<Vec<f64>>,
 }
 
 impl PlanArgs {
@@ -95,10 +125,23 @@ impl PlanArgs {
         check_png(&self.plot)?;
         let part = load_part(&self.part)?;
         let plate = load_plate(&self.plate)?;
-        let opt =
-            PlanOptions { margin_deg: self.margin_deg, safety: self.safety, ..Default::default() };
-        let syn = planner::plan(&part, &plate, &opt)
-            .map_err(|e| anyhow::anyhow!("{}: {e}", part.name))?;
+        let region = feed_region(&self.feed, &plate)?;
+        let opt = PlanOptions {
+            margin_deg: self.margin_deg,
+            safety: self.safety,
+            feed: region,
+            ..Default::default()
+        };
+        let syn = match &region {
+            Some(r) => {
+                let bar = search_bar(self.json);
+                let syn = feed::plan(&part, &plate, &opt, r, &bar);
+                bar.finish_and_clear();
+                syn
+            }
+            None => planner::plan(&part, &plate, &opt),
+        }
+        .map_err(|e| anyhow::anyhow!("{}: {e}", part.name))?;
         let file = syn.to_file(&plate, &part.name);
         file.to_plan(&DeviceLimits::DEFAULT)
             .map_err(|e| anyhow::anyhow!("planned steps refused: {e}"))?;
@@ -146,6 +189,18 @@ impl PlanArgs {
                     );
                 }
             }
+            if let Some(f) = &syn.feed {
+                println!(
+                    "feed       ({}, {})–({}, {}) mm: {} start poses tracked; the plan run from {} starts ends at most {:.2}° off",
+                    f.region.lo[0],
+                    f.region.lo[1],
+                    f.region.hi[0],
+                    f.region.hi[1],
+                    f.starts,
+                    f.checked,
+                    f.worst_error_deg
+                );
+            }
             println!("final      θ = {:.3}° (mod {}°)", syn.final_orientation_deg, syn.period_deg);
             match syn.final_position_mm {
                 Some(p) => println!("position   ({:.2}, {:.2}) mm", p[0], p[1]),
@@ -163,7 +218,8 @@ impl PlanArgs {
             let mut rng = Rng(1);
             let examples: Vec<Vec<Pose>> = (0..3)
                 .map(|_| {
-                    run_plan(&body, &plate, &fields, &steps, random_pose(&mut rng, &body, &plate)).0
+                    let start = random_pose(&mut rng, &body, &plate, region.as_ref());
+                    run_plan(&body, &plate, &fields, &steps, start).0
                 })
                 .collect();
             let modes: Vec<usize> = syn.steps.iter().map(|s| s.mode).collect();
@@ -212,6 +268,9 @@ pub struct SimulateArgs {
     /// Draw traces of the first trials (PNG); also FILE-plan.png, the step-by-step figure.
     #[arg(long, value_name = "FILE.png")]
     plot: Option<PathBuf>,
+    /// Draw the random start poses in this rectangle (mm), where a feed-region plan holds.
+    #[arg(long, num_args = 4, value_names = ["X0", "Y0", "X1", "Y1"], allow_negative_numbers = true)]
+    feed: Option<Vec<f64>>,
 }
 
 impl SimulateArgs {
@@ -222,6 +281,7 @@ impl SimulateArgs {
         }
         let part = load_part(&self.part)?;
         let plate = load_plate(&self.plate)?;
+        let region = feed_region(&self.feed, &plate)?;
         let text = std::fs::read_to_string(&self.plan)
             .map_err(|e| bad(format!("cannot read plan {}: {e}", self.plan.display())))?;
         let file = PlanFile::parse(&text)
@@ -268,7 +328,7 @@ impl SimulateArgs {
         let mut examples = Vec::new();
         let mut ends = Vec::new();
         for i in 0..self.trials {
-            let start = random_pose(&mut rng, &body, &plate);
+            let start = random_pose(&mut rng, &body, &plate, region.as_ref());
             let (poses, trace, e) = run_plan(&body, &plate, &fields, &steps, start);
             starts.push(start);
             finals.push(*poses.last().unwrap_or(&start));

@@ -1,0 +1,514 @@
+//! Feed-region planning: plans for parts that arrive at a known place (a chute).
+//!
+//! On plates with several curved node lines (free plates, a hinged rod's elastic modes) where a
+//! part comes to rest depends on where it started, not only on its orientation, so the
+//! orientation-set search of [`super::Problem`] sees ambiguity everywhere. When parts are fed
+//! into a known rectangle, the planner can instead track poses:
+//! 1. **Starts.** An n × n grid of centroid positions over the feed region × `starts`
+//!    orientations (offset 0.3 of a step off 0°, as [`super::sampled_map`] does).
+//! 2. **Search.** Breadth-first over mode sequences up to `depth` steps. Applying a mode
+//!    simulates every tracked pose to rest (limit 5000 T₀, as for simulated maps); a run that
+//!    does not rest or ends on the plate edge kills the sequence. Rest poses are clustered (1°
+//!    mod the period, 2 mm) and only one pose per cluster is tracked further; a sequence whose
+//!    pose set falls into the same coarse cells (2°, 4 mm) as one already seen is pruned.
+//! 3. **Success.** Every tracked pose within `tol_deg` of one orientation (mod the period).
+//!    Each such sequence of the shortest length is confirmed from scratch: all starts tracked
+//!    without clustering, durations from their settle times
+//!    (× safety + ramp, as [`super::plan_with`]), then the plan run as the simulator runs it
+//!    (fixed durations, [`run_plan`]) from interleaved starts (grid shifted half a cell,
+//!    orientations half a step; and from the tracked starts again when some lingered and
+//!    were left out of the durations); every end must lie within the margin of the
+//!    predicted orientation. The fastest confirmed sequence wins.
+
+use std::collections::{HashMap, HashSet};
+
+use indicatif::ProgressBar;
+
+use super::{
+    PlanFailure, PlanOptions, PlannedStep, Settle, Synthesis, cdist, on_plate_edge, plan_period,
+    slowest_settled, step_duration_ms,
+};
+use crate::part::Part;
+use crate::plate::model::PlateModel;
+use crate::sim::{self, Body, FieldModel, Pose, SimParams, SimStep, run_plan};
+
+/// A rectangle of the plate (mm) where parts are dropped.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FeedRegion {
+    /// Lower-left corner (x0, y0).
+    pub lo: [f64; 2],
+    /// Upper-right corner (x1, y1).
+    pub hi: [f64; 2],
+}
+
+/// A feed region that cannot be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FeedError {
+    /// A coordinate is NaN or infinite.
+    #[error("feed region {} mm: every coordinate must be a finite number", show(.0))]
+    NotFinite([f64; 4]),
+    /// X1 ≤ X0 or Y1 ≤ Y0.
+    #[error("feed region {} mm is empty: X0 < X1 and Y0 < Y1 are required", show(.0))]
+    Empty([f64; 4]),
+    /// Part of the region lies off the plate.
+    #[error("feed region {} mm is not inside the {} × {} mm plate", show(.0), .1[0], .1[1])]
+    OutsidePlate([f64; 4], [f64; 2]),
+}
+
+fn show(c: &[f64; 4]) -> String {
+    c.iter().map(f64::to_string).collect::<Vec<_>>().join(" ")
+}
+
+impl FeedRegion {
+    /// The region X0 Y0 X1 Y1 (mm), checked against the plate.
+    pub fn new(c: [f64; 4], plate: &PlateModel) -> Result<FeedRegion, FeedError> {
+        if !c.iter().all(|v| v.is_finite()) {
+            return Err(FeedError::NotFinite(c));
+        }
+        if c[2] <= c[0] || c[3] <= c[1] {
+            return Err(FeedError::Empty(c));
+        }
+        let [w, h] = plate.size_mm;
+        if c[0] < 0.0 || c[1] < 0.0 || c[2] > w || c[3] > h {
+            return Err(FeedError::OutsidePlate(c, plate.size_mm));
+        }
+        Ok(FeedRegion { lo: [c[0], c[1]], hi: [c[2], c[3]] })
+    }
+
+    /// The point at fractions (u, v) of the region, kept at least `r` (the part's radius) from
+    /// the plate's edges, as `chladni simulate` keeps its random starts: a centroid nearer the
+    /// edge would leave the part overhanging it.
+    pub fn at(&self, u: f64, v: f64, r: f64, plate: &PlateModel) -> [f64; 2] {
+        let keep = |x: f64, size: f64| {
+            let r = r.min(size / 2.0);
+            x.clamp(r, size - r)
+        };
+        let x = self.lo[0] + u * (self.hi[0] - self.lo[0]);
+        let y = self.lo[1] + v * (self.hi[1] - self.lo[1]);
+        [keep(x, plate.size_mm[0]), keep(y, plate.size_mm[1])]
+    }
+}
+
+/// Feed-region search settings.
+#[derive(Debug, Clone, Copy)]
+pub struct FeedSearch {
+    /// Most steps.
+    pub depth: usize,
+    /// Start positions per side of the feed region (n × n grid; 1: its centre).
+    pub points: usize,
+    /// Start orientations per position.
+    pub starts: usize,
+    /// Every tracked pose must end within this of one orientation (deg, mod the period).
+    pub tol_deg: f64,
+    /// Most sequences of the shortest length confirmed.
+    pub candidates: usize,
+}
+
+impl Default for FeedSearch {
+    fn default() -> Self {
+        FeedSearch { depth: 4, points: 3, starts: 24, tol_deg: 2.0, candidates: 8 }
+    }
+}
+
+/// What the confirmation of a feed-region plan measured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FeedCheck {
+    /// The region.
+    pub region: FeedRegion,
+    /// Start poses tracked.
+    pub starts: usize,
+    /// Start poses the finished plan was run from with its fixed step durations: the
+    /// interleaved ones, and the tracked ones again when some lingered near an unstable rest
+    /// (their settle times are left out of the durations).
+    pub checked: usize,
+    /// Largest final orientation error of those runs and of the tracked poses at rest (deg,
+    /// mod the period).
+    pub worst_error_deg: f64,
+    /// Mode sequences the search found but the confirmation rejected.
+    pub rejected: usize,
+}
+
+/// Start poses: `n` × `n` positions at fractions `frac(i)` of the region, `m` orientations
+/// at `(j + shift)` steps.
+fn poses(
+    region: &FeedRegion,
+    body: &Body,
+    plate: &PlateModel,
+    (n, frac): (usize, &dyn Fn(usize) -> f64),
+    (m, shift): (usize, f64),
+) -> Vec<Pose> {
+    let mut out = Vec::with_capacity(n * n * m);
+    for i in 0..n {
+        for j in 0..n {
+            let p = region.at(frac(i), frac(j), body.radius, plate);
+            for k in 0..m {
+                let theta = ((k as f64 + shift) * 360.0 / m as f64).to_radians();
+                out.push(Pose { x: p[0], y: p[1], theta });
+            }
+        }
+    }
+    out
+}
+
+/// The tracked starts: a grid including the region's corners (its centre for n = 1).
+fn tracked_starts(
+    region: &FeedRegion,
+    body: &Body,
+    plate: &PlateModel,
+    s: &FeedSearch,
+) -> Vec<Pose> {
+    let n = s.points.max(1);
+    let frac = |i: usize| if n == 1 { 0.5 } else { i as f64 / (n - 1) as f64 };
+    poses(region, body, plate, (n, &frac), (s.starts.max(1), 0.3))
+}
+
+/// Starts between the tracked ones: the grid shifted half a cell, orientations half a step.
+fn interleaved_starts(
+    region: &FeedRegion,
+    body: &Body,
+    plate: &PlateModel,
+    s: &FeedSearch,
+) -> Vec<Pose> {
+    let n = s.points.max(1) + 1;
+    let frac = |i: usize| (i as f64 + 0.5) / n as f64;
+    poses(region, body, plate, (n, &frac), (s.starts.max(1), 0.8))
+}
+
+/// Simulates parts to rest under the plate's modes.
+struct Tracker<'a> {
+    body: Body,
+    plate: &'a PlateModel,
+    fields: Vec<FieldModel>,
+    period: f64,
+}
+
+impl<'a> Tracker<'a> {
+    fn new(body: Body, plate: &'a PlateModel, period: f64) -> Self {
+        let fields = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
+        Tracker { body, plate, fields, period }
+    }
+
+    /// The rest reached under mode `k` from `pose`, or `None` when the run does not come to
+    /// rest within 5000 T₀ (as for simulated maps) or ends on the plate edge.
+    fn rest(&self, k: usize, pose: Pose) -> Option<sim::Run> {
+        let (mode, field) = (&self.plate.modes[k], &self.fields[k]);
+        let t0 = self.body.radius / (mode.speed_mm_s * field.max_gain());
+        let p = SimParams { speed: mode.speed_mm_s, t_limit: 5000.0 * t0, run_to_limit: false };
+        let run = sim::run(&self.body, field, p, pose);
+        (run.rested && !on_plate_edge(&self.body, self.plate, run.pose)).then_some(run)
+    }
+
+    /// Every pose's rest under mode `k`, or `None` as soon as one fails.
+    fn rests(&self, k: usize, poses: &[Pose]) -> Option<Vec<sim::Run>> {
+        poses.iter().map(|&q| self.rest(k, q)).collect()
+    }
+}
+
+/// Circular mean (mod `period`) of the orientations of `poses` (deg) and the largest distance
+/// of one of them from it.
+fn spread(poses: &[Pose], period: f64) -> (f64, f64) {
+    let s = std::f64::consts::TAU / period;
+    let (mut c, mut n) = (0.0, 0.0);
+    for q in poses {
+        let a = q.theta.to_degrees() * s;
+        c += a.cos();
+        n += a.sin();
+    }
+    let mean = (n.atan2(c) / s).rem_euclid(period);
+    let dev = poses.iter().map(|q| cdist(q.theta.to_degrees(), mean, period)).fold(0.0, f64::max);
+    (mean, dev)
+}
+
+/// Greedy clustering of rest poses: a pose joins the first cluster whose first pose is within
+/// 1° (mod `period`) and 2 mm; that first pose stands for the cluster. Poses that close end
+/// alike under the next mode unless they lie on a basin boundary, which the confirmation
+/// (every start tracked, no clustering) catches.
+fn cluster(poses: &[Pose], period: f64) -> Vec<Pose> {
+    let mut reps: Vec<Pose> = Vec::new();
+    for q in poses {
+        let near = |r: &Pose| {
+            cdist(r.theta.to_degrees(), q.theta.to_degrees(), period) < 1.0
+                && (r.x - q.x).hypot(r.y - q.y) < 2.0
+        };
+        if !reps.iter().any(near) {
+            reps.push(*q);
+        }
+    }
+    reps
+}
+
+/// Coarse cells (2°, 4 mm) of a pose set: sequences reaching the same cells are equivalent.
+fn cells(poses: &[Pose], period: f64) -> Vec<[i64; 3]> {
+    let mut c: Vec<[i64; 3]> = poses
+        .iter()
+        .map(|q| {
+            let th = q.theta.to_degrees().rem_euclid(period);
+            [
+                (th / 2.0) as i64 % (period / 2.0).ceil() as i64,
+                (q.x / 4.0) as i64,
+                (q.y / 4.0) as i64,
+            ]
+        })
+        .collect();
+    c.sort_unstable();
+    c.dedup();
+    c
+}
+
+/// Orientations (deg, mod `period`, 1° apart) of a pose set, for [`PlannedStep`].
+fn orientations(poses: &[Pose], period: f64) -> Vec<f64> {
+    let mut out: Vec<f64> = Vec::new();
+    for q in poses {
+        let th = q.theta.to_degrees().rem_euclid(period);
+        if !out.iter().any(|&o| cdist(o, th, period) < 1.0) {
+            out.push(th);
+        }
+    }
+    out.sort_by(f64::total_cmp);
+    out.iter().map(|v| (v * 100.0).round() / 100.0).collect()
+}
+
+/// A partial sequence in the search: its modes and the (clustered) poses it leaves.
+struct Node {
+    seq: Vec<usize>,
+    poses: Vec<Pose>,
+}
+
+/// Why the search found nothing, for the failure message.
+#[derive(Default)]
+struct Tally {
+    tried: usize,
+    dead: usize,
+    best: Option<(usize, Vec<usize>, Vec<f64>)>,
+}
+
+impl Tally {
+    /// Remembers the sequence leaving the fewest distinct orientations.
+    fn note(&mut self, seq: &[usize], poses: &[Pose], period: f64) {
+        let o = orientations(poses, period);
+        if self.best.as_ref().is_none_or(|b| o.len() < b.0) {
+            self.best = Some((o.len(), seq.to_vec(), o));
+        }
+    }
+}
+
+/// The search: mode sequences of increasing length whose tracked poses end in one orientation.
+struct Search<'a> {
+    tracker: Tracker<'a>,
+    memo: HashMap<(usize, [u64; 3]), Option<Pose>>,
+    seen: HashSet<Vec<[i64; 3]>>,
+    tally: Tally,
+}
+
+impl Search<'_> {
+    /// Rests of `poses` under mode `k` (memoised: the same cluster pose recurs across
+    /// sequences), or `None` if one run fails.
+    fn apply(&mut self, k: usize, poses: &[Pose]) -> Option<Vec<Pose>> {
+        let mut out = Vec::with_capacity(poses.len());
+        for &q in poses {
+            let key = (k, [q.x.to_bits(), q.y.to_bits(), q.theta.to_bits()]);
+            let r = match self.memo.get(&key) {
+                Some(r) => *r,
+                None => {
+                    let r = self.tracker.rest(k, q).map(|run| run.pose);
+                    self.memo.insert(key, r);
+                    r
+                }
+            };
+            out.push(r?);
+        }
+        Some(out)
+    }
+
+    /// One BFS level: the children of `level`, and the sequences among them that succeed.
+    fn expand(&mut self, level: &[Node], tol: f64, bar: &ProgressBar) -> (Vec<Node>, Vec<Node>) {
+        let (nm, period) = (self.tracker.plate.modes.len(), self.tracker.period);
+        let (mut next, mut found) = (Vec::new(), Vec::new());
+        for node in level {
+            for k in 0..nm {
+                bar.inc(1);
+                // A mode applied twice in a row leaves every part where it rested.
+                if node.seq.last() == Some(&k) {
+                    continue;
+                }
+                self.tally.tried += 1;
+                let Some(rests) = self.apply(k, &node.poses) else {
+                    self.tally.dead += 1;
+                    continue;
+                };
+                let poses = cluster(&rests, period);
+                if !self.seen.insert(cells(&poses, period)) {
+                    continue;
+                }
+                let seq = [node.seq.as_slice(), &[k]].concat();
+                self.tally.note(&seq, &poses, period);
+                let child = Node { seq, poses };
+                if spread(&child.poses, period).1 <= tol {
+                    found.push(child);
+                } else {
+                    next.push(child);
+                }
+            }
+        }
+        (next, found)
+    }
+}
+
+/// A plan for parts fed into `region`: see the module documentation. `bar` shows the search's
+/// progress (pass [`ProgressBar::hidden`] for none).
+pub fn plan(
+    part: &Part,
+    plate: &PlateModel,
+    opt: &PlanOptions,
+    region: &FeedRegion,
+    bar: &ProgressBar,
+) -> Result<Synthesis, PlanFailure> {
+    let s = opt.feed_search;
+    let period = plan_period(part, plate);
+    // 160 body samples, as `plan_with`'s settle times: `chladni simulate` (400) checks the
+    // plan independently.
+    let tracker = Tracker::new(Body::with_samples(part, 160), plate, period);
+    let starts = tracked_starts(region, &tracker.body, plate, &s);
+    let mut search =
+        Search { tracker, memo: HashMap::new(), seen: HashSet::new(), tally: Tally::default() };
+    let verify = interleaved_starts(region, &search.tracker.body, plate, &s);
+    let mut level = vec![Node { seq: Vec::new(), poses: starts.clone() }];
+    let mut rejected = Vec::new();
+    for depth in 1..=s.depth {
+        bar.set_length((level.len() * plate.modes.len()) as u64);
+        bar.set_position(0);
+        bar.set_message(format!("feed plan: {depth}-step sequences"));
+        let (next, found) = search.expand(&level, s.tol_deg, bar);
+        let mut best: Option<Synthesis> = None;
+        for cand in found.iter().take(s.candidates) {
+            match confirm(&search.tracker, &cand.seq, (region, &starts, &verify), opt) {
+                Ok(syn) => {
+                    if best.as_ref().is_none_or(|b| total_ms(&syn) < total_ms(b)) {
+                        best = Some(syn);
+                    }
+                }
+                Err(why) => rejected.push(why),
+            }
+        }
+        if let Some(mut syn) = best {
+            if let Some(f) = syn.feed.as_mut() {
+                f.rejected = rejected.len();
+            }
+            return Ok(syn);
+        }
+        level = next;
+        if level.is_empty() {
+            break;
+        }
+    }
+    Err(PlanFailure::NoPlan(explain(&search.tally, &rejected, s.depth, period)))
+}
+
+fn total_ms(syn: &Synthesis) -> u64 {
+    syn.steps.iter().map(|s| s.duration_ms as u64).sum()
+}
+
+fn explain(t: &Tally, rejected: &[String], depth: usize, period: f64) -> String {
+    let mut msg = format!(
+        "no sequence of up to {depth} modes brings every start in the feed region to one \
+         orientation ({} sequences simulated, {} of them left a part unsettled or on the plate edge)",
+        t.tried, t.dead
+    );
+    if let Some((_, seq, o)) = &t.best {
+        let modes = seq.iter().map(|k| (k + 1).to_string()).collect::<Vec<_>>().join(", ");
+        let list = o.iter().map(|v| format!("{v:.1}°")).collect::<Vec<_>>().join(", ");
+        msg += &format!("; the closest, modes {modes}, leaves {list} (mod {period}°)");
+    }
+    if let Some(first) = rejected.first() {
+        msg += &format!("; {} candidate(s) failed the check, e.g. {first}", rejected.len());
+    }
+    msg
+}
+
+/// Confirms a mode sequence from scratch (see the module documentation) and builds its plan.
+fn confirm(
+    t: &Tracker,
+    seq: &[usize],
+    (region, starts, verify): (&FeedRegion, &[Pose], &[Pose]),
+    opt: &PlanOptions,
+) -> Result<Synthesis, String> {
+    let modes = seq.iter().map(|k| (k + 1).to_string()).collect::<Vec<_>>().join(", ");
+    let mut poses = starts.to_vec();
+    let mut steps = Vec::with_capacity(seq.len());
+    for (i, &k) in seq.iter().enumerate() {
+        let runs = t
+            .rests(k, &poses)
+            .ok_or_else(|| format!("modes {modes}: step {} leaves a part off any node", i + 1))?;
+        let (settle_s, lingering) = slowest_settled(runs.iter().map(|r| r.settle_s).collect());
+        let before = if i == 0 { Vec::new() } else { orientations(&poses, t.period) };
+        poses = runs.iter().map(|r| r.pose).collect();
+        steps.push(PlannedStep {
+            mode: k,
+            before,
+            after: orientations(&poses, t.period),
+            duration_ms: step_duration_ms(settle_s, opt.safety, t.plate.modes[k].ramp_ms),
+            settle: Settle { settle_s, lingering, points: starts.len(), outside_feed: Vec::new() },
+        });
+    }
+    let (theta, dev) = spread(&poses, t.period);
+    if dev > opt.feed_search.tol_deg {
+        return Err(format!("modes {modes}: tracked orientations spread ±{dev:.2}°"));
+    }
+    // Tracked starts settled within their step durations unless some lingered (left out of
+    // the durations); only then can they end elsewhere when run with the fixed durations.
+    let lingered = steps.iter().any(|s| s.settle.lingering > 0);
+    let again = if lingered { starts } else { &[] };
+    let worst = checked_error(t, &steps, again.iter().chain(verify), theta).max(dev);
+    let bound = opt.margin_deg.max(opt.feed_search.tol_deg);
+    if worst > bound {
+        return Err(format!("modes {modes}: a start ends {worst:.2}° off (bound {bound}°)"));
+    }
+    Ok(Synthesis {
+        final_position_mm: common_position(&poses),
+        steps,
+        final_orientation_deg: theta,
+        period_deg: t.period,
+        feed: Some(FeedCheck {
+            region: *region,
+            starts: starts.len(),
+            checked: again.len() + verify.len(),
+            worst_error_deg: worst,
+            rejected: 0,
+        }),
+    })
+}
+
+/// The largest final orientation error (deg, mod the period) of the plan run as the simulator
+/// runs it (fixed step durations) from `starts`.
+fn checked_error<'p>(
+    t: &Tracker,
+    steps: &[PlannedStep],
+    starts: impl Iterator<Item = &'p Pose>,
+    theta: f64,
+) -> f64 {
+    let sim_steps: Vec<SimStep> = steps
+        .iter()
+        .map(|s| SimStep {
+            mode: s.mode,
+            duration_s: s.duration_ms as f64 / 1000.0,
+            amplitude_ratio: 1.0,
+        })
+        .collect();
+    starts
+        .map(|&q| {
+            let (ends, _, _) = run_plan(&t.body, t.plate, &t.fields, &sim_steps, q);
+            let end = ends.last().copied().unwrap_or(q);
+            cdist(end.theta.to_degrees(), theta, t.period)
+        })
+        .fold(0.0, f64::max)
+}
+
+/// The mean centroid when every final pose lies within 2 mm of it (the nodes fix the
+/// position), else `None`.
+fn common_position(poses: &[Pose]) -> Option<[f64; 2]> {
+    let n = poses.len().max(1) as f64;
+    let m =
+        [poses.iter().map(|q| q.x).sum::<f64>() / n, poses.iter().map(|q| q.y).sum::<f64>() / n];
+    let fixed = poses.iter().all(|q| (q.x - m[0]).hypot(q.y - m[1]) <= 2.0);
+    fixed.then(|| [(m[0] * 1000.0).round() / 1000.0, (m[1] * 1000.0).round() / 1000.0])
+}

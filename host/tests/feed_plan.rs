@@ -1,0 +1,77 @@
+//! Feed-region planning (docs/plan.md "Feed-region planning"): on the free plate's solver
+//! modes the rest a part reaches depends on where it starts, so the orientation-set planner
+//! finds no plan; tracking poses from a known feed region does, and independent simulation
+//! from poses inside that region (not the ones the planner tracked) confirms it.
+
+use std::path::Path;
+use std::process::Command;
+
+use chladni::part::Part;
+use chladni::planner::feed::{FeedRegion, FeedSearch};
+use chladni::planner::{self, PlanFailure, PlanOptions, cdist};
+use chladni::plate::model::{Node, PlateModel};
+use chladni::sim::{Body, FieldModel, Pose, run_plan};
+
+fn root() -> &'static Path {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+}
+
+/// The free plate's solver modes 2 and 4 (`chladni plate modes --count 4 --write-modes`).
+fn free_plate_modes_2_and_4() -> PlateModel {
+    let out = std::env::temp_dir().join(format!("chladni-feed-{}.toml", std::process::id()));
+    let st = Command::new(env!("CARGO_BIN_EXE_chladni"))
+        .args(["plate", "modes"])
+        .arg(root().join("examples/plate-free.toml"))
+        .args(["--count", "4", "--write-modes"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    let mut plate = PlateModel::load(&out).unwrap();
+    let _ = std::fs::remove_file(&out);
+    assert!(plate.modes.iter().all(|m| matches!(m.node, Node::Grid(_))));
+    plate.modes = vec![plate.modes[1].clone(), plate.modes[3].clone()];
+    plate
+}
+
+#[test]
+fn triangle_on_free_plate_modes_plans_only_from_a_feed_region() {
+    let plate = free_plate_modes_2_and_4();
+    let part = Part::load(&root().join("examples/parts/triangle.json")).unwrap();
+
+    // Without a feed region: the outcome of each mode depends on the start point, which the
+    // orientation-set search sees as ambiguity everywhere.
+    let opt = PlanOptions { sim_starts: 18, ..Default::default() };
+    let err = planner::plan(&part, &plate, &opt).unwrap_err();
+    assert!(matches!(err, PlanFailure::NoPlan(_)), "{err}");
+
+    // From a 40 × 40 mm feed region in the lower-left quadrant (coarse: 2 × 2 positions × 6
+    // orientations tracked, 3 × 3 × 6 interleaved starts in the confirmation).
+    let region = FeedRegion::new([60.0, 40.0, 100.0, 80.0], &plate).unwrap();
+    let feed_search = FeedSearch { depth: 3, points: 2, starts: 6, ..Default::default() };
+    let opt = PlanOptions { feed: Some(region), feed_search, ..Default::default() };
+    let syn = planner::plan(&part, &plate, &opt).unwrap();
+    let modes: Vec<usize> = syn.steps.iter().map(|s| s.mode).collect();
+    assert!(modes.len() >= 2, "one mode cannot orient the triangle here: {modes:?}");
+    assert_eq!(syn.period_deg, 360.0);
+    let check = syn.feed.as_ref().unwrap();
+    assert_eq!(check.starts, 24);
+    assert!(check.checked >= 54, "{check:?}");
+    assert!(check.worst_error_deg < 3.0, "{check:?}");
+
+    // Independent check: poses on a grid inside the feed region that the planner did not
+    // track, every 60° from 10°.
+    let body = Body::new(&part);
+    let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, &plate)).collect();
+    let steps = syn.sim_steps();
+    let mut worst = 0.0f64;
+    for (x, y) in [(65.0, 45.0), (95.0, 50.0), (80.0, 60.0), (70.0, 75.0), (90.0, 78.0)] {
+        for k in 0..6 {
+            let start = Pose { x, y, theta: (10.0 + 60.0 * k as f64).to_radians() };
+            let (poses, _, _) = run_plan(&body, &plate, &fields, &steps, start);
+            let end = poses.last().unwrap();
+            worst = worst.max(cdist(end.theta.to_degrees(), syn.final_orientation_deg, 360.0));
+        }
+    }
+    assert!(worst < 3.0, "worst final orientation error {worst}° (plan {modes:?})");
+}
