@@ -191,3 +191,34 @@ fn line_truth(angle_deg: f64, offset_mm: f64) -> Polyline {
     let l = SIZE[0] + SIZE[1];
     vec![[p[0] - l * c, p[1] - l * s], [p[0] + l * c, p[1] + l * s]]
 }
+
+#[test]
+#[ignore]
+fn lentil_probe() {
+    let w: u32 = std::env::var("LENTIL_W").ok().and_then(|v| v.parse().ok()).unwrap_or(720);
+    for seed in 1..=6 {
+        let s = Scene {
+            px: (w, w * 2 / 3),
+            grain_mm: 4.0,
+            sand_sigma_mm: 5.0,
+            density: 0.8,
+            stray: 0.01,
+            ..Scene::standard(
+                if std::env::var("LENTIL_NOLINES").is_ok() { vec![] } else { vec![(90.0, 40.0), (20.0, -30.0)] },
+                if std::env::var("LENTIL_NOARC").is_ok() { vec![] } else { vec![arc([0.0, 0.0], 130.0, 0.0, 90.0, 90)] },
+                seed,
+            )
+        };
+        let img = render(&s);
+        let f = find_lines(
+            &img,
+            SIZE,
+            &Params { grain_px: 4.0 * w as f64 / 300.0, ..Params::default() },
+        );
+        println!(
+            "seed {seed}: lines {:?} curves {:?}",
+            f.lines.iter().map(|l| (l.angle_deg, l.offset_mm)).collect::<Vec<_>>(),
+            f.curves.iter().map(|c| (c.points[0], c.length_mm)).collect::<Vec<_>>()
+        );
+    }
+}
