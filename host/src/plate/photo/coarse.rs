@@ -1,17 +1,23 @@
 //! Nodes made of coarse grains (the paper's urad lentils, ≈ 4 mm): a node is a band of
 //! separate disks with gaps between them, which a threshold-and-skeleton pipeline breaks into
 //! ragged pieces. Here the grain pixels themselves are the evidence:
-//! 1. grain pixels are pooled into grain-sized cells (centroid, count);
-//! 2. cells closer than 2.5 grains are linked; the longest path through the minimum spanning
-//!    tree of the largest linked group, smoothed over two grains and simplified, follows one
-//!    band (through a crossing it may turn into another band: it is split at corners > 35°);
-//!    the cells within two grains of it leave the pool, and the next path is traced;
-//! 3. each piece at least as long as a node must be is a **line** if its pieces stay within
-//!    ¾ grain of the total-least-squares line through the grain pixels within 1.5 grains
-//!    (then fitted on those pixels), else a **curve**; lines of the same direction and offset
-//!    (a band cut by a crossing) are merged and refitted.
+//! 1. **Tracing.** Grain pixels are pooled into grain-sized cells; cells closer than 2.5
+//!    grains are linked; the longest path through the minimum spanning tree of a linked
+//!    group, averaged over 4 grains and simplified, follows one band (at a crossing it may
+//!    turn into another: it is split at corners over 35° of a coarse outline); the cells
+//!    within 3 grains leave the pool and the next path is traced.
+//! 2. **Lines.** A traced piece is straight if it does not bow (parabola fit ≤ 1.25 grains;
+//!    the wiggle between grains is random, a curve's bow systematic) and grains cover at
+//!    least 60 % of its chord across the plate (a curve's tangent leaves its band). Its band
+//!    (pixels within 1.5 grains) is refitted three times, dropping 4-grain stretches whose
+//!    median offset leaves the line (a crossing node adds pixels to one side). Lines of the
+//!    same direction (< 5°) and offset (< 3 grains), pieces of one band cut by a crossing, are
+//!    merged; a line sharing a third of its pixels with a stronger one is dropped.
+//! 3. **Curves** are traced again on the cells off the lines' bands, so no band remnant
+//!    becomes a curve; every piece is a curve.
+//! 4. Lines are refitted without their pixels near a curve (ends prolonged into the band).
 
-use std::collections::VecDeque;
+use std::collections::{HashMap, HashSet, VecDeque};
 
 use image::GrayImage;
 
@@ -38,19 +44,46 @@ pub fn find(img: &GrayImage, size_mm: [f64; 2], p: &Params, grain_px: f64) -> Fo
             }
         }
     }
-    let pieces = trace(&cells(&pts, size_mm, grain), grain, frame.min_length_mm(p), p.max_lines);
+    let min_len = frame.min_length_mm(p);
+    let pooled = cells(&pts, size_mm, grain);
     // Grain pixels sampled per grain (a disk a grain across, every `stride` pixels).
     let per_grain = std::f64::consts::PI * (0.5 * grain_px / stride as f64).powi(2);
-    let (mut lines, mut curves) = (Vec::new(), Vec::new());
-    for piece in pieces {
-        match straight_fit(&piece, &pts, grain).filter(|sel| {
-            chord_coverage(&band_pixels(sel, &pts, grain), size_mm, grain, per_grain) >= 0.6
-        }) {
-            Some(sel) => lines.push(band_pixels(&sel, &pts, grain)),
-            None => curves.push(piece),
+    // 1. Lines: traced pieces that are straight and whose band crosses the plate.
+    let mut lines = Vec::new();
+    for piece in trace(&pooled, grain, min_len, p.max_lines) {
+        if let Some(sel) = straight_fit(&piece, &pts, grain) {
+            let band = band_pixels(&sel, &pts, grain);
+            if chord_coverage(&band, size_mm, grain, per_grain) >= 0.6 {
+                lines.push(band);
+            }
         }
     }
     let lines = merge(lines, &pts, grain, size_mm);
+    // 2. Curves: traced again without the lines' bands (3 grains each side, the band's
+    //    stragglers included), so no remnant of a line band is taken for a curve.
+    let fits: Vec<([f64; 2], [f64; 2])> = lines
+        .iter()
+        .map(|sel| {
+            let (o, d, _) = tls(sel);
+            (o, d)
+        })
+        .collect();
+    let off_lines = |q: [f64; 2]| {
+        fits.iter().all(|(o, d)| (-(q[0] - o[0]) * d[1] + (q[1] - o[1]) * d[0]).abs() > 3.0 * grain)
+    };
+    let rest: Vec<([f64; 2], usize)> = pooled.iter().copied().filter(|c| off_lines(c.0)).collect();
+    let curves = trace(&rest, grain, min_len, p.max_lines);
+    // 3. Lines refitted without the pixels where a curve crosses their band. The curves were
+    //    traced without the bands, so they stop short of them: extend their ends into them.
+    let reach: Vec<Vec<[f64; 2]>> = curves.iter().map(|c| extended(c, 5.0 * grain)).collect();
+    let lines: Vec<Vec<[f64; 2]>> = lines
+        .into_iter()
+        .map(|sel| {
+            let clear: Vec<[f64; 2]> =
+                sel.iter().copied().filter(|q| distance_to(*q, &reach) > 2.0 * grain).collect();
+            if clear.len() * 2 >= sel.len() { clear } else { sel }
+        })
+        .collect();
     let on_node = |q: &[f64; 2]| {
         lines.iter().any(|sel: &Vec<[f64; 2]>| sel.contains(q))
             || distance_to(*q, &curves) <= 1.5 * grain
@@ -105,14 +138,6 @@ fn trace(cells: &[([f64; 2], usize)], grain: f64, min_len: f64, max: usize) -> V
             })
             .collect();
         let line = simplified(&smooth, 0.5 * grain);
-        if std::env::var("COARSE_DEBUG").is_ok() {
-            eprintln!(
-                "path {} cells, len {:.0} (min {min_len:.0}), pool {}",
-                path.len(),
-                length(&line),
-                pool.len()
-            );
-        }
         if length(&line) < min_len {
             // The longest path left is too short: so is every other.
             break;
@@ -154,6 +179,22 @@ fn simplified(pts: &[[f64; 2]], tol: f64) -> Vec<[f64; 2]> {
     douglas_peucker(pts, tol).into_iter().map(|i| pts[i]).collect()
 }
 
+/// The polyline with both ends prolonged by `by` along their last segments.
+fn extended(l: &[[f64; 2]], by: f64) -> Vec<[f64; 2]> {
+    let mut out = l.to_vec();
+    let n = l.len();
+    if n < 2 {
+        return out;
+    }
+    let ext = |a: [f64; 2], b: [f64; 2]| {
+        let d = dist(a, b).max(1e-9);
+        [b[0] + (b[0] - a[0]) / d * by, b[1] + (b[1] - a[1]) / d * by]
+    };
+    out.insert(0, ext(l[1], l[0]));
+    out.push(ext(l[n - 2], l[n - 1]));
+    out
+}
+
 fn length(l: &[[f64; 2]]) -> f64 {
     l.windows(2).map(|w| dist(w[0], w[1])).sum()
 }
@@ -163,16 +204,6 @@ fn length(l: &[[f64; 2]]) -> f64 {
 fn straight_fit(piece: &[[f64; 2]], pts: &[[f64; 2]], grain: f64) -> Option<Vec<[f64; 2]>> {
     let (origin, dir, _) = tls(piece);
     let off = |q: &[f64; 2]| (-(q[0] - origin[0]) * dir[1] + (q[1] - origin[1]) * dir[0]).abs();
-    if std::env::var("COARSE_DEBUG").is_ok() {
-        eprintln!(
-            "piece {} pts len {:.0} dir {:.1}° max off {:.2} bow {:.2} (grain {grain:.2})",
-            piece.len(),
-            length(piece),
-            dir[1].atan2(dir[0]).to_degrees(),
-            piece.iter().map(&off).fold(0.0, f64::max),
-            super::sagitta(piece, origin, dir)
-        );
-    }
     // A band's centre line wiggles by a few millimetres between grains, randomly; a curve
     // bows systematically (the parabola fit of `sagitta` sees only that).
     if super::sagitta(piece, origin, dir) > 1.25 * grain {
@@ -205,7 +236,7 @@ fn chord_coverage(sel: &[[f64; 2]], size_mm: [f64; 2], grain: f64, per_grain: f6
         lo = lo.max(a.min(b));
         hi = hi.min(a.max(b));
     }
-    if !(hi > lo) {
+    if hi.is_nan() || lo.is_nan() || hi <= lo {
         return 0.0;
     }
     let n = ((hi - lo) / grain).ceil() as usize;
@@ -241,10 +272,19 @@ fn merge(
                     da = 180.0 - da;
                     ob = -ob;
                 }
-                if da < 5.0 && (a.offset_mm - ob).abs() < 1.5 * grain {
+                if da < 5.0 && (a.offset_mm - ob).abs() < 3.0 * grain {
                     let other = sets.swap_remove(j);
                     sets[i].extend(other);
                     sets[i] = band_pixels(&sets[i], pts, grain);
+                    merged = true;
+                    break 'outer;
+                }
+                // Two node lines share pixels only where they cross; sharing much more, the
+                // weaker is a curve's tangent running along the stronger's band.
+                let shared = sets[j].iter().filter(|q| sets[i].contains(q)).count();
+                if shared * 3 > sets[i].len().min(sets[j].len()) {
+                    let weaker = if sets[i].len() < sets[j].len() { i } else { j };
+                    sets.swap_remove(weaker);
                     merged = true;
                     break 'outer;
                 }
@@ -258,17 +298,78 @@ fn merge(
 /// refitted twice (each fit centres the band better).
 fn band_pixels(sel: &[[f64; 2]], pts: &[[f64; 2]], grain: f64) -> Vec<[f64; 2]> {
     let mut sel = sel.to_vec();
-    for _ in 0..2 {
+    for _ in 0..3 {
         let (origin, dir, _) = tls(&sel);
-        sel = pts
+        let band: Vec<[f64; 2]> = pts
             .iter()
             .filter(|q| {
                 (-(q[0] - origin[0]) * dir[1] + (q[1] - origin[1]) * dir[0]).abs() <= 1.5 * grain
             })
             .copied()
             .collect();
+        sel = without_crossings(&band, origin, dir, grain);
     }
     sel
+}
+
+/// The band's pixels without the stretches where another node crosses it: the band is cut
+/// into 4-grain bins along the line; each bin's median offset should lie on a straight line,
+/// and bins off it by more than 2.5 median absolute deviations (at least half a grain) — a
+/// crossing node adds pixels to one side — are dropped.
+fn without_crossings(
+    band: &[[f64; 2]],
+    origin: [f64; 2],
+    dir: [f64; 2],
+    grain: f64,
+) -> Vec<[f64; 2]> {
+    let se = |q: &[f64; 2]| {
+        let (dx, dy) = (q[0] - origin[0], q[1] - origin[1]);
+        (dx * dir[0] + dy * dir[1], -dx * dir[1] + dy * dir[0])
+    };
+    let bin_len = 4.0 * grain;
+    let mut bins: HashMap<i64, Vec<(f64, f64)>> = HashMap::new();
+    for q in band {
+        let (s, e) = se(q);
+        bins.entry((s / bin_len).floor() as i64).or_default().push((s, e));
+    }
+    let mut med: Vec<(i64, f64, f64)> = bins
+        .iter()
+        .filter(|(_, v)| v.len() >= 3)
+        .map(|(&k, v)| {
+            let mut e: Vec<f64> = v.iter().map(|p| p.1).collect();
+            e.sort_by(f64::total_cmp);
+            (k, v.iter().map(|p| p.0).sum::<f64>() / v.len() as f64, e[e.len() / 2])
+        })
+        .collect();
+    if med.len() < 3 {
+        return band.to_vec();
+    }
+    // Straight line e = a + b s through the bin medians, then residuals.
+    let fit = |m: &[(i64, f64, f64)]| {
+        let n = m.len() as f64;
+        let (ms, me) =
+            (m.iter().map(|v| v.1).sum::<f64>() / n, m.iter().map(|v| v.2).sum::<f64>() / n);
+        let sss: f64 = m.iter().map(|v| (v.1 - ms).powi(2)).sum();
+        let b = if sss > 0.0 {
+            m.iter().map(|v| (v.1 - ms) * (v.2 - me)).sum::<f64>() / sss
+        } else {
+            0.0
+        };
+        (me - b * ms, b)
+    };
+    let (a, b) = fit(&med);
+    let mut res: Vec<f64> = med.iter().map(|v| (v.2 - a - b * v.1).abs()).collect();
+    let mut sorted = res.clone();
+    sorted.sort_by(f64::total_cmp);
+    let limit = (2.5 * 1.4826 * sorted[sorted.len() / 2]).max(0.5 * grain);
+    let mut k = 0;
+    med.retain(|_| {
+        k += 1;
+        res[k - 1] <= limit
+    });
+    res.clear();
+    let keep: HashSet<i64> = med.iter().map(|v| v.0).collect();
+    band.iter().copied().filter(|q| keep.contains(&((se(q).0 / bin_len).floor() as i64))).collect()
 }
 
 /// The reported line through pixels (plate coordinates).
