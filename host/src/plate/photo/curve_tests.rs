@@ -205,6 +205,18 @@ fn lentils(lines: Vec<(f64, f64)>, curves: Vec<Polyline>, seed: u64) -> (image::
     (render(&s), Params { grain_px: 4.0 * 720.0 / 300.0, ..Params::default() })
 }
 
+/// The seeds a lentil test runs: `default`, or all of `LENTIL_SEEDS=first-last` (to re-measure
+/// the docs' numbers over more photos).
+fn seeds(default: std::ops::RangeInclusive<u64>) -> std::ops::RangeInclusive<u64> {
+    std::env::var("LENTIL_SEEDS")
+        .ok()
+        .and_then(|v| {
+            let (a, b) = v.split_once('-')?;
+            Some(a.parse().ok()?..=b.parse().ok()?)
+        })
+        .unwrap_or(default)
+}
+
 /// Worst (angle °, offset mm) error of `found` against `truth`, one found line per true line.
 fn line_errors(found: &[Line], truth: &[(f64, f64)]) -> (f64, f64) {
     truth.iter().fold((0.0f64, 0.0f64), |(wa, wo), &t| {
@@ -230,7 +242,7 @@ fn line_errors(found: &[Line], truth: &[(f64, f64)]) -> (f64, f64) {
 #[test]
 fn lentil_lines_are_found_as_drawn() {
     let truth = [(90.0, 40.0), (20.0, -30.0)];
-    for seed in 1..=4 {
+    for seed in seeds(1..=4) {
         let (img, p) = lentils(truth.to_vec(), vec![], seed);
         let found = find_lines(&img, SIZE, &p);
         let (da, dof) = line_errors(&found.lines, &truth);
@@ -248,7 +260,9 @@ fn lentil_lines_are_found_as_drawn() {
 fn lentil_arc_is_one_curve_and_a_blank_plate_has_none() {
     let arc_nodes = vec![arc([0.0, 0.0], 130.0, 0.0, 90.0, 90)];
     let mut whole = 0;
-    for seed in 1..=4 {
+    let runs = seeds(1..=4);
+    let n = runs.clone().count();
+    for seed in runs {
         let (img, p) = lentils(vec![], arc_nodes.clone(), seed);
         let found = find_lines(&img, SIZE, &p);
         assert!(found.lines.is_empty(), "seed {seed}: {:?}", found.lines);
@@ -263,7 +277,7 @@ fn lentil_arc_is_one_curve_and_a_blank_plate_has_none() {
             assert!(none.lines.is_empty() && none.curves.is_empty(), "seed {seed}: blank plate");
         }
     }
-    assert!(whole >= 3, "the arc was one whole curve in {whole} of 4 photos");
+    assert!(whole + 1 >= n, "the arc was one whole curve in {whole} of {n} photos");
 }
 
 // The hard case: the arc crosses the vertical band at 32°, where its lentils pull that line.
@@ -273,7 +287,7 @@ fn lentil_arc_is_one_curve_and_a_blank_plate_has_none() {
 fn lentil_lines_crossed_by_an_arc() {
     let truth = [(90.0, 40.0), (20.0, -30.0)];
     let arc_nodes = vec![arc([0.0, 0.0], 130.0, 0.0, 90.0, 90)];
-    for seed in 3..=5 {
+    for seed in seeds(3..=5) {
         let (img, p) = lentils(truth.to_vec(), arc_nodes.clone(), seed);
         let found = find_lines(&img, SIZE, &p);
         let (da, dof) = line_errors(&found.lines, &truth);
