@@ -27,6 +27,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         noise: 30.0,
         dark_sand: false,
         seed: 7,
+        grain_mm: 0.0,
     };
     if curved {
         let file = PlateFile::parse(include_str!("../../examples/plate-free.toml"), "free")?;

@@ -159,3 +159,32 @@ fn oblique_photo_is_rectified_by_its_corners() {
         let _ = std::fs::remove_file(f);
     }
 }
+
+// The paper's lentils: with --grain-mm the nodes are found as bands of separate grains; a
+// grain size over a tenth of the plate is refused.
+#[test]
+fn lentil_photo_with_grain_size() {
+    let img = render(&Scene {
+        px: (720, 480),
+        grain_mm: 4.0,
+        sand_sigma_mm: 5.0,
+        density: 0.8,
+        stray: 0.01,
+        ..Scene::standard(vec![(90.0, 40.0), (20.0, -30.0)], vec![], 2)
+    });
+    let path = tmp("lentils.png");
+    img.save(&path).unwrap();
+    let out = from_photo(&path, &["--grain-mm", "4", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let mut angles: Vec<f64> =
+        v["lines"].as_array().unwrap().iter().map(|l| l["angle_deg"].as_f64().unwrap()).collect();
+    angles.sort_by(f64::total_cmp);
+    assert_eq!(angles.len(), 2, "{v}");
+    assert!((angles[0] - 20.0).abs() < 2.5 && (angles[1] - 90.0).abs() < 2.5, "{angles:?}");
+    let out = from_photo(&path, &["--grain-mm", "25"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--grain-mm must be in [0, 20.0)") && err.contains("got 25"), "{err}");
+    let _ = std::fs::remove_file(path);
+}

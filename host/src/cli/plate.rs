@@ -249,6 +249,10 @@ pub struct FromPhotoArgs {
     /// The photo is rectified to the square-on view first.
     #[arg(long, num_args = 8, value_names = ["X0", "Y0", "X1", "Y1", "X2", "Y2", "X3", "Y3"])]
     corners: Option<Vec<f64>>,
+    /// Diameter (mm) of coarse grains such as lentils (the paper's are ≈ 4 mm); above 2 px
+    /// in the photo the nodes are found as bands of separate grains. 0: sand.
+    #[arg(long, value_name = "MM", default_value_t = 0.0)]
+    grain_mm: f64,
     /// Write the rectified photo (PNG) to check the corners.
     #[arg(long, value_name = "FILE", requires = "corners")]
     save_rectified: Option<PathBuf>,
@@ -270,7 +274,10 @@ impl FromPhotoArgs {
                 img.save(path).with_context(|| format!("writing {}", path.display()))?;
             }
         }
-        let found = photo::find_lines(&img, size, &photo::Params::default());
+        // Grain size in pixels of the (rectified) photo.
+        let mm_per_px = 0.5 * (size[0] / img.width() as f64 + size[1] / img.height() as f64);
+        let params = photo::Params { grain_px: self.grain_mm / mm_per_px, ..Default::default() };
+        let found = photo::find_lines(&img, size, &params);
         let grid = (self.as_grid || !found.curves.is_empty()).then(|| {
             let (nx, ny) = grid_dims(self.grid, size);
             node_field::node_field(&found.nodes(photo::DEFAULT_SNAP), size, nx, ny)
@@ -331,6 +338,17 @@ impl FromPhotoArgs {
         }
         if !(3..=401).contains(&self.grid) {
             return Err(InputError(format!("--grid must be in 3..=401, got {}", self.grid)).into());
+        }
+        if !(self.grain_mm.is_finite()
+            && self.grain_mm >= 0.0
+            && self.grain_mm < 0.1 * size[0].min(size[1]))
+        {
+            return Err(InputError(format!(
+                "--grain-mm must be in [0, {:.1}) (a tenth of the plate's short side), got {}",
+                0.1 * size[0].min(size[1]),
+                self.grain_mm
+            ))
+            .into());
         }
         if let Some(c) = &self.corners
             && !c.iter().all(|v| v.is_finite())

@@ -19,6 +19,7 @@ use image::GrayImage;
 
 use super::contour::Polyline;
 
+mod coarse;
 #[cfg(test)]
 mod curve_tests;
 mod curves;
@@ -53,6 +54,9 @@ pub struct Params {
     /// chains that turn more per length (measured on the chain simplified at twice
     /// `simplify_px`) zig-zag through scattered grains.
     pub min_radius: f64,
+    /// Grain diameter (pixels): above 2 px the grains (lentils) are found as bands of
+    /// separate disks ([`coarse`]) instead of by threshold and skeleton.
+    pub grain_px: f64,
 }
 
 impl Default for Params {
@@ -69,6 +73,7 @@ impl Default for Params {
             simplify_px: 1.5,
             spur_px: 10,
             min_radius: 0.1,
+            grain_px: 0.0,
         }
     }
 }
@@ -346,6 +351,9 @@ impl Frame {
 /// Finds straight node lines, then curved nodes (as polylines) among the skeleton pixels left
 /// over, in a photo of the plate (`size_mm` = [W, H]).
 pub fn find_lines(img: &GrayImage, size_mm: [f64; 2], p: &Params) -> Found {
+    if p.grain_px > 2.0 {
+        return coarse::find(img, size_mm, p, p.grain_px);
+    }
     let (mask, threshold, sand_is_dark) = sand_mask(img, p);
     let sk = skeleton(&clean(&mask, p.open_px, p.close_px));
     let frame = Frame::new(sk.w, sk.h, size_mm);
@@ -614,6 +622,9 @@ pub mod synth {
         pub dark_sand: bool,
         /// Seed.
         pub seed: u64,
+        /// Grain diameter (mm): 0 draws single-pixel grains (sand); lentils are ~4 mm disks,
+        /// scattered so that they cover the same fraction of the plate.
+        pub grain_mm: f64,
     }
 
     impl Scene {
@@ -631,8 +642,57 @@ pub mod synth {
                 noise: 25.0,
                 dark_sand: false,
                 seed,
+                grain_mm: 0.0,
             }
         }
+    }
+
+    /// Fraction of the plate covered by grains at distance `d` (mm) from the nearest node.
+    fn coverage(s: &Scene, d: f64) -> f64 {
+        s.density * (-0.5 * (d / s.sand_sigma_mm).powi(2)).exp() + s.stray
+    }
+
+    /// Distance (mm) from plate point (x, y) (origin at the centre) to the nearest node.
+    fn node_distance(s: &Scene, x: f64, y: f64) -> f64 {
+        s.lines
+            .iter()
+            .map(|&(a, o)| {
+                let a = a.to_radians();
+                (-a.sin() * x + a.cos() * y - o).abs()
+            })
+            .fold(f64::MAX, f64::min)
+            .min(distance_to([x + s.size_mm[0] / 2.0, y + s.size_mm[1] / 2.0], &s.curves))
+    }
+
+    /// Lentils: disks of `grain_mm` whose centres fall with the density that covers the
+    /// same fraction of the plate as single-pixel sand would (`None` for sand).
+    fn lentil_mask(s: &Scene, rng: &mut Rng) -> Option<Vec<bool>> {
+        if s.grain_mm <= 0.0 {
+            return None;
+        }
+        let (w, h) = (s.px.0 as i64, s.px.1 as i64);
+        let (sx, sy) = (s.size_mm[0] / w as f64, s.size_mm[1] / h as f64);
+        let r = 0.5 * s.grain_mm;
+        let disk_px = std::f64::consts::PI * r * r / (sx * sy);
+        let (rx, ry) = ((r / sx).ceil() as i64, (r / sy).ceil() as i64);
+        let mut mask = vec![false; (w * h) as usize];
+        for row in 0..h {
+            for col in 0..w {
+                let x = (col as f64 + 0.5) * sx - s.size_mm[0] / 2.0;
+                let y = s.size_mm[1] / 2.0 - (row as f64 + 0.5) * sy;
+                if rng.uniform() >= coverage(s, node_distance(s, x, y)) / disk_px {
+                    continue;
+                }
+                for j in (row - ry).max(0)..(row + ry + 1).min(h) {
+                    for i in (col - rx).max(0)..(col + rx + 1).min(w) {
+                        if ((i - col) as f64 * sx).hypot((j - row) as f64 * sy) <= r {
+                            mask[(j * w + i) as usize] = true;
+                        }
+                    }
+                }
+            }
+        }
+        Some(mask)
     }
 
     /// Renders the scene.
@@ -640,25 +700,19 @@ pub mod synth {
         let mut rng = Rng(s.seed);
         let (w, h) = s.px;
         let (sx, sy) = (s.size_mm[0] / w as f64, s.size_mm[1] / h as f64);
+        let lentils = lentil_mask(s, &mut rng);
         let mut img = GrayImage::new(w, h);
         for row in 0..h {
             for col in 0..w {
                 let x = (col as f64 + 0.5) * sx - s.size_mm[0] / 2.0;
                 let y = s.size_mm[1] / 2.0 - (row as f64 + 0.5) * sy;
-                let d = s
-                    .lines
-                    .iter()
-                    .map(|&(a, o)| {
-                        let a = a.to_radians();
-                        (-a.sin() * x + a.cos() * y - o).abs()
-                    })
-                    .fold(f64::MAX, f64::min)
-                    .min(distance_to([x + s.size_mm[0] / 2.0, y + s.size_mm[1] / 2.0], &s.curves));
-                let p = s.density * (-0.5 * (d / s.sand_sigma_mm).powi(2)).exp() + s.stray;
                 // Lighting gradient across the plate plus noise.
                 let light = 70.0 + 30.0 * (col as f64 / w as f64) - 15.0 * (row as f64 / h as f64);
                 let noise = s.noise * (rng.uniform() + rng.uniform() + rng.uniform() - 1.5);
-                let grain = rng.uniform() < p;
+                let grain = match &lentils {
+                    Some(m) => m[(row * w + col) as usize],
+                    None => rng.uniform() < coverage(s, node_distance(s, x, y)),
+                };
                 let v = match (grain, s.dark_sand) {
                     (false, false) => light + noise,
                     (true, false) => 190.0 + 40.0 * rng.uniform() + noise,
