@@ -102,7 +102,7 @@ pub struct StepMap {
     sampled: Option<Vec<(f64, f64)>>,
     /// Extra distance to boundaries for sampled maps (half the start spacing).
     slack: f64,
-    /// Simulated grid maps: start points outside the mode's feed region (no interior node
+    /// Simulated grid maps: start points outside the mode's reach (no interior node
     /// reached; see [`sampled_map`]).
     pub dead_starts: usize,
 }
@@ -279,7 +279,7 @@ pub fn map_starts(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]>
 /// Grid modes only: a start point from which some run ends with the centroid within half the
 /// part's radius of the plate edge reached no interior node (near a clamped edge φ and ∂φ/∂x
 /// vanish, the pull falls off like x³ and parts drift onto the clamp); it lies outside the
-/// mode's feed region, is left out of the map and counted in [`StepMap::dead_starts`].
+/// mode's reach, is left out of the map and counted in [`StepMap::dead_starts`].
 pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, period: f64) -> StepMap {
     let field = FieldModel::new(mode, plate);
     let t0 = body.radius / (mode.speed_mm_s * field.max_gain());
@@ -636,20 +636,21 @@ pub struct Settle {
     pub lingering: usize,
     /// Start points simulated.
     pub points: usize,
-    /// Grid modes: start points outside the feed region, from which the part ended on the
-    /// plate edge instead of a node (left out of the settle time).
-    pub outside_feed: Vec<[f64; 2]>,
+    /// Grid modes: start points from which the part ended on the plate edge instead of a
+    /// node (outside the mode's reach, e.g. at a cantilever's clamp; left out of the settle
+    /// time).
+    pub ends_on_edge: Vec<[f64; 2]>,
 }
 
 /// Simulated settle time of a step from the given orientations (deg), from the start points
-/// of [`start_points`]: the slowest start, except lingering ones and those outside the
-/// mode's feed region (see [`Settle`]).
+/// of [`start_points`]: the slowest start, except lingering ones and those that end on the
+/// plate edge (see [`Settle`]).
 pub fn settle_time(body: &Body, mode: &Mode, plate: &PlateModel, orientations: &[f64]) -> Settle {
     let field = FieldModel::new(mode, plate);
     let p = SimParams { speed: mode.speed_mm_s, t_limit: 3600.0, run_to_limit: false };
     let mut times = Vec::new();
     let points = start_points(body, mode, plate);
-    let mut outside_feed = Vec::new();
+    let mut ends_on_edge = Vec::new();
     for &pt in &points {
         let runs: Vec<sim::Run> = orientations
             .iter()
@@ -657,18 +658,18 @@ pub fn settle_time(body: &Body, mode: &Mode, plate: &PlateModel, orientations: &
                 sim::run(body, &field, p, Pose { x: pt[0], y: pt[1], theta: th.to_radians() })
             })
             .collect();
-        // Grid modes: a corner outside the feed region (see [`sampled_map`]) never reaches a
+        // Grid modes: a corner outside the mode's reach (see [`sampled_map`]) never reaches a
         // node; its drift onto the clamp is no settle time.
         if matches!(mode.node, Node::Grid(_))
             && runs.iter().any(|r| on_plate_edge(body, plate, r.pose))
         {
-            outside_feed.push(pt);
+            ends_on_edge.push(pt);
             continue;
         }
         times.extend(runs.iter().map(|r| r.settle_s));
     }
     let (settle_s, lingering) = slowest_settled(times);
-    Settle { settle_s, lingering, points: points.len(), outside_feed }
+    Settle { settle_s, lingering, points: points.len(), ends_on_edge }
 }
 
 /// The slowest of some settle times (s) and how many were left out as lingering (slower than

@@ -1,7 +1,7 @@
 //! The planner on solver-made modes (issue 6): `chladni plate modes --write-modes` on the
 //! cantilever plate, the modes read back as `grid` nodes, a plan for the rectangle that uses
 //! the torsion mode (node line along the plate's mid-line y = 100 mm), verified by independent
-//! simulation from many start poses in the mode's feed region (x ≥ 150 mm within the planned duration: nearer the clamp
+//! simulation from many start poses in the mode's reach (x ≥ 150 mm within the planned duration: nearer the clamp
 //! the pull vanishes like x³ and parts drift onto the clamp instead of the node).
 
 use std::path::Path;
@@ -37,7 +37,7 @@ fn rectangle_plan_on_solver_made_cantilever_modes_holds_in_simulation() {
     let problem = Problem::new(&part, &plate, &opt).unwrap();
     // Mode 1 (bending, no interior node): every start drifts onto the clamp or never settles.
     assert!(problem.maps[0].dead_starts >= 3, "{}", problem.maps[0].dead_starts);
-    // Mode 2 (torsion): the two corners at the clamp lie outside the feed region; from the
+    // Mode 2 (torsion): the two corners at the clamp lie outside the mode's reach; from the
     // centre and the two far corners the rectangle lies along the node line; the only basin
     // boundary is its unstable rest across the node (90°, sampled exactly from the centre,
     // which lies on the node).
@@ -49,14 +49,14 @@ fn rectangle_plan_on_solver_made_cantilever_modes_holds_in_simulation() {
     assert_eq!(syn.period_deg, 180.0);
     assert!(cdist(syn.final_orientation_deg, 0.0, 180.0) < 0.5, "{}", syn.final_orientation_deg);
     assert!(syn.steps[0].duration_ms < 3_600_000);
-    // `chladni plan` reports the feed region: the two clamp-side corners of the 9 settle
-    // start points end on the clamp edge.
+    // `chladni plan` reports the mode's reach: from the two clamp-side corners of the 9
+    // settle start points the part ends on the clamp edge.
     let settle = &syn.steps[0].settle;
     assert_eq!(settle.points, 9);
-    assert_eq!(settle.outside_feed.len(), 2, "{settle:?}");
-    assert!(settle.outside_feed.iter().all(|p| p[0] < 50.0), "{settle:?}");
+    assert_eq!(settle.ends_on_edge.len(), 2, "{settle:?}");
+    assert!(settle.ends_on_edge.iter().all(|p| p[0] < 50.0), "{settle:?}");
 
-    // Independent check: start poses on a grid over the feed region, every 30°.
+    // Independent check: start poses on a grid over the mode's reach, every 30°.
     let body = Body::new(&part);
     let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, &plate)).collect();
     let steps = syn.sim_steps();

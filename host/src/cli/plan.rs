@@ -174,17 +174,17 @@ impl PlanArgs {
                         s.settle.lingering
                     );
                 }
-                if !s.settle.outside_feed.is_empty() {
+                if !s.settle.ends_on_edge.is_empty() {
                     let at = s
                         .settle
-                        .outside_feed
+                        .ends_on_edge
                         .iter()
                         .map(|p| format!("({:.0}, {:.0})", p[0], p[1]))
                         .collect::<Vec<_>>()
                         .join(", ");
                     println!(
-                        "           feed region: {} of {} simulated start points reach a node; from {at} mm the part ends on the plate edge — place parts away from there",
-                        s.settle.points - s.settle.outside_feed.len(),
+                        "           reach      {} of {} simulated start points end on a node; from {at} mm the part ends on the plate edge (drop parts elsewhere, or plan for the drop region with --feed)",
+                        s.settle.points - s.settle.ends_on_edge.len(),
                         s.settle.points
                     );
                 }

@@ -447,7 +447,7 @@ fn confirm(
             before,
             after: orientations(&poses, t.period),
             duration_ms: step_duration_ms(settle_s, opt.safety, t.plate.modes[k].ramp_ms),
-            settle: Settle { settle_s, lingering, points: starts.len(), outside_feed: Vec::new() },
+            settle: Settle { settle_s, lingering, points: starts.len(), ends_on_edge: Vec::new() },
         });
     }
     let (theta, dev) = spread(&poses, t.period);
