@@ -164,14 +164,7 @@ fn oblique_photo_is_rectified_by_its_corners() {
 // grain size over a tenth of the plate is refused.
 #[test]
 fn lentil_photo_with_grain_size() {
-    let img = render(&Scene {
-        px: (720, 480),
-        grain_mm: 4.0,
-        sand_sigma_mm: 5.0,
-        density: 0.8,
-        stray: 0.01,
-        ..Scene::standard(vec![(90.0, 40.0), (20.0, -30.0)], vec![], 2)
-    });
+    let img = render(&Scene::lentils(vec![(90.0, 40.0), (20.0, -30.0)], vec![], 2));
     let path = tmp("lentils.png");
     img.save(&path).unwrap();
     let out = from_photo(&path, &["--grain-mm", "4", "--json"]);

@@ -265,14 +265,9 @@ fn merge(
         merged = false;
         'outer: for i in 0..sets.len() {
             for j in i + 1..sets.len() {
-                let (a, b) = (fit_line(&sets[i], centre), fit_line(&sets[j], centre));
-                let mut da = (a.angle_deg - b.angle_deg).abs();
-                let mut ob = b.offset_mm;
-                if da > 90.0 {
-                    da = 180.0 - da;
-                    ob = -ob;
-                }
-                if da < 5.0 && (a.offset_mm - ob).abs() < 3.0 * grain {
+                let b = fit_line(&sets[j], centre);
+                let (da, doff) = fit_line(&sets[i], centre).difference(b.angle_deg, b.offset_mm);
+                if da < 5.0 && doff < 3.0 * grain {
                     let other = sets.swap_remove(j);
                     sets[i].extend(other);
                     sets[i] = band_pixels(&sets[i], pts, grain);

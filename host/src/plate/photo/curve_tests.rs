@@ -194,14 +194,7 @@ fn line_truth(angle_deg: f64, offset_mm: f64) -> Polyline {
 
 /// A 720×480 photo of lentils (4 mm disks, 10 px) in bands (σ = 5 mm) on the given nodes.
 fn lentils(lines: Vec<(f64, f64)>, curves: Vec<Polyline>, seed: u64) -> (image::GrayImage, Params) {
-    let s = Scene {
-        px: (720, 480),
-        grain_mm: 4.0,
-        sand_sigma_mm: 5.0,
-        density: 0.8,
-        stray: 0.01,
-        ..Scene::standard(lines, curves, seed)
-    };
+    let s = Scene::lentils(lines, curves, seed);
     (render(&s), Params { grain_px: 4.0 * 720.0 / 300.0, ..Params::default() })
 }
 
@@ -222,15 +215,7 @@ fn line_errors(found: &[Line], truth: &[(f64, f64)]) -> (f64, f64) {
     truth.iter().fold((0.0f64, 0.0f64), |(wa, wo), &t| {
         let (da, dof) = found
             .iter()
-            .map(|l| {
-                let (mut da, mut off) = (l.angle_deg - t.0, l.offset_mm);
-                if da > 90.0 {
-                    (da, off) = (da - 180.0, -off);
-                } else if da < -90.0 {
-                    (da, off) = (da + 180.0, -off);
-                }
-                (da.abs(), (off - t.1).abs())
-            })
+            .map(|l| l.difference(t.0, t.1))
             .min_by(|a, b| a.0.total_cmp(&b.0))
             .unwrap_or((f64::INFINITY, f64::INFINITY));
         (wa.max(da), wo.max(dof))
