@@ -5,11 +5,15 @@
 #   scripts/firmware.sh clippy qemu|stm32l475
 #   scripts/firmware.sh test   qemu             -> on-target tests in QEMU
 #   scripts/firmware.sh size   qemu|stm32l475
+#   scripts/firmware.sh run    qemu             -> boot in QEMU, defmt log on stdout (Ctrl-C ends;
+#                                                  `chladni emulator` is the one with a link)
+#   scripts/firmware.sh run    stm32l475        -> flash the board with probe-rs, then its defmt
+#                                                  log over RTT (installs probe-rs-tools if missing)
 #   scripts/firmware.sh bench  qemu             -> per-sample cost of the drive (QEMU -icount)
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cmd=${1:?usage: firmware.sh build|clippy|test|size BOARD}
-board=${2:?usage: firmware.sh build|clippy|test|size BOARD}
+cmd=${1:?usage: firmware.sh build|clippy|test|size|run|bench BOARD}
+board=${2:?usage: firmware.sh build|clippy|test|size|run|bench BOARD}
 case "$board" in qemu|stm32l475) ;; *) echo "unknown board '$board' (qemu or stm32l475)" >&2; exit 2 ;; esac
 args=(-p chladni-firmware --target thumbv7em-none-eabihf --profile firmware
       --features "board-$board" --target-dir target/firmware)
@@ -27,6 +31,13 @@ case "$cmd" in
           $1 ~ /^\.data$/ {flash += $2; ram += $2}
           $1 ~ /^\.(bss|uninit)$/ {ram += $2}
           END {printf "firmware %s: flash %d B, static RAM %d B\n", b, flash, ram}' ;;
+  run)
+    elf=$("$0" build "$board")
+    if [ "$board" = qemu ]; then
+      QEMU_TIMEOUT=${QEMU_TIMEOUT:-86400} exec scripts/qemu-run.sh "$elf"
+    fi
+    scripts/install-deps.sh --board
+    exec probe-rs run --chip "${CHLADNI_CHIP:-STM32L475VGTx}" ${CHLADNI_PROBE:+--probe "$CHLADNI_PROBE"} "$elf" ;;
   bench) [ "$board" = qemu ] || { echo "bench runs on the qemu board only" >&2; exit 2; }
          cargo build "${args[@]}" --bin bench_drive >&2 &&
          QEMU_EXTRA="-icount shift=0" scripts/qemu-run.sh \

@@ -1,14 +1,43 @@
 #!/usr/bin/env bash
-# Installs what Chladni needs beyond the Rust toolchain (rust-toolchain.toml brings that):
+# Installs everything Chladni needs, from nothing but rustup and Debian's apt:
+#   - the Rust toolchain named by rust-toolchain.toml, with its components and the
+#     thumbv7em-none-eabihf target (`rustup toolchain install` reads the file; it also adds a
+#     missing target or component to a toolchain that is already installed, which a plain
+#     `cargo` call does not do)
 #   - qemu-system-arm 10 from Debian bookworm-backports (the emulated B-L475E-IOT01A)
-#   - binutils-arm-none-eabi (arm-none-eabi-size for the size report)
+#   - binutils-arm-none-eabi (arm-none-eabi-size/nm/objdump: size report, image checks)
 #   - defmt-print (decodes the QEMU firmware's defmt log)
+# With --board it also installs probe-rs-tools (the `probe-rs` command, for
+# `scripts/firmware.sh run stm32l475`: flash the real board and print its defmt log over RTT).
 # Idempotent: every step checks first, so running it twice costs seconds.
 set -euo pipefail
+cd "$(dirname "$0")/.."
+
+board=false
+for arg in "$@"; do
+  case "$arg" in
+    --board) board=true ;;
+    *) echo "install-deps: unknown option '$arg' (only --board)" >&2; exit 2 ;;
+  esac
+done
 
 SUDO=""
 if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi
 
+# 1. Rust, from rust-toolchain.toml, before any cargo call.
+if ! command -v rustup >/dev/null; then
+  echo "install-deps: rustup not found. Install it (https://rustup.rs, or Debian's 'rustup'" >&2
+  echo "package), make sure \$CARGO_HOME/bin is on PATH, and run this again." >&2
+  exit 1
+fi
+rustup toolchain install
+if ! rustup target list --installed | grep -qx thumbv7em-none-eabihf; then
+  echo "install-deps: thumbv7em-none-eabihf still missing after 'rustup toolchain install'" >&2
+  exit 1
+fi
+rustc --version
+
+# 2. Debian packages.
 need_apt=()
 if ! qemu-system-arm --version 2>/dev/null | grep -qE 'version (9|1[0-9])\.'; then
   need_apt+=(qemu-system-arm)
@@ -34,7 +63,12 @@ if [ ${#need_apt[@]} -gt 0 ]; then
 fi
 qemu-system-arm --version | head -n 1
 
+# 3. Cargo-installed tools (into $CARGO_HOME/bin).
 if ! command -v defmt-print >/dev/null; then
   echo "install-deps: cargo install defmt-print"
   cargo install --locked defmt-print@1.0.0 2>&1 | tail -n 2
+fi
+if $board && ! command -v probe-rs >/dev/null; then
+  echo "install-deps: cargo install probe-rs-tools (a few minutes)"
+  cargo install --locked probe-rs-tools@0.32.0 2>&1 | tail -n 2
 fi

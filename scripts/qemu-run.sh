@@ -7,6 +7,30 @@
 # QEMU_EXTRA adds options (e.g. "-icount shift=0" for the instruction-counting benchmark).
 set -uo pipefail
 elf=${1:?usage: qemu-run.sh ELF}
+
+# The board an image was built for, from its CHLADNI_BOARD symbol (NUL-padded name); empty if
+# the image has none (not a Chladni firmware image).
+board_of() {
+  local addr hex
+  addr=$(arm-none-eabi-nm "$1" 2>/dev/null | awk '$3 == "CHLADNI_BOARD" {print $1; exit}')
+  [ -n "$addr" ] || return 0
+  hex=$(arm-none-eabi-objdump -s --start-address=0x"$addr" \
+          --stop-address="$(printf '0x%x' $((0x$addr + 16)))" "$1" |
+        awk '/^ [0-9a-f]+ / {for (i = 2; i <= 5 && $i ~ /^[0-9a-f]+$/; i++) printf "%s", $i}')
+  printf '%b' "$(printf '%s' "$hex" | fold -w2 | grep -v '^00$' | sed 's/^/\\x/' | tr -d '\n')"
+}
+# One runner serves the whole target, so `cargo run --features board-stm32l475` lands here too:
+# refuse an image QEMU cannot run instead of booting it into a hang.
+board=$(board_of "$elf")
+if [ "$board" != qemu ]; then
+  echo "qemu-run: $elf is ${board:+a '$board' image, }not a QEMU-board image${board:- (no CHLADNI_BOARD symbol)}." >&2
+  if [ "$board" = stm32l475 ]; then
+    echo "qemu-run: it runs on the B-L475E-IOT01A: scripts/firmware.sh run stm32l475, or chladni flash --elf $elf" >&2
+  else
+    echo "qemu-run: build the QEMU image with --features board-qemu (scripts/firmware.sh run qemu)" >&2
+  fi
+  exit 2
+fi
 serial=(-serial null)
 if [ -n "${QEMU_SERIAL:-}" ]; then serial=(-chardev "$QEMU_SERIAL,id=s0" -serial chardev:s0); fi
 # Flash bank 2 lives in a fresh erased file for each run (see firmware/src/board/qemu/flash.rs).

@@ -25,4 +25,21 @@ done
 step "tests (host, on-target in QEMU, end-to-end)"
 cargo test
 
+# scripts/hitl.sh runs the end-to-end suite against a port instead of its own QEMU; try that
+# path here against a standalone `chladni emulator` (no board on CI).
+step "hardware-in-the-loop path (scripts/hitl.sh against a standalone emulator)"
+cargo build --bin chladni
+hitl_dir=$(mktemp -d)
+target/debug/chladni emulator --time-limit-s 600 --log "$hitl_dir/firmware.log" >"$hitl_dir/out" &
+emu=$!
+trap 'kill $emu 2>/dev/null || true; rm -rf "$hitl_dir"' EXIT
+for _ in $(seq 1 600); do
+  grep -q 'tcp://' "$hitl_dir/out" && break
+  kill -0 $emu || { echo "the emulator did not start"; exit 1; }
+  sleep 0.1
+done
+port=$(grep -o 'tcp://[0-9.:]*' "$hitl_dir/out" | head -n 1)
+CHLADNI_EXPECT_BOARD=qemu scripts/hitl.sh "$port" --no-flash
+kill $emu
+
 step "done in $(( $(date +%s) - start )) s"

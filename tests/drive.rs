@@ -1,29 +1,23 @@
-//! End to end: plans and manual drive sent from the host over the link to the firmware in QEMU.
+//! End to end: plans and manual drive sent from the host over the link to the firmware in QEMU,
+//! or to the real board on `CHLADNI_PORT` (hardware in the loop).
 //!
 //! Timing assertions are on sample counts reported by the firmware, never on wall time: QEMU's
 //! clock follows the host's and slips under load. Polling uses generous deadlines.
 
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use chladni::device::{DeviceClient, DeviceError};
-use chladni::emulator::{Emulator, EmulatorConfig};
+use chladni_e2e::Controller;
 use chladni_shared::dds::SAMPLES_PER_MS;
 use chladni_shared::link::{DriveError, DriveState, Plan, PlanError, StatusReport};
 use chladni_shared::plan::Step;
 use chladni_shared::runner::{BLOCK_LEN, MANUAL_RAMP_MS};
 
-fn start(name: &str) -> (Emulator, DeviceClient) {
-    let log = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("drive-{name}.log"));
-    let emulator = Emulator::start(&EmulatorConfig {
-        time_limit: Some(Duration::from_secs(240)),
-        log_file: Some(log),
-        ..Default::default()
-    })
-    .expect("emulator starts");
-    let mut client = emulator.connect().expect("connect");
+fn start(name: &str) -> (Controller, DeviceClient) {
+    let controller = Controller::start(&format!("drive-{name}"));
+    let mut client = controller.connect().expect("connect");
     client.set_timeout(Duration::from_secs(10));
-    (emulator, client)
+    (controller, client)
 }
 
 fn plan(name: &str, steps: &[Step], repeat: u16) -> Plan {

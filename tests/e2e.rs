@@ -1,12 +1,13 @@
-//! End to end: the host client against the firmware running in QEMU over USART1 ↔ TCP.
+//! End to end: the host client against the firmware running in QEMU over USART1 ↔ TCP, or
+//! against the real board on `CHLADNI_PORT` (hardware in the loop).
 //! One QEMU boot for the whole sequence (boots cost seconds on a 2-core CI machine).
 
 use std::time::Duration;
 
 use chladni::device::{DeviceClient, DeviceError};
-use chladni_e2e::{pseudo_random_bytes, start_emulator};
+use chladni_e2e::{Controller, pseudo_random_bytes};
 use chladni_shared::link::{
-    Board, DriveState, LinkError, MAX_FRAME, PROTOCOL_VERSION, Request, StatusReport,
+    DriveState, LinkError, MAX_FRAME, PROTOCOL_VERSION, Request, StatusReport,
 };
 
 /// Polls `status` until `done` holds (generous timeout: QEMU's clock slips under load).
@@ -25,15 +26,14 @@ fn wait_for(client: &mut DeviceClient, done: impl Fn(&StatusReport) -> bool) -> 
 #[test]
 fn link_survives_everything_the_host_can_throw_at_it() {
     let _ = std::fs::remove_file(chladni_e2e::flash_path("link"));
-    let mut emulator = start_emulator("link");
-    let pid = emulator.pid();
-    let mut client = emulator.connect().expect("connect to emulator");
+    let mut controller = Controller::start("link");
+    let mut client = controller.connect().expect("connect to the controller");
     client.set_timeout(Duration::from_secs(10));
 
     // Ping and GetInfo.
     client.ping().expect("first ping");
     let info = client.info().expect("GetInfo");
-    assert_eq!(info.board, Board::Qemu);
+    assert_eq!(info.board, controller.expected_board());
     assert_eq!(info.protocol_version, PROTOCOL_VERSION);
     assert_eq!(info.firmware_version.as_str(), env!("CARGO_PKG_VERSION"));
 
@@ -93,10 +93,15 @@ fn link_survives_everything_the_host_can_throw_at_it() {
 
     // A second client after the first disconnects (QEMU's socket accepts the next one).
     drop(client);
-    let mut second = emulator.connect().expect("reconnect");
+    let mut second = controller.connect().expect("reconnect");
     second.set_timeout(Duration::from_secs(10));
     second.ping().expect("ping from a second connection");
+    drop(second);
 
+    let Some(emulator) = controller.emulator("flash file and QEMU process checks") else {
+        return;
+    };
+    let pid = emulator.pid();
     emulator.stop();
     let log = chladni_e2e::read_log(&chladni_e2e::log_path("link"));
     assert!(log.contains("flash bank 2 backed by"), "flash file not in use:\n{log}");

@@ -1,10 +1,87 @@
-//! Helpers shared by the end-to-end tests: start the emulated controller the same way
-//! `chladni emulator` does, with a time limit and a log file per test.
+//! Helpers shared by the end-to-end tests: the controller under test, which is the firmware
+//! in QEMU (started the same way `chladni emulator` does, with a time limit and a log file per
+//! test) or, when `CHLADNI_PORT` is set, a real board on that port (a serial device path or
+//! `tcp://HOST:PORT`): hardware in the loop, run by `scripts/hitl.sh`.
 
 use std::path::PathBuf;
+use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
+use chladni::device::{DeviceClient, DeviceError};
 use chladni::emulator::{Emulator, EmulatorConfig};
+use chladni_shared::link::Board;
+
+/// The environment variable that points the tests at a real controller.
+pub const PORT_VAR: &str = "CHLADNI_PORT";
+
+/// The real controller's port, when the tests run against one.
+pub fn real_port() -> Option<String> {
+    std::env::var(PORT_VAR).ok().filter(|p| !p.trim().is_empty())
+}
+
+/// One real board serves one test at a time (tests in a file run on parallel threads).
+static REAL_BOARD: Mutex<()> = Mutex::new(());
+
+/// The controller a test talks to.
+pub enum Controller {
+    /// The firmware in QEMU, owned by the test.
+    Emulated(Emulator),
+    /// A real board on a port; the guard keeps other tests of this process off it.
+    Real {
+        /// Serial path or `tcp://HOST:PORT`.
+        port: String,
+        /// Held for the test's lifetime.
+        _turn: MutexGuard<'static, ()>,
+    },
+}
+
+impl Controller {
+    /// The real board from `CHLADNI_PORT` if set, else a fresh emulator for test `name`.
+    pub fn start(name: &str) -> Controller {
+        match real_port() {
+            Some(port) => Controller::Real {
+                port,
+                _turn: REAL_BOARD.lock().unwrap_or_else(|poisoned| poisoned.into_inner()),
+            },
+            None => Controller::Emulated(start_emulator(name)),
+        }
+    }
+
+    /// A new client on the controller's link.
+    pub fn connect(&self) -> Result<DeviceClient, DeviceError> {
+        match self {
+            Controller::Emulated(emulator) => emulator.connect(),
+            Controller::Real { port, .. } => DeviceClient::open(port),
+        }
+    }
+
+    /// The board the controller must report: QEMU for the emulator; on a port, the board named
+    /// by `CHLADNI_EXPECT_BOARD` (`qemu` when the port is a `chladni emulator` started by hand,
+    /// which is how the hardware-in-the-loop path itself is tried without a board), else the
+    /// B-L475E-IOT01A.
+    pub fn expected_board(&self) -> Board {
+        match self {
+            Controller::Emulated(_) => Board::Qemu,
+            Controller::Real { .. } => match std::env::var("CHLADNI_EXPECT_BOARD").as_deref() {
+                Ok("qemu") => Board::Qemu,
+                Ok("stm32l475") | Err(_) => Board::Stm32l475,
+                Ok(other) => panic!("CHLADNI_EXPECT_BOARD={other}: expected qemu or stm32l475"),
+            },
+        }
+    }
+
+    /// The emulator, for what only QEMU can do (restart, its process, its log, its flash file);
+    /// `None` on a real board, after printing that `what` is skipped there.
+    pub fn emulator(&mut self, what: &str) -> Option<&mut Emulator> {
+        match self {
+            Controller::Emulated(emulator) => Some(emulator),
+            Controller::Real { port, .. } => {
+                println!("skipped on the real board at {port}: {what} (needs QEMU)");
+                None
+            }
+        }
+    }
+}
 
 /// Longest any one emulator may live: QEMU is killed after this even if the test hangs.
 pub const EMULATOR_TIME_LIMIT: Duration = Duration::from_secs(600);
