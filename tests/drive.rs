@@ -6,7 +6,7 @@
 
 use std::time::{Duration, Instant};
 
-use chladni::device::{DeviceClient, DeviceError};
+use chladni::controller::client::{DeviceClient, DeviceError};
 use chladni_e2e::Controller;
 use chladni_shared::dds::SAMPLES_PER_MS;
 use chladni_shared::link::{DriveError, DriveState, Plan, PlanError, StatusReport};

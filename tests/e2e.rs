@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use chladni::device::{DeviceClient, DeviceError};
+use chladni::controller::client::{DeviceClient, DeviceError};
 use chladni_e2e::{Controller, pseudo_random_bytes};
 use chladni_shared::link::{
     DriveState, LinkError, MAX_FRAME, PROTOCOL_VERSION, Request, StatusReport,

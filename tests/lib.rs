@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
-use chladni::device::{DeviceClient, DeviceError};
-use chladni::emulator::{Emulator, EmulatorConfig};
+use chladni::controller::client::{DeviceClient, DeviceError};
+use chladni::controller::emulator::{Emulator, EmulatorConfig};
 use chladni_shared::link::Board;
 
 /// The environment variable that points the tests at a real controller.

@@ -6,10 +6,10 @@
 
 use std::hint::black_box;
 
-use chladni::part::Part;
+use chladni::model::part::Part;
+use chladni::model::plate::PlateModel;
+use chladni::model::plate_file::PlateFile;
 use chladni::planner::{self, PlanOptions, Problem};
-use chladni::plate::file::PlateFile;
-use chladni::plate::model::PlateModel;
 use criterion::{Criterion, criterion_group, criterion_main};
 
 /// An irregular 64-gon (an ellipse with a few harmonics): no symmetry.

@@ -6,15 +6,15 @@
 
 use std::hint::black_box;
 
-use chladni::physics::string::{self, Params as StringParams};
+use chladni::model::plate_file::PlateFile;
+use chladni::motion::string::{self, Params as StringParams};
 use chladni::plate::contour::node_lines;
-use chladni::plate::file::PlateFile;
 use chladni::plate::photo::synth::{Scene, render};
 use chladni::plate::photo::{self, DEFAULT_SNAP, Params};
 use chladni::plate::{node_field, solver};
 use criterion::{Criterion, criterion_group, criterion_main};
 
-fn plate(text: &str) -> chladni::plate::file::Plate {
+fn plate(text: &str) -> chladni::model::plate_file::Plate {
     PlateFile::parse(text, "bench").unwrap().plate.mechanics().unwrap()
 }
 

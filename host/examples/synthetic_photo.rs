@@ -6,8 +6,8 @@
 //! with OVERLAY,
 //! also writes the photo with the nodes `plate::photo` recovers from it drawn in white.
 
+use chladni::model::plate_file::PlateFile;
 use chladni::plate::contour::node_lines;
-use chladni::plate::file::PlateFile;
 use chladni::plate::photo::synth::{Scene, render};
 use chladni::plate::photo::{self, DEFAULT_SNAP, Params};
 use chladni::plate::solver;

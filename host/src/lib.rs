@@ -1,29 +1,21 @@
 //! # chladni (host library)
 //!
-//! Everything the `chladni` command does, as a library the CLI and the end-to-end tests share:
-//! - [`device`]: the client for the controller's link (serial port or QEMU's TCP socket).
-//! - [`emulator`]: builds the QEMU firmware and runs it as a controller on a TCP port.
-//! - [`firmware`]: locates and builds firmware images.
-//! - [`plate`]: plate files, the plate mode solver, node lines, Chladni photos.
-//! - [`physics`]: the particle-on-a-string model of the paper's Appendix.
-//! - [`part`]: planar parts: JSON/SVG import and validation.
-//! - [`reference`]: the f64 reference implementation of the rest analysis.
-//! - [`plot`]: part, turn-function and alignment-function plots.
-//! - [`plan_file`]: the plan JSON file ⇄ the device plan.
-//! - [`plan_plot`]: plan and motion-trace figures.
+//! Everything the `chladni` command does, as a library the CLI and the end-to-end tests share.
+//! The CLI (`src/cli/`) only parses arguments, calls this library and renders the result.
+//! - [`model`]: the files: parts (JSON, SVG), plates and their modes (TOML), plans (JSON).
+//! - [`analysis`]: rest analysis of a part at a straight node (the f64 reference).
+//! - [`motion`]: quasi-static part motion under a mode's field; the particle on a string.
+//! - [`plate`]: the plate mode solver, node lines, node fields, Chladni photos.
 //! - [`planner`]: sensorless plan synthesis (step maps, BFS over orientation sets; feed-region
 //!   plans by tracking simulated poses, [`planner::feed`]).
-//! - [`sim`]: quasi-static part motion under a mode's field.
+//! - [`plot`]: figures of analyses, plans, traces and plate modes.
+//! - [`controller`]: the link client, the QEMU emulator, firmware builds.
+#![forbid(unsafe_code)]
 
-pub mod device;
-pub mod emulator;
-pub mod firmware;
-pub mod part;
-pub mod physics;
-pub mod plan_file;
-pub mod plan_plot;
+pub mod analysis;
+pub mod controller;
+pub mod model;
+pub mod motion;
 pub mod planner;
 pub mod plate;
 pub mod plot;
-pub mod reference;
-pub mod sim;

@@ -1,10 +1,10 @@
 //! Fixed-point analysis (chladni_shared::rest) against the independent f64 reference
-//! (chladni::reference): rest orientations agree within 0.05° on every test part.
+//! (chladni::analysis::reference): rest orientations agree within 0.05° on every test part.
 
 use std::path::Path;
 
-use chladni::part::{Part, to_fx};
-use chladni::reference::{Law, RefField, Reference};
+use chladni::analysis::reference::{Law, RefField, Reference};
+use chladni::model::part::{Part, to_fx};
 use chladni_shared::field::{Field, FieldKind};
 use chladni_shared::geometry::Pt;
 use chladni_shared::rest::Analyzer;

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use chladni::plate::model::{Node, PlateModel};
+use chladni::model::plate::{Node, PlateModel};
 use chladni::plate::photo::synth::{Scene, arc, render};
 
 fn chladni(args: &[&str]) -> Output {

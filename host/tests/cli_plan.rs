@@ -127,7 +127,7 @@ fn bad_input_exits_2_with_named_errors() {
 
 #[test]
 fn example_plans_parse_as_device_plans_and_match_the_planner() {
-    use chladni::plan_file::PlanFile;
+    use chladni::model::plan_file::PlanFile;
     use chladni_shared::plan::DeviceLimits;
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/plans");
     let mut n = 0;

@@ -6,11 +6,11 @@
 use std::path::Path;
 use std::process::Command;
 
-use chladni::part::Part;
+use chladni::model::part::Part;
+use chladni::model::plate::{Node, PlateModel};
+use chladni::motion::sim::{Body, FieldModel, Pose, run_plan};
 use chladni::planner::feed::{FeedRegion, FeedSearch};
 use chladni::planner::{self, PlanFailure, PlanOptions, cdist};
-use chladni::plate::model::{Node, PlateModel};
-use chladni::sim::{Body, FieldModel, Pose, run_plan};
 
 fn root() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))

@@ -7,10 +7,10 @@
 use std::path::Path;
 use std::process::Command;
 
-use chladni::part::Part;
+use chladni::model::part::Part;
+use chladni::model::plate::{Node, PlateModel};
+use chladni::motion::sim::{Body, FieldModel, Pose, run_plan};
 use chladni::planner::{self, PlanOptions, Problem, cdist};
-use chladni::plate::model::{Node, PlateModel};
-use chladni::sim::{Body, FieldModel, Pose, run_plan};
 
 fn root() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))

@@ -4,12 +4,12 @@
 
 use std::path::Path;
 
-use chladni::part::Part;
+use chladni::model::part::Part;
+use chladni::model::plate::{Node, PlateModel};
+use chladni::model::plate_file::PlateFile;
+use chladni::motion::sim::{Body, FieldModel, Pose, SimStep, run_plan};
 use chladni::planner::{self, Backend, PlanFailure, PlanOptions, Problem, cdist, symmetry_order};
-use chladni::plate::file::PlateFile;
-use chladni::plate::model::{Node, PlateModel};
 use chladni::plate::solver::Grid;
-use chladni::sim::{Body, FieldModel, Pose, SimStep, run_plan};
 
 fn root() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))

@@ -3,8 +3,8 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use chladni::part::{Part, from_fx, to_fx};
-use chladni::plot::{self, PlotData};
+use chladni::model::part::{Part, from_fx, to_fx};
+use chladni::plot::analysis::{self, PlotData};
 use chladni_shared::field::{Field, FieldKind};
 use chladni_shared::fx::{Bam, Fx};
 use chladni_shared::rest::{Analysis, AnalysisError, Analyzer};
@@ -142,7 +142,7 @@ impl AnalyzeArgs {
         }
         if let Some(path) = &self.plot {
             let data = plot_data(&part, &an, &analysis, self.field.name(), &self.describe_field());
-            plot::write(path, &data)?;
+            analysis::write(path, &data)?;
             if !self.json {
                 println!("plot       {}", path.display());
             }

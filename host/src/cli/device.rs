@@ -4,8 +4,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
-use chladni::device::DeviceClient;
-use chladni::plan_file::PlanFile;
+use chladni::controller::client::DeviceClient;
+use chladni::model::plan_file::PlanFile;
 use chladni_shared::plan::{DeviceLimits, Plan};
 use chladni_shared::runner::StatusReport;
 use clap::{Args, Subcommand};

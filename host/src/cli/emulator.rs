@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::mpsc;
 
-use chladni::emulator::{Emulator, EmulatorConfig, EmulatorError};
+use chladni::controller::emulator::{Emulator, EmulatorConfig, EmulatorError};
 
 use super::InputError;
 use clap::Args;

@@ -10,8 +10,8 @@ use plotters::prelude::*;
 use serde_json::json;
 
 use super::InputError;
-use chladni::physics::string::{self, Params};
-use chladni::plate::plot::ensure_font;
+use chladni::motion::string::{self, Params};
+use chladni::plot::plate::ensure_font;
 
 #[derive(Debug, Subcommand)]
 pub enum PhysicsCommand {

@@ -3,13 +3,13 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use chladni::part::Part;
-use chladni::plan_file::PlanFile;
-use chladni::plan_plot;
+use chladni::model::part::Part;
+use chladni::model::plan_file::PlanFile;
+use chladni::model::plate::PlateModel;
+use chladni::motion::sim::{Body, FieldModel, Pose, SimStep, run_plan};
 use chladni::planner::feed::{self, FeedRegion};
 use chladni::planner::{self, PlanOptions};
-use chladni::plate::model::PlateModel;
-use chladni::sim::{Body, FieldModel, Pose, SimStep, run_plan};
+use chladni::plot::plan as plan_plot;
 use chladni_shared::plan::DeviceLimits;
 use clap::Args;
 

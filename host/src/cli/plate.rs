@@ -9,10 +9,12 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
 use super::InputError;
+use chladni::model::modes_file;
+use chladni::model::plate_file::{Boundary, Plate, PlateFile, PlateTable};
 use chladni::plate::contour::{node_lines, total_length};
-use chladni::plate::file::{Boundary, Plate, PlateFile, PlateTable};
 use chladni::plate::photo::rectify::rectify;
-use chladni::plate::{modes_file, node_field, photo, plot, solver};
+use chladni::plate::{node_field, photo, solver};
+use chladni::plot::plate as plot;
 
 #[derive(Debug, Subcommand)]
 pub enum PlateCommand {

@@ -28,9 +28,9 @@ use super::{
     PlanFailure, PlanOptions, PlannedStep, Settle, Synthesis, cdist, on_plate_edge, plan_period,
     slowest_settled, step_duration_ms,
 };
-use crate::part::Part;
-use crate::plate::model::PlateModel;
-use crate::sim::{self, Body, FieldModel, Pose, SimParams, SimStep, run_plan};
+use crate::model::part::Part;
+use crate::model::plate::PlateModel;
+use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams, SimStep, run_plan};
 
 /// A rectangle of the plate (mm) where parts are dropped.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -1,11 +1,7 @@
-//! Plates: the plate file, the Kirchhoff-plate mode solver, node lines (contours of φ = 0),
-//! Chladni photos to node lines, and plots.
+//! Plates: the Kirchhoff-plate mode solver and its sampled mode shapes, node lines (contours of
+//! φ = 0), the signed-distance field of a set of nodes, and Chladni photos to node lines.
 
 pub mod contour;
-pub mod file;
-pub mod model;
-pub mod modes_file;
 pub mod node_field;
 pub mod photo;
-pub mod plot;
 pub mod solver;

@@ -12,7 +12,7 @@
 
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 
-use super::file::{Boundary, Plate};
+use crate::model::plate_file::{Boundary, Plate};
 
 /// Polynomial degree count per direction used by default (`N × N` trial functions).
 pub const DEFAULT_TERMS: usize = 14;

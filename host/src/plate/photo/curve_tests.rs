@@ -3,10 +3,10 @@
 
 use super::synth::{Scene, arc, hyperbola, render};
 use super::*;
+use crate::model::modes_file;
+use crate::model::plate::PlateModel;
+use crate::model::plate_file::PlateFile;
 use crate::plate::contour::{distance_to, node_lines};
-use crate::plate::file::PlateFile;
-use crate::plate::model::PlateModel;
-use crate::plate::modes_file;
 use crate::plate::node_field::node_field;
 use crate::plate::solver;
 

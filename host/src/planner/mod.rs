@@ -5,7 +5,7 @@
 //!    - straight node of direction α: the shared fixed-point analysis in the node frame,
 //!      θ' = α − 90° + a(θ − α + 90°); boundaries = unstable rests (the f64 reference can be
 //!      used instead, [`Backend::F64`], to check agreement);
-//!    - hyperbola and grid nodes: quasi-static simulation ([`crate::sim`]) from `sim_starts`
+//!    - hyperbola and grid nodes: quasi-static simulation ([`crate::motion::sim`]) from `sim_starts`
 //!      start orientations at one start point (hyperbola: its vertex; grid: the plate centre);
 //!      final orientations are clustered (2°) into rests, boundaries lie between neighbouring
 //!      starts that end in different rests.
@@ -35,11 +35,11 @@ use chladni_shared::fx::Bam;
 use chladni_shared::geometry::Pt;
 use chladni_shared::rest::Analyzer;
 
-use crate::part::{Part, to_fx};
-use crate::plan_file::{PlanFile, StepJson};
-use crate::plate::model::{Law, Mode, Node, PlateModel};
-use crate::reference::{self, RefField, Reference};
-use crate::sim::{self, Body, FieldModel, Pose, SimParams};
+use crate::analysis::reference::{self, RefField, Reference};
+use crate::model::part::{Part, to_fx};
+use crate::model::plan_file::{PlanFile, StepJson};
+use crate::model::plate::{Law, Mode, Node, PlateModel};
+use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
 
 pub mod feed;
 

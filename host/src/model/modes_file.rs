@@ -4,8 +4,8 @@
 
 use toml::{Table, Value};
 
-use super::file::{PlateFile, PlateTable};
-use super::solver::Grid;
+use crate::model::plate_file::{PlateFile, PlateTable};
+use crate::plate::solver::Grid;
 
 /// Rounds to `digits` decimals so files stay small and diff well.
 fn round(v: f64, digits: i32) -> f64 {

@@ -5,7 +5,7 @@
 //! sampling (0.5°) over the full turn and bisection. Slow and simple; used by the tests to
 //! check the fixed-point code (agreement within 0.05° on stable orientations).
 
-use crate::part::Part;
+use crate::model::part::Part;
 
 /// Field law, as in `chladni_shared::field::FieldKind` but in f64.
 #[derive(Debug, Clone, Copy, PartialEq)]

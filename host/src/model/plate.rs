@@ -19,8 +19,8 @@ use std::path::Path;
 
 use toml::{Table, Value};
 
-use super::file::{PlateFile, PlateFileError};
-use super::solver::Grid;
+use crate::model::plate_file::{PlateFile, PlateFileError};
+use crate::plate::solver::Grid;
 
 /// The linear field's length scale: its pull equals the gain this far from the node.
 pub const LINEAR_SCALE_MM: f64 = 10.0;

@@ -8,9 +8,9 @@ use std::path::Path;
 use anyhow::anyhow;
 use plotters::prelude::*;
 
+use crate::model::plate::{Mode, Node, PlateModel};
+use crate::motion::sim::{Body, Pose};
 use crate::plate::contour;
-use crate::plate::model::{Mode, Node, PlateModel};
-use crate::sim::{Body, Pose};
 
 fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
     anyhow!("plotting: {e}")
@@ -106,7 +106,7 @@ pub fn plan_figure(
     modes: &[usize],
     examples: &[Example],
 ) -> anyhow::Result<()> {
-    crate::plate::plot::ensure_font();
+    crate::plot::plate::ensure_font();
     let [w, h] = plate.size_mm;
     let cols = modes.len().max(1);
     let rows = examples.len().max(1);
@@ -179,7 +179,7 @@ pub fn traces_figure(
     step_ends: &[f64],
     target: Option<(f64, f64)>,
 ) -> anyhow::Result<()> {
-    crate::plate::plot::ensure_font();
+    crate::plot::plate::ensure_font();
     let [w, h] = plate.size_mm;
     let root = BitMapBackend::new(path, (1300, 560)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;

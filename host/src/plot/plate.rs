@@ -8,9 +8,9 @@ use std::sync::OnceLock;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
-use super::contour::Polyline;
-use super::file::{Boundary, Plate};
-use super::solver::Grid;
+use crate::model::plate_file::{Boundary, Plate};
+use crate::plate::contour::Polyline;
+use crate::plate::solver::Grid;
 
 /// Registers the embedded font as "sans-serif" (idempotent).
 pub fn ensure_font() {

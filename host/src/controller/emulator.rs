@@ -1,5 +1,5 @@
 //! Runs the controller in QEMU: the QEMU-board firmware on `qemu-system-arm -M b-l475e-iot01a`,
-//! its USART1 on a TCP socket on 127.0.0.1 that [`crate::device::DeviceClient`] connects to.
+//! its USART1 on a TCP socket on 127.0.0.1 that [`crate::controller::client::DeviceClient`] connects to.
 //!
 //! `chladni emulator`, the end-to-end tests and the demo all start the controller through
 //! [`Emulator::start`]. QEMU is stopped by PID when the [`Emulator`] is dropped; with
@@ -16,8 +16,8 @@ use chladni_shared::link::Board;
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 
-use crate::device::{DeviceClient, DeviceError};
-use crate::firmware::{self, FirmwareError};
+use crate::controller::client::{DeviceClient, DeviceError};
+use crate::controller::firmware::{self, FirmwareError};
 
 /// How to start the emulated controller.
 #[derive(Debug, Clone, Default)]

@@ -10,10 +10,10 @@
 //!
 //! Units: mm, s, rad inside (degrees in [`Pose`] helpers only where named).
 
-use crate::part::{Part, inside};
-use crate::plate::model::{Law, Mode, Node, PlateModel};
+use crate::analysis::reference::GL;
+use crate::model::part::{Part, inside};
+use crate::model::plate::{Law, Mode, Node, PlateModel};
 use crate::plate::solver::Grid;
-use crate::reference::GL;
 
 /// Target number of interior sample points for numerical force integration.
 pub const BODY_SAMPLES: usize = 400;
@@ -628,7 +628,7 @@ pub fn run_plan(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plate::model::parse_mode;
+    use crate::model::plate::parse_mode;
 
     fn mode(toml_text: &str) -> Mode {
         let t: toml::Table = toml::from_str(toml_text).unwrap();

@@ -1,0 +1,8 @@
+//! The files a user writes and the tool reads and writes: parts (JSON, SVG), plates (TOML:
+//! material, size and the menu of modes), plans (JSON, the same plan the controller runs).
+
+pub mod modes_file;
+pub mod part;
+pub mod plan_file;
+pub mod plate;
+pub mod plate_file;

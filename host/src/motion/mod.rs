@@ -1,0 +1,5 @@
+//! How parts move: the quasi-static motion of a part under a mode's field (field evaluation,
+//! simulation of plans), and the paper's particle bouncing on a vibrating string.
+
+pub mod sim;
+pub mod string;

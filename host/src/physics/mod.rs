@@ -1,3 +1,0 @@
-//! Physics models behind the field model of DESIGN §2.
-
-pub mod string;
