@@ -58,8 +58,6 @@ bind_interrupts!(struct Irqs {
 /// DAC1 channel 1 on PA4, triggered by TIM6 TRGO, fed by circular DMA over two blocks.
 pub struct DacOutput {
     ring: WritableRingBuffer<'static, u32>,
-    /// One block widened to the DMA's 32-bit words.
-    words: [u32; BLOCK_LEN],
     _dac: DacChannel<'static, Blocking>,
     _timer: Timer<'static, peripherals::TIM6>,
 }
@@ -106,7 +104,7 @@ impl DacOutput {
         timer.regs_basic().cr2().modify(|w| w.set_mms(MasterMode::UPDATE));
         timer.start();
         defmt::info!("drive: DAC1 ch1 at {} S/s (TIM6 {} Hz)", SAMPLE_RATE, update_rate(&timer));
-        Self { ring, words: [0; BLOCK_LEN], _dac: dac_ch, _timer: timer }
+        Self { ring, _dac: dac_ch, _timer: timer }
     }
 }
 
@@ -120,20 +118,25 @@ fn update_rate(timer: &Timer<'static, peripherals::TIM6>) -> u32 {
     ((clock + divider / 2) / divider) as u32
 }
 
+/// Samples widened to 32-bit words per ring write: a small stack buffer (it lives in the drive
+/// task's future across the await) instead of a whole block.
+const WORDS_PER_WRITE: usize = 50;
+
 impl SampleOutput for DacOutput {
     async fn write_block(&mut self, block: &[u16]) -> Result<(), Underrun> {
-        let words = &mut self.words[..block.len()];
-        words.iter_mut().zip(block).for_each(|(w, &code)| *w = u32::from(code));
-        let words = &self.words[..block.len()];
-        match self.ring.write_exact(words).await {
-            Ok(_) => Ok(()),
-            Err(_) => {
+        let mut result = Ok(());
+        let mut words = [0u32; WORDS_PER_WRITE];
+        for codes in block.chunks(WORDS_PER_WRITE) {
+            let words = &mut words[..codes.len()];
+            words.iter_mut().zip(codes).for_each(|(w, &code)| *w = u32::from(code));
+            if self.ring.write_exact(words).await.is_err() {
                 // The DMA overtook the writer (some old samples were played again). The ring
-                // has reset itself to a full buffer's lead; queue this block behind it.
+                // has reset itself to a full buffer's lead; queue these samples behind it.
                 let _ = self.ring.write_exact(words).await;
-                Err(Underrun)
+                result = Err(Underrun);
             }
         }
+        result
     }
 }
 
