@@ -5,8 +5,8 @@
 //! The drive is DAC1 channel 1 on PA4, converting on every TIM6 TRGO (update event at the
 //! sample rate). DMA1 channel 3 (request 6) moves samples from a circular buffer of two
 //! blocks into DHR12R1, one 32-bit word per sample (RM0351 asks for word accesses to the DAC
-//! registers; the 12-bit code sits in bits 11:0); its half-transfer and transfer-complete interrupts wake the drive task,
-//! which refills the half just played (embassy-stm32's `WritableRingBuffer`, which starts full
+//! registers; the 12-bit code sits in bits 11:0); its half-transfer and transfer-complete
+//! interrupts wake the drive task, which refills the half just played (embassy-stm32's `WritableRingBuffer`, which starts full
 //! of the mid-scale codes it was given). If the DMA catches up with the writer (a refill missed
 //! its half period) the ring reports an overrun and resets itself: counted as an underrun.
 //!
@@ -169,6 +169,9 @@ fn clocks() -> embassy_stm32::Config {
 pub fn init() -> Board {
     let p = embassy_stm32::init(clocks());
     check_clocks();
+    // A debugger halting the core (breakpoint, or a fault caught before its handler runs)
+    // also stops TIM6, so the DAC holds one code instead of the DMA replaying the ring.
+    pac::DBGMCU.apb1fzr1().modify(|w| w.set_tim6(true));
     static TX: StaticCell<[u8; 1024]> = StaticCell::new();
     static RX: StaticCell<[u8; 1024]> = StaticCell::new();
     let mut config = usart::Config::default();
@@ -196,9 +199,6 @@ fn check_clocks() {
     } else {
         defmt::warn!("clocks: MSI untrimmed (LSE ready {}, MSIPLLEN {})", lse_ready, msi_pll);
     }
-    // A debugger halting the core (breakpoint, or a fault caught before its handler runs)
-    // also stops TIM6, so the DAC holds one code instead of the DMA replaying the ring.
-    pac::DBGMCU.apb1fzr1().modify(|w| w.set_tim6(true));
 }
 
 /// Runs embassy's thread-mode executor forever; `init` spawns the first tasks.
