@@ -6,9 +6,10 @@
 //! sample rate). DMA1 channel 3 (request 6) moves samples from a circular buffer of two
 //! blocks into DHR12R1, one 32-bit word per sample (RM0351 asks for word accesses to the DAC
 //! registers; the 12-bit code sits in bits 11:0); its half-transfer and transfer-complete
-//! interrupts wake the drive task, which refills the half just played (embassy-stm32's `WritableRingBuffer`, which starts full
-//! of the mid-scale codes it was given). If the DMA catches up with the writer (a refill missed
-//! its half period) the ring reports an overrun and resets itself: counted as an underrun.
+//! interrupts wake the drive task, which refills the half just played (embassy-stm32's
+//! `WritableRingBuffer`, which starts full of the mid-scale codes it was given). If the DMA
+//! catches up with the writer (a refill missed its half period) the ring reports an overrun
+//! and resets itself: counted as an underrun.
 //!
 //! A panic or HardFault parks the output at mid-scale first ([`failsafe`]).
 //!
