@@ -10,6 +10,7 @@
 #   scripts/firmware.sh run    stm32l475        -> flash the board with probe-rs, then its defmt
 #                                                  log over RTT (installs probe-rs-tools if missing)
 #   scripts/firmware.sh bench  qemu             -> per-sample cost of the drive (QEMU -icount)
+#   scripts/firmware.sh build-bin qemu NAME     -> builds firmware/src/bin/NAME, prints its ELF path
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cmd=${1:?usage: firmware.sh build|clippy|test|size|run|bench BOARD}
@@ -42,5 +43,8 @@ case "$cmd" in
          cargo build "${args[@]}" --bin bench_drive >&2 &&
          QEMU_EXTRA="-icount shift=0" scripts/qemu-run.sh \
            target/firmware/thumbv7em-none-eabihf/firmware/bench_drive ;;
+  build-bin) name=${3:?usage: firmware.sh build-bin BOARD NAME}
+    cargo build "${args[@]}" --bin "$name" >&2
+    echo "target/firmware/thumbv7em-none-eabihf/firmware/$name" ;;
   *) echo "unknown command '$cmd'" >&2; exit 2 ;;
 esac

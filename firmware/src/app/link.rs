@@ -10,6 +10,10 @@ use embedded_io_async::{Read, Write};
 
 use super::drive::{Command, DriveShared};
 
+/// Pause after a failed read before trying again, ms (short enough not to lose a UART byte
+/// burst behind a framing error: the port's RX buffer keeps receiving meanwhile).
+const READ_ERROR_BACKOFF_MS: u64 = 10;
+
 /// What the link needs to know about the device to answer requests.
 #[derive(Debug, Clone, Copy)]
 pub struct Identity {
@@ -51,6 +55,10 @@ pub async fn serve<P: Read + Write>(identity: Identity, drive: &DriveShared, por
             Ok(n) => n,
             Err(_) => {
                 defmt::warn!("link: read error");
+                // Back off before reading again: some ports fail at once and keep failing
+                // (a USB CDC endpoint before the host configures it), and without an await
+                // here this loop would never yield and starve every other task (livelock).
+                embassy_time::Timer::after_millis(READ_ERROR_BACKOFF_MS).await;
                 continue;
             }
         };

@@ -4,10 +4,20 @@
 //!
 //! The drive is DAC1 channel 1 on PA4, converting on every TIM6 TRGO (update event at the
 //! sample rate). DMA1 channel 3 (request 6) moves samples from a circular buffer of two
-//! blocks into DHR12R1; its half-transfer and transfer-complete interrupts wake the drive task,
-//! which refills the half just played (embassy-stm32's `WritableRingBuffer`, which starts full
-//! of the mid-scale codes it was given). If the DMA catches up with the writer (a refill missed
-//! its half period) the ring reports an overrun and resets itself: counted as an underrun.
+//! blocks into DHR12R1, one 32-bit word per sample (RM0351 asks for word accesses to the DAC
+//! registers; the 12-bit code sits in bits 11:0); its half-transfer and transfer-complete
+//! interrupts wake the drive task, which refills the half just played (embassy-stm32's
+//! `WritableRingBuffer`, which starts full of the mid-scale codes it was given). If the DMA
+//! catches up with the writer (a refill missed its half period) the ring reports an overrun
+//! and resets itself: counted as an underrun.
+//!
+//! A panic or HardFault parks the output at mid-scale first ([`failsafe`]).
+//!
+//! Clocks: the 32.768 kHz crystal (LSE, X3) trims MSI continuously (MSI PLL mode), so the
+//! 80 MHz system clock and the 50 kS/s sample rate are as accurate as the crystal (see
+//! [`clocks`]).
+
+pub mod failsafe;
 
 use chladni_shared::dds::SAMPLE_RATE;
 use chladni_shared::runner::BLOCK_LEN;
@@ -48,7 +58,7 @@ bind_interrupts!(struct Irqs {
 
 /// DAC1 channel 1 on PA4, triggered by TIM6 TRGO, fed by circular DMA over two blocks.
 pub struct DacOutput {
-    ring: WritableRingBuffer<'static, u16>,
+    ring: WritableRingBuffer<'static, u32>,
     _dac: DacChannel<'static, Blocking>,
     _timer: Timer<'static, peripherals::TIM6>,
 }
@@ -60,8 +70,8 @@ impl DacOutput {
         dma_ch: embassy_stm32::Peri<'static, peripherals::DMA1_CH3>,
         tim6: embassy_stm32::Peri<'static, peripherals::TIM6>,
     ) -> Self {
-        static BUF: StaticCell<[u16; 2 * BLOCK_LEN]> = StaticCell::new();
-        let buf = BUF.init([chladni_shared::dds::DAC_MID; 2 * BLOCK_LEN]);
+        static BUF: StaticCell<[u32; 2 * BLOCK_LEN]> = StaticCell::new();
+        let buf = BUF.init([u32::from(chladni_shared::dds::DAC_MID); 2 * BLOCK_LEN]);
 
         // The DAC channel (clock, analog pin); then trigger and DMA request by register, since
         // the ring buffer owns the DMA channel rather than the DAC driver.
@@ -80,9 +90,10 @@ impl DacOutput {
         let request =
             <peripherals::DMA1_CH3 as dac::Dma<peripherals::DAC1, dac::Ch1>>::request(&dma_ch);
         let channel = dma::Channel::new(dma_ch, Irqs);
-        let dhr = pac::DAC1.dhr12r(0).as_ptr() as *mut u16;
-        // SAFETY: `dhr` is DAC1's 12-bit right-aligned data register for channel 1, which
-        // accepts half-word writes; `buf` is 'static and owned by the ring from here on.
+        let dhr = pac::DAC1.dhr12r(0).as_ptr() as *mut u32;
+        // SAFETY: `dhr` is DAC1's 12-bit right-aligned data register for channel 1, written
+        // one word at a time (bits 31:12 are reserved and get 0); `buf` is 'static and owned
+        // by the ring from here on.
         let mut ring = unsafe {
             WritableRingBuffer::new(channel, request, dhr, buf, TransferOptions::default())
         };
@@ -93,33 +104,55 @@ impl DacOutput {
         timer.set_frequency(Hertz(SAMPLE_RATE), RoundTo::Slower);
         timer.regs_basic().cr2().modify(|w| w.set_mms(MasterMode::UPDATE));
         timer.start();
-        defmt::info!(
-            "drive: DAC1 ch1 at {} S/s (TIM6 {} Hz)",
-            SAMPLE_RATE,
-            timer.get_frequency().0
-        );
+        defmt::info!("drive: DAC1 ch1 at {} S/s (TIM6 {} Hz)", SAMPLE_RATE, update_rate(&timer));
         Self { ring, _dac: dac_ch, _timer: timer }
     }
 }
 
+/// The timer's update rate as the hardware makes it: clock / (PSC + 1) / (ARR + 1), rounded.
+/// (embassy-stm32 0.6.0's `get_frequency()` divides by ARR, not ARR + 1: it says 50 031 Hz for
+/// the 50 000 Hz that PSC = 0, ARR = 1599 give at 80 MHz.)
+fn update_rate(timer: &Timer<'static, peripherals::TIM6>) -> u32 {
+    let regs = timer.regs_basic();
+    let divider = (u64::from(regs.psc().read()) + 1) * (u64::from(regs.arr().read().arr()) + 1);
+    let clock = u64::from(timer.get_clock_frequency().0);
+    ((clock + divider / 2) / divider) as u32
+}
+
+/// Samples widened to 32-bit words per ring write: a small stack buffer (it lives in the drive
+/// task's future across the await) instead of a whole block.
+const WORDS_PER_WRITE: usize = 50;
+
 impl SampleOutput for DacOutput {
     async fn write_block(&mut self, block: &[u16]) -> Result<(), Underrun> {
-        match self.ring.write_exact(block).await {
-            Ok(_) => Ok(()),
-            Err(_) => {
+        let mut result = Ok(());
+        let mut words = [0u32; WORDS_PER_WRITE];
+        for codes in block.chunks(WORDS_PER_WRITE) {
+            let words = &mut words[..codes.len()];
+            words.iter_mut().zip(codes).for_each(|(w, &code)| *w = u32::from(code));
+            if self.ring.write_exact(words).await.is_err() {
                 // The DMA overtook the writer (some old samples were played again). The ring
-                // has reset itself to a full buffer's lead; queue this block behind it.
-                let _ = self.ring.write_exact(block).await;
-                Err(Underrun)
+                // has reset itself to a full buffer's lead; queue these samples behind it.
+                let _ = self.ring.write_exact(words).await;
+                result = Err(Underrun);
             }
         }
+        result
     }
 }
 
 /// 80 MHz from MSI 4 MHz through PLL1 (×40 /2): TIM6 then divides exactly to 50 kS/s.
+///
+/// Untrimmed, MSI is only good to about ±1 % (RM0351/datasheet), which would put every drive
+/// frequency off by as much. With the LSE crystal running, MSI PLL mode (RCC_CR.MSIPLLEN)
+/// locks MSI to 32.768 kHz × N. embassy-stm32 0.6.0 sets MSIPLLEN itself in `rcc::init` when
+/// `ls.lse` is a 32 768 Hz crystal, after LSERDY (rcc/l.rs: `if config.ls.lse ... ==
+/// Some(Hertz(32_768)) { msipllen = true }`), which is the order RM0351 asks for; `init` checks
+/// it afterwards. `default_lse` also clocks the (unused) RTC from LSE instead of LSI.
 fn clocks() -> embassy_stm32::Config {
     use embassy_stm32::rcc::*;
     let mut config = embassy_stm32::Config::default();
+    config.rcc.ls = LsConfig::default_lse();
     config.rcc.msi = Some(MSIRange::RANGE4M);
     config.rcc.pll = Some(Pll {
         source: PllSource::MSI,
@@ -136,6 +169,10 @@ fn clocks() -> embassy_stm32::Config {
 /// Brings the board up: 80 MHz system clock, the link, the drive output.
 pub fn init() -> Board {
     let p = embassy_stm32::init(clocks());
+    check_clocks();
+    // A debugger halting the core (breakpoint, or a fault caught before its handler runs)
+    // also stops TIM6, so the DAC holds one code instead of the DMA replaying the ring.
+    pac::DBGMCU.apb1fzr1().modify(|w| w.set_tim6(true));
     static TX: StaticCell<[u8; 1024]> = StaticCell::new();
     static RX: StaticCell<[u8; 1024]> = StaticCell::new();
     let mut config = usart::Config::default();
@@ -154,15 +191,19 @@ pub fn init() -> Board {
     Board { link, drive }
 }
 
+/// Logs the clock tree's trim state: LSE ready and MSI in PLL mode, or why not.
+fn check_clocks() {
+    let lse_ready = pac::RCC.bdcr().read().lserdy();
+    let msi_pll = pac::RCC.cr().read().msipllen();
+    if lse_ready && msi_pll {
+        defmt::info!("clocks: 80 MHz from MSI 4 MHz locked to LSE 32.768 kHz (MSI PLL mode)");
+    } else {
+        defmt::warn!("clocks: MSI untrimmed (LSE ready {}, MSIPLLEN {})", lse_ready, msi_pll);
+    }
+}
+
 /// Runs embassy's thread-mode executor forever; `init` spawns the first tasks.
 pub fn run(init: impl FnOnce(embassy_executor::Spawner)) -> ! {
     static EXECUTOR: StaticCell<embassy_executor::Executor> = StaticCell::new();
     EXECUTOR.init(embassy_executor::Executor::new()).run(init)
-}
-
-/// A panic resets the MCU into its safe idle state (drive off) after logging.
-#[panic_handler]
-fn panic(info: &core::panic::PanicInfo) -> ! {
-    defmt::error!("panic: {}", defmt::Display2Format(info));
-    cortex_m::peripheral::SCB::sys_reset()
 }

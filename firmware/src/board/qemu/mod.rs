@@ -7,9 +7,12 @@
 //! - [`usart`]: USART1 with 32-bit register accesses and an RX interrupt;
 //! - [`executor`]: embassy's executor sleeping with WFI instead of WFE (which QEMU spins on);
 //! - [`flash`]: flash bank 2 kept in a host file through semihosting (QEMU's flash is inert);
-//! - defmt over semihosting, and [`exit`] to end QEMU with a status code.
+//! - defmt over semihosting, and [`exit`] to end QEMU with a status code;
+//! - [`failsafe`]: the simulated DAC parks at mid-scale on a panic or HardFault, and the exit
+//!   code says whether it did.
 
 pub mod executor;
+pub mod failsafe;
 pub mod flash;
 pub mod time_driver;
 pub mod usart;
@@ -23,8 +26,8 @@ pub const BOARD: chladni_shared::link::Board = chladni_shared::link::Board::Qemu
 pub type Link = usart::Usart1;
 
 /// The drive output: no DAC in QEMU, so a simulated one paced by the time driver, feeding the
-/// simulated shaker + plate.
-pub type DriveOutput = crate::app::drive::SimulatedDac;
+/// simulated shaker + plate, which the fault handlers park.
+pub type DriveOutput = failsafe::ParkableDac;
 
 /// The initialised board.
 pub struct Board {
@@ -64,30 +67,15 @@ pub fn host_time_s() -> u32 {
     unsafe { cortex_m_semihosting::syscall1(cortex_m_semihosting::nr::TIME, 0) as u32 }
 }
 
-/// Ends the QEMU process with `code` (semihosting `SYS_EXIT_EXTENDED`).
+/// Ends the QEMU process with exit status `code` (semihosting `SYS_EXIT_EXTENDED`: QEMU exits
+/// with the subcode when the reason is `ADP_Stopped_ApplicationExit`; plain `SYS_EXIT` on
+/// 32-bit Arm only knows success and failure, i.e. 0 or 1).
 pub fn exit(code: i32) -> ! {
+    const SYS_EXIT_EXTENDED: usize = 0x20;
+    const ADP_STOPPED_APPLICATION_EXIT: usize = 0x2_0026;
+    let block = [ADP_STOPPED_APPLICATION_EXIT, code as u32 as usize];
     loop {
-        cortex_m_semihosting::debug::exit(if code == 0 {
-            cortex_m_semihosting::debug::EXIT_SUCCESS
-        } else {
-            cortex_m_semihosting::debug::EXIT_FAILURE
-        });
+        // SAFETY: SYS_EXIT_EXTENDED reads the two words of `block`, which outlives the call.
+        unsafe { cortex_m_semihosting::syscall1(SYS_EXIT_EXTENDED, block.as_ptr() as usize) };
     }
-}
-
-#[defmt::panic_handler]
-fn defmt_panic() -> ! {
-    exit(101)
-}
-
-#[panic_handler]
-fn panic(info: &core::panic::PanicInfo) -> ! {
-    defmt::error!("panic: {}", defmt::Display2Format(info));
-    exit(101)
-}
-
-#[cortex_m_rt::exception]
-unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
-    defmt::error!("hard fault at pc {=u32:#010x}", frame.pc());
-    exit(102)
 }

@@ -1,0 +1,102 @@
+//! Fail-safe for the QEMU board: the simulated DAC parks at mid-scale on a panic or HardFault,
+//! as the real board's DAC does, and the exit code says whether it did.
+//!
+//! QEMU has no DAC, so "the output" is [`ParkableDac`]: the app's `SimulatedDac` (paced blocks
+//! into the simulated plant) plus the code on the imaginary pin, kept in [`OUTPUT_CODE`]. The
+//! fault handlers call [`park_output`] first, then read the code back, log it and end QEMU with
+//! [`EXIT_PANIC_PARKED`] / [`EXIT_HARD_FAULT_PARKED`], or [`EXIT_FAULT_NOT_PARKED`] when the
+//! output is not at mid-scale and frozen (so a handler that forgot to park fails the test).
+
+use core::sync::atomic::{AtomicBool, AtomicU16, Ordering};
+
+use chladni_shared::dds::DAC_MID;
+use chladni_shared::runner::BLOCK_LEN;
+
+use crate::app::drive::{SampleOutput, SimulatedDac, Underrun};
+
+/// Exit code: a panic, and the output was parked at mid-scale.
+pub const EXIT_PANIC_PARKED: i32 = 101;
+/// Exit code: a HardFault, and the output was parked at mid-scale.
+pub const EXIT_HARD_FAULT_PARKED: i32 = 102;
+/// Exit code: a panic or HardFault, and the output was NOT at mid-scale afterwards.
+pub const EXIT_FAULT_NOT_PARKED: i32 = 103;
+
+/// The code the simulated DAC outputs now: the last sample of the block it is playing.
+static OUTPUT_CODE: AtomicU16 = AtomicU16::new(DAC_MID);
+/// Set by [`park_output`]: from then on the simulated DAC plays mid-scale only.
+static PARKED: AtomicBool = AtomicBool::new(false);
+
+/// The QEMU board's drive output: [`SimulatedDac`], publishing its output code, parkable.
+#[derive(Default)]
+pub struct ParkableDac {
+    dac: SimulatedDac,
+}
+
+impl ParkableDac {
+    /// A plant at rest, output at mid-scale.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The simulated DAC and plant.
+    pub fn simulated(&self) -> &SimulatedDac {
+        &self.dac
+    }
+}
+
+impl SampleOutput for ParkableDac {
+    async fn write_block(&mut self, block: &[u16]) -> Result<(), Underrun> {
+        if PARKED.load(Ordering::Acquire) {
+            // Frozen: whatever the drive computes, the "pin" stays at mid-scale.
+            return self.dac.write_block(&[DAC_MID; BLOCK_LEN][..block.len()]).await;
+        }
+        if let Some(&last) = block.last() {
+            OUTPUT_CODE.store(last, Ordering::Release);
+        }
+        self.dac.write_block(block).await
+    }
+}
+
+/// The code on the simulated DAC's output now.
+pub fn output_code() -> u16 {
+    OUTPUT_CODE.load(Ordering::Acquire)
+}
+
+/// Holds the simulated output at mid-scale from now on. Idempotent, safe from any context.
+pub fn park_output() {
+    PARKED.store(true, Ordering::Release);
+    OUTPUT_CODE.store(DAC_MID, Ordering::Release);
+}
+
+/// Logs the output's state and returns the exit code for a fault of kind `parked_code`.
+fn report_output(parked_code: i32) -> i32 {
+    let code = output_code();
+    if code == DAC_MID && PARKED.load(Ordering::Acquire) {
+        defmt::error!("fault: output parked at code {=u16}", code);
+        parked_code
+    } else {
+        defmt::error!("fault: output NOT parked (code {=u16})", code);
+        EXIT_FAULT_NOT_PARKED
+    }
+}
+
+/// `defmt::panic!` (and defmt's `unwrap!`, `assert!`) end here after printing their message.
+#[defmt::panic_handler]
+fn defmt_panic() -> ! {
+    park_output();
+    super::exit(report_output(EXIT_PANIC_PARKED))
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    park_output();
+    defmt::error!("panic: {}", defmt::Display2Format(info));
+    super::exit(report_output(EXIT_PANIC_PARKED))
+}
+
+#[cortex_m_rt::exception]
+unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    park_output();
+    defmt::error!("hard fault at pc {=u32:#010x}", frame.pc());
+    super::exit(report_output(EXIT_HARD_FAULT_PARKED))
+}

@@ -1,0 +1,104 @@
+//! Fail-safe for the B-L475E-IOT01A: on a panic or a HardFault the drive output is parked at
+//! mid-scale before anything else happens, then the fault is logged and the core stops.
+//!
+//! The drive runs without the CPU: TIM6 triggers the DAC and circular DMA keeps feeding it from
+//! the two-block ring. A crash that only stopped the CPU would leave the DMA replaying the last
+//! 10 ms into the amplifier forever. So the handlers stop that machinery by raw register writes
+//! (stm32-metapac, no driver state: safe from any context, before or after `init`, any number
+//! of times) and only then log.
+//!
+//! Why not panic-probe's own `#[panic_handler]`: it disables interrupts and prints first, and
+//! offers no hook before the print. With a probe attached, defmt-rtt may block in that print
+//! (probe-rs switches RTT to blocking mode), and while it blocks the DMA replays the ring. The
+//! crate's handler cannot be linked next to ours (duplicate `panic_impl` lang item), so this
+//! module does what panic-probe does, in a safe order: park, disable interrupts, guard against
+//! recursion, print the message through defmt (panic-probe's `print-defmt`), then `udf` into
+//! HardFault (panic-probe's `hard_fault()`), which probe-rs reports with a backtrace.
+
+use core::sync::atomic::{AtomicBool, Ordering};
+
+use chladni_shared::dds::DAC_MID;
+use stm32_metapac as pac;
+
+/// DAC1 channel 1 (index 0 in the metapac's per-channel fields).
+const DAC_CH1: usize = 0;
+/// DMA1 channel 3 (index 2), the DAC1 ch1 channel (request 6), see `super::DacOutput`.
+const DMA_CH3: usize = 2;
+
+/// Set by the panic handler, so that the HardFault it raises does not log a second fault.
+static PANICKED: AtomicBool = AtomicBool::new(false);
+
+/// Stops the drive and holds the DAC at mid-scale (zero signal). Idempotent, needs no state.
+///
+/// Order: stop TIM6 (no more DAC triggers), disable the DMA channel and the DAC's DMA request
+/// (nothing writes DHR any more), clear TEN1 so that a DHR write reaches the output without a
+/// trigger (RM0351 DAC_CR: with TEN1 = 0, DHR1 moves to DOR1 one APB clock later; with
+/// TEN1 = 1 it would wait for a trigger that no longer comes), then write mid-scale. The
+/// channel stays enabled: switching it off would let PA4 float instead of holding mid-scale.
+/// Before `init` the peripheral clocks are off, the writes are ignored, and nothing drives.
+pub fn park_output() {
+    pac::TIM6.cr1().modify(|w| w.set_cen(false));
+    pac::DMA1.ch(DMA_CH3).cr().modify(|w| w.set_en(false));
+    pac::DAC1.cr().modify(|w| {
+        w.set_dmaen(DAC_CH1, false);
+        w.set_ten(DAC_CH1, false);
+    });
+    pac::DAC1.dhr12r(DAC_CH1).write(|w| w.set_dhr(DAC_MID));
+}
+
+/// Logs what the output holds now (DOR1 and whether TIM6 still runs), for the fault report.
+fn report_output() {
+    // DOR1 follows DHR1 one APB clock after the write; a few loads later it has.
+    let code = pac::DAC1.dor(DAC_CH1).read().dor();
+    let tim6_running = pac::TIM6.cr1().read().cen();
+    if code == DAC_MID && !tim6_running {
+        defmt::error!("fault: output parked at code {=u16}", code);
+    } else {
+        defmt::error!(
+            "fault: output NOT parked (code {=u16}, TIM6 running {})",
+            code,
+            tim6_running
+        );
+    }
+}
+
+/// Stops here for good: the output is parked, which is the safe idle state.
+///
+/// Halt rather than reset: a reset would take the DAC off (PA4 floating), then boot through a
+/// moment where the DAC is enabled at code 0 before the ring's mid-scale codes arrive, i.e. two
+/// steps into the amplifier; and it would erase the RAM a debugger needs to see what happened.
+/// Halted, the DAC holds mid-scale and the link stays silent until someone power-cycles.
+fn halt() -> ! {
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    park_output();
+    cortex_m::interrupt::disable();
+    if !PANICKED.swap(true, Ordering::Relaxed) {
+        defmt::error!("panic: {}", defmt::Display2Format(info));
+        report_output();
+    }
+    hard_fault()
+}
+
+/// panic-probe's `hard_fault()`: make sure `udf` escalates to HardFault (UsageFault disabled),
+/// so a probe sees the same fault as from any other crash.
+fn hard_fault() -> ! {
+    // SAFETY: only clears USGFAULTENA in SHCSR; nothing else depends on UsageFault.
+    unsafe { (*cortex_m::peripheral::SCB::PTR).shcsr.modify(|v| v & !(1 << 18)) };
+    cortex_m::asm::udf()
+}
+
+#[cortex_m_rt::exception]
+unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    park_output();
+    if !PANICKED.load(Ordering::Relaxed) {
+        defmt::error!("hard fault at pc {=u32:#010x}", frame.pc());
+        report_output();
+    }
+    halt()
+}

@@ -1,0 +1,78 @@
+//! Fail-safe in QEMU: the firmware's `failsafe` image drives the simulated DAC through the real
+//! drive task, then panics or takes a HardFault; the board's handlers must park the output at
+//! mid-scale before anything else, report the parked code and end QEMU with the exit code
+//! that says "fault, output parked" (101 panic, 102 HardFault; 103 would mean NOT parked).
+
+use std::process::Command;
+use std::sync::OnceLock;
+
+use chladni_e2e::root;
+use chladni_shared::dds::DAC_MID;
+
+/// Exit codes of the QEMU board's fault handlers (firmware/src/board/qemu/failsafe.rs).
+const EXIT_PANIC_PARKED: i32 = 101;
+const EXIT_HARD_FAULT_PARKED: i32 = 102;
+
+/// Builds the image once per test binary; returns its path.
+fn image() -> &'static str {
+    static IMAGE: OnceLock<String> = OnceLock::new();
+    IMAGE.get_or_init(|| {
+        let out = Command::new(root().join("scripts/firmware.sh"))
+            .args(["build-bin", "qemu", "failsafe"])
+            .current_dir(root())
+            .output()
+            .expect("run scripts/firmware.sh build-bin qemu failsafe");
+        assert!(
+            out.status.success(),
+            "building the failsafe image failed:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).unwrap().trim().to_string()
+    })
+}
+
+/// Boots the image with `crash=<crash>`; returns QEMU's exit code and the decoded log.
+fn run(crash: &str) -> (Option<i32>, String) {
+    let out = Command::new(root().join("scripts/qemu-run.sh"))
+        .arg(image())
+        .env("QEMU_TIMEOUT", "120")
+        .env("QEMU_EXTRA", format!("-semihosting-config arg=crash={crash}"))
+        .current_dir(root())
+        .output()
+        .expect("run scripts/qemu-run.sh");
+    let log =
+        format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    (out.status.code(), log)
+}
+
+/// The number after `prefix` on the first log line that has it.
+fn code_after(log: &str, prefix: &str) -> Option<u16> {
+    let rest = &log[log.find(prefix)? + prefix.len()..];
+    rest.split(|c: char| !c.is_ascii_digit()).next()?.parse().ok()
+}
+
+/// Checks one crash: driven before, the fault logged, parked at mid-scale after, exit code.
+fn assert_parks(crash: &str, fault_line: &str, exit_code: i32) {
+    let (code, log) = run(crash);
+    let before = code_after(&log, "failsafe: driving, output at code ")
+        .unwrap_or_else(|| panic!("the drive never ran before the crash:\n{log}"));
+    assert!(before.abs_diff(DAC_MID) >= 256, "output {before} was not driven before the crash");
+    assert!(log.contains(fault_line), "no '{fault_line}' in the log:\n{log}");
+    assert_eq!(code, Some(exit_code), "exit code (101/102 parked, 103 NOT parked):\n{log}");
+    assert_eq!(
+        code_after(&log, "fault: output parked at code "),
+        Some(DAC_MID),
+        "the handler did not report the output parked at mid-scale:\n{log}"
+    );
+    println!("crash={crash}: output {before} -> parked at {DAC_MID}, exit code {exit_code}");
+}
+
+#[test]
+fn a_panic_parks_the_output_at_mid_scale() {
+    assert_parks("panic", "panic: panicked at", EXIT_PANIC_PARKED);
+}
+
+#[test]
+fn a_hard_fault_parks_the_output_at_mid_scale() {
+    assert_parks("hardfault", "hard fault at pc", EXIT_HARD_FAULT_PARKED);
+}
