@@ -4,6 +4,7 @@
 //! - [`device`]: the client for the controller's link (serial port or QEMU's TCP socket).
 //! - [`emulator`]: builds the QEMU firmware and runs it as a controller on a TCP port.
 //! - [`firmware`]: locates and builds firmware images.
+//! - [`flash`]: checks a board image and writes it through a debug probe (probe-rs).
 //! - [`plate`]: plate files, the plate mode solver, node lines, Chladni photos.
 //! - [`physics`]: the particle-on-a-string model of the paper's Appendix.
 //! - [`part`]: planar parts: JSON/SVG import and validation.
@@ -18,6 +19,7 @@
 pub mod device;
 pub mod emulator;
 pub mod firmware;
+pub mod flash;
 pub mod part;
 pub mod physics;
 pub mod plan_file;
