@@ -36,15 +36,13 @@ pub const FLASHABLE_BOARD: &str = "stm32l475";
 /// The linker memory map of the firmware, as built into this binary.
 pub const MEMORY_X: &str = include_str!("../../memory.x");
 
-/// Where probe-rs's udev rules are expected on Linux.
-pub const UDEV_RULE: &str = "/etc/udev/rules.d/69-probe-rs.rules";
-
 /// What to check when no probe shows up or one cannot be opened.
-const PROBE_HINT: &str = "check the USB cable (the board's ST-LINK USB port, CN7), that the \
-     ST-LINK jumpers CN9 are both fitted, that probe-rs's udev rule is installed as \
-     /etc/udev/rules.d/69-probe-rs.rules (then `udevadm control --reload && udevadm trigger`, \
-     and re-plug the board), and that your user may access the USB device (e.g. is in the \
-     `plugdev` group); see docs/flash.md";
+const PROBE_HINT: &str = "check
+  - the USB cable: on the board's micro-USB port marked USB ST-LINK (not USB OTG), and one that carries data;
+  - the board's ST-LINK jumpers: fitted, so the on-board ST-LINK drives the STM32's SWD;
+  - the udev rule: probe-rs's 69-probe-rs.rules in /etc/udev/rules.d/, then `sudo udevadm control --reload && sudo udevadm trigger` and re-plug the board;
+  - permissions: your user may open the USB device (e.g. is in the `plugdev` group; log in again after adding it).
+See docs/flash.md.";
 
 /// Why flashing did not happen or did not succeed.
 #[derive(Debug, thiserror::Error)]
@@ -146,7 +144,7 @@ pub enum FlashError {
         hint: String,
     },
     /// No probe attached.
-    #[error("no debug probe found ({looked_for}): {PROBE_HINT}")]
+    #[error("no debug probe found ({looked_for}); {PROBE_HINT}")]
     NoProbe {
         /// What was looked for.
         looked_for: String,
@@ -163,11 +161,11 @@ pub enum FlashError {
         attached: Vec<ProbeDesc>,
     },
     /// The chosen probe is there but this user may not open it.
-    #[error("no permission to open the debug probe {0}: {PROBE_HINT}")]
+    #[error("no permission to open the debug probe {0}; {PROBE_HINT}")]
     PermissionDenied(ProbeDesc),
     /// Opening the probe or attaching to the chip failed.
     #[error(
-        "cannot attach to {chip} through {probe}: {reason}; check that the board is powered and the ST-LINK jumpers (CN9) are fitted, or try again with the reset button held"
+        "cannot attach to {chip} through {probe}: {reason}; check that the board is powered and its ST-LINK jumpers are fitted, or try again while holding the black RESET button"
     )]
     Attach {
         /// The probe.
@@ -187,7 +185,7 @@ pub enum FlashError {
     },
     /// The core could not be reset after flashing.
     #[error(
-        "the image was flashed but resetting the core failed: {0}; press the board's reset button (B2)"
+        "the image was flashed but resetting the core failed: {0}; press the board's black RESET button"
     )]
     Reset(String),
 }
@@ -834,7 +832,7 @@ mod tests {
         p.accessible = false;
         let err = choose_probe(&[p], None).unwrap_err();
         assert!(matches!(err, FlashError::PermissionDenied(_)));
-        assert!(err.to_string().contains(UDEV_RULE), "{err}");
+        assert!(err.to_string().contains("69-probe-rs.rules in /etc/udev/rules.d/"), "{err}");
     }
 
     #[test]
