@@ -21,13 +21,18 @@ args=(-p chladni-firmware --target thumbv7em-none-eabihf --profile firmware
 elf=target/firmware/thumbv7em-none-eabihf/firmware/chladni-firmware
 case "$cmd" in
   build)
-    cargo build "${args[@]}" --bin chladni-firmware >&2
-    # Both boards link to the same path; keep one copy per board.
-    cp "$elf" "target/firmware/chladni-firmware-$board.elf"
+    # Both boards link to the same path; keep one copy per board. Build and copy under one
+    # lock, so that two builds for different boards at once cannot swap their images.
+    mkdir -p target/firmware
+    (
+      flock 9
+      cargo build "${args[@]}" --bin chladni-firmware >&2
+      cp "$elf" "target/firmware/chladni-firmware-$board.elf"
+    ) 9>target/firmware/.build.lock
     echo "target/firmware/chladni-firmware-$board.elf" ;;
   clippy) cargo clippy "${args[@]}" --all-targets -- -D warnings ;;
   test) cargo test "${args[@]}" ;;
-  size) cargo build "${args[@]}" --bin chladni-firmware >&2 && arm-none-eabi-size -A "$elf" | awk -v b="$board" '
+  size) elf=$("$0" build "$board") && arm-none-eabi-size -A "$elf" | awk -v b="$board" '
           $1 ~ /^\.(vector_table|text|rodata)$/ {flash += $2}
           $1 ~ /^\.data$/ {flash += $2; ram += $2}
           $1 ~ /^\.(bss|uninit)$/ {ram += $2}

@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 mod analyze;
 mod device;
 mod emulator;
+mod flash;
 mod physics;
 mod plan;
 mod plate;
@@ -39,6 +40,8 @@ enum Command {
     Device(device::DeviceCommand),
     /// Run the controller firmware in QEMU, its link on a TCP port.
     Emulator(emulator::EmulatorArgs),
+    /// Write the controller firmware to the board through a debug probe.
+    Flash(flash::FlashArgs),
     /// Plate modes from theory, node lines from Chladni photos.
     #[command(subcommand)]
     Plate(plate::PlateCommand),
@@ -58,6 +61,7 @@ impl Cli {
             Command::Analyze(args) => args.run(),
             Command::Device(cmd) => cmd.run(),
             Command::Emulator(args) => args.run(),
+            Command::Flash(args) => args.run(),
             Command::Plate(cmd) => cmd.run(),
             Command::Physics(cmd) => cmd.run(),
             Command::Plan(args) => args.run(),

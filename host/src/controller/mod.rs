@@ -1,6 +1,7 @@
 //! The controller seen from the host: the link client, the QEMU emulator that runs the
-//! firmware as a controller, and building firmware images.
+//! firmware as a controller, building firmware images, and flashing the board (probe-rs).
 
 pub mod client;
 pub mod emulator;
 pub mod firmware;
+pub mod flash;
