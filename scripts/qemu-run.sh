@@ -23,7 +23,11 @@ board_of() {
 # refuse an image QEMU cannot run instead of booting it into a hang.
 board=$(board_of "$elf")
 if [ "$board" != qemu ]; then
-  echo "qemu-run: $elf is ${board:+a '$board' image, }not a QEMU-board image${board:- (no CHLADNI_BOARD symbol)}." >&2
+  if [ -n "$board" ]; then
+    echo "qemu-run: $elf is a '$board' image, not a QEMU-board image." >&2
+  else
+    echo "qemu-run: $elf is not a QEMU-board image (no CHLADNI_BOARD symbol)." >&2
+  fi
   if [ "$board" = stm32l475 ]; then
     echo "qemu-run: it runs on the B-L475E-IOT01A: scripts/firmware.sh run stm32l475, or chladni flash --elf $elf" >&2
   else
