@@ -1,18 +1,18 @@
 //! Rest orientations of a planar part at a straight node: balance offset, turn function
 //! t(θ), exact roots with stable/unstable classification, alignment function a(θ).
 //!
-//! Conventions (DESIGN.md §2): the node is the plate's y-axis (d = x). Orientation θ turns
+//! Conventions: the node is the plate's y-axis (d = x). Orientation θ turns
 //! the part, as drawn in its file, counter-clockwise about its centroid c. For each θ the
 //! part is translated along x by the *balance offset* s (position of c) until the force
 //! F = ∫ f_x dA vanishes; then `t(θ) = M`, the moment about c. t > 0 turns the part
 //! counter-clockwise. A root where t goes from + to − (increasing θ) is stable.
 //!
-//! Method, all in Q31.32 ([`crate::fx`]):
+//! Method, all in Q31.32 ([`crate::analysis::fx`]):
 //! 1. Normalise: subtract the bounding-box centre and shift by a power of two (exact) so the
 //!    part lies within (−½, ½)²; subtract the centroid. Results are scale-free (the sine
 //!    wavelength is scaled by the same power of two).
 //! 2. One *pass* over the edges at (θ, s) rotates each vertex, splits edges at the node and
-//!    sums the exact piece integrals of [`crate::field::piece`]: it yields F, ∂F/∂s and M in
+//!    sums the exact piece integrals of [`crate::analysis::field::piece`]: it yields F, ∂F/∂s and M in
 //!    O(n), with no clipped polygon stored.
 //! 3. Balance: safeguarded Newton on s within [−R, R] (R = the part's radius about c), F is
 //!    decreasing in s; started from the extrapolation of the previous samples.
@@ -24,9 +24,9 @@
 
 use heapless::Vec;
 
-use crate::field::{Field, FieldKind, Law, PieceSums, piece};
-use crate::fx::{self, Bam, Fx, HALF_TURN};
-use crate::geometry::{self, Pt};
+use crate::analysis::field::{Field, FieldKind, Law, PieceSums, piece};
+use crate::analysis::fx::{self, Bam, Fx, HALF_TURN};
+use crate::analysis::geometry::{self, Pt};
 
 /// Turn-function samples per field period before root refinement.
 pub const SAMPLES: usize = 128;
