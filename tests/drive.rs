@@ -8,10 +8,12 @@ use std::time::{Duration, Instant};
 
 use chladni::controller::client::{DeviceClient, DeviceError};
 use chladni_e2e::Controller;
-use chladni_shared::dds::SAMPLES_PER_MS;
-use chladni_shared::link::{DriveError, DriveState, Plan, PlanError, StatusReport};
-use chladni_shared::plan::Step;
-use chladni_shared::runner::{BLOCK_LEN, MANUAL_RAMP_MS};
+use chladni_shared::drive::dds::SAMPLES_PER_MS;
+use chladni_shared::drive::runner::{BLOCK_LEN, MANUAL_RAMP_MS};
+use chladni_shared::icd::link::{
+    DriveError, DriveState, Plan, PlanError, SetpointError, StatusReport,
+};
+use chladni_shared::icd::plan::Step;
 
 fn start(name: &str) -> (Controller, DeviceClient) {
     let controller = Controller::start(&format!("drive-{name}"));
@@ -122,7 +124,7 @@ fn manual_drive_stop_and_refusals() {
     }
     match client.drive(440_000, 40_000) {
         Err(DeviceError::Rejected { error: DriveError::Setpoint(e), .. }) => {
-            assert!(matches!(e, PlanError::AmplitudeTooHigh { amplitude_q15: 40_000, .. }))
+            assert!(matches!(e, SetpointError::AmplitudeTooHigh { amplitude_q15: 40_000, .. }))
         }
         other => panic!("expected an amplitude error, got {other:?}"),
     }

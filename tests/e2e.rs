@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use chladni::controller::client::{DeviceClient, DeviceError};
 use chladni_e2e::{Controller, pseudo_random_bytes};
-use chladni_shared::link::{
+use chladni_shared::icd::link::{
     DriveState, LinkError, MAX_FRAME, PROTOCOL_VERSION, Request, StatusReport,
 };
 

@@ -7,7 +7,7 @@ use std::process::Command;
 use std::sync::OnceLock;
 
 use chladni_e2e::root;
-use chladni_shared::dds::DAC_MID;
+use chladni_shared::drive::dds::DAC_MID;
 
 /// Exit codes of the QEMU board's fault handlers (firmware/src/board/qemu/failsafe.rs).
 const EXIT_PANIC_PARKED: i32 = 101;

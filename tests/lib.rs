@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use chladni::controller::client::{DeviceClient, DeviceError};
 use chladni::controller::emulator::{Emulator, EmulatorConfig};
-use chladni_shared::link::Board;
+use chladni_shared::icd::link::Board;
 
 /// The environment variable that points the tests at a real controller.
 pub const PORT_VAR: &str = "CHLADNI_PORT";

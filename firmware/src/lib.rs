@@ -7,14 +7,22 @@
 //!   drivers of its own for what QEMU models (SysTick, USART1) and fakes for what it doesn't.
 //!
 //! Unsafe code is allowed only in [`board`], where registers are touched.
+//!
+//! Like quartiq/stabilizer, the hardware stays out of host builds: `board` (and the image in
+//! `main.rs`) exist only for `target_os = "none"`, while [`app`] builds and unit-tests on the
+//! host too (`cargo test -p chladni-firmware --lib`), its defmt logs in defmt's host mode there.
 #![no_std]
 
-#[cfg(not(any(feature = "board-qemu", feature = "board-stm32l475")))]
+#[cfg(all(target_os = "none", not(any(feature = "board-qemu", feature = "board-stm32l475"))))]
 compile_error!("select a board: --features board-qemu or --features board-stm32l475");
 #[cfg(all(feature = "board-qemu", feature = "board-stm32l475"))]
 compile_error!("select exactly one board feature");
 
+#[cfg(all(test, not(target_os = "none")))]
+extern crate std;
+
 pub mod app;
+#[cfg(target_os = "none")]
 pub mod board;
 
 /// Firmware version, from the crate's manifest.

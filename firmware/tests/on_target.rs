@@ -63,7 +63,7 @@ async fn timer_task() {
 mod tests {
     use chladni_firmware::app::drive::DriveShared;
     use chladni_firmware::app::link::{Identity, handle};
-    use chladni_shared::link::{Board, PROTOCOL_VERSION, Request, Response};
+    use chladni_shared::icd::link::{Board, PROTOCOL_VERSION, Request, Response};
 
     use chladni_firmware::board::qemu::flash::{self, FileFlashError};
     use embedded_storage::nor_flash::{NorFlash, NorFlashErrorKind, ReadNorFlash};
@@ -115,6 +115,43 @@ mod tests {
     }
 
     #[test]
+    fn file_flash_pages_persist_and_stay_inside_the_bank() {
+        let page = (flash::CAPACITY - 2 * flash::PAGE_SIZE) as u32;
+        let mut f = super::open_flash();
+        f.erase(page, page + flash::PAGE_SIZE as u32).unwrap();
+        // A whole page, more than the driver's 256-byte chunks, in one write.
+        let mut data = [0u8; flash::PAGE_SIZE];
+        data.iter_mut().enumerate().for_each(|(i, b)| *b = (i * 7 + 3) as u8);
+        f.write(page, &data).unwrap();
+
+        // The bytes live in the host file: a second handle reads them back.
+        let mut g = super::open_flash();
+        let mut back = [0u8; flash::PAGE_SIZE];
+        g.read(page, &mut back).unwrap();
+        assert!(back == data, "page read back differs");
+        let mut next = [0u8; 8];
+        g.read(page + flash::PAGE_SIZE as u32, &mut next).unwrap();
+        assert_eq!(next, [0xff; 8], "the next page is untouched");
+
+        // Erasing the page restores it, and only it.
+        g.erase(page, page + flash::PAGE_SIZE as u32).unwrap();
+        f.read(page, &mut back).unwrap();
+        assert!(back.iter().all(|&b| b == 0xff), "erased page reads 0xff");
+
+        // Requests outside the bank or off the 8-byte / 2 KiB grid are refused untouched.
+        let end = flash::CAPACITY as u32;
+        let out = FileFlashError::Request(NorFlashErrorKind::OutOfBounds);
+        assert_eq!(f.erase(end, end + flash::PAGE_SIZE as u32), Err(out));
+        assert_eq!(f.write(end - 8, &[0; 16]), Err(out));
+        assert_eq!(f.read(end - 4, &mut [0; 8]), Err(out));
+        let not_aligned = FileFlashError::Request(NorFlashErrorKind::NotAligned);
+        assert_eq!(f.write(page, &[0; 12]), Err(not_aligned));
+        assert_eq!(f.erase(page, page + 100), Err(not_aligned));
+        f.read(page, &mut next).unwrap();
+        assert_eq!(next, [0xff; 8], "refused writes changed nothing");
+    }
+
+    #[test]
     fn shared_vectors() {
         for (name, vector) in chladni_shared::vectors::ALL {
             match vector() {
@@ -149,8 +186,9 @@ mod tests {
     #[test]
     fn drive_core_runs_a_plan_to_idle() {
         use chladni_firmware::app::drive::{Command, DriveCore};
-        use chladni_shared::plan::{Plan, Step};
-        use chladni_shared::runner::{BLOCK_LEN, DriveState};
+        use chladni_shared::drive::runner::BLOCK_LEN;
+        use chladni_shared::icd::link::DriveState;
+        use chladni_shared::icd::plan::{Plan, Step};
         let shared = DriveShared::new();
         let mut plan =
             Plan { name: heapless::String::new(), repeat: 1, steps: heapless::Vec::new() };

@@ -6,10 +6,10 @@
 
 use std::hint::black_box;
 
-use chladni_shared::field::{Field, FieldKind};
-use chladni_shared::fx::Fx;
-use chladni_shared::geometry::Pt;
-use chladni_shared::rest::Analyzer;
+use chladni_shared::analysis::field::{Field, FieldKind};
+use chladni_shared::analysis::fx::Fx;
+use chladni_shared::analysis::geometry::Pt;
+use chladni_shared::analysis::rest::Analyzer;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 
 fn blob(n: usize) -> Vec<Pt> {

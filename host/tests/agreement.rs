@@ -1,13 +1,13 @@
-//! Fixed-point analysis (chladni_shared::rest) against the independent f64 reference
+//! Fixed-point analysis (chladni_shared::analysis::rest) against the independent f64 reference
 //! (chladni::analysis::reference): rest orientations agree within 0.05° on every test part.
 
 use std::path::Path;
 
 use chladni::analysis::reference::{Law, RefField, Reference};
 use chladni::model::part::{Part, to_fx};
-use chladni_shared::field::{Field, FieldKind};
-use chladni_shared::geometry::Pt;
-use chladni_shared::rest::Analyzer;
+use chladni_shared::analysis::field::{Field, FieldKind};
+use chladni_shared::analysis::geometry::Pt;
+use chladni_shared::analysis::rest::Analyzer;
 
 const TOL_DEG: f64 = 0.05;
 

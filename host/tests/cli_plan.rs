@@ -128,7 +128,7 @@ fn bad_input_exits_2_with_named_errors() {
 #[test]
 fn example_plans_parse_as_device_plans_and_match_the_planner() {
     use chladni::model::plan_file::PlanFile;
-    use chladni_shared::plan::DeviceLimits;
+    use chladni_shared::icd::plan::DeviceLimits;
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/plans");
     let mut n = 0;
     for e in std::fs::read_dir(&dir).unwrap() {

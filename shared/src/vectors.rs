@@ -8,14 +8,15 @@
 //! A vector may also check invariants itself and return `Err` with a message; that fails on
 //! both sides.
 
-use crate::field::{Field, FieldKind};
-use crate::fx::Fx;
-use crate::geometry::Pt;
-use crate::link::{self, Envelope, Request, Response};
-use crate::plan::{DeviceLimits, Plan, Step};
-use crate::plant::{Plant, PlantParams};
-use crate::rest::{Analysis, Analyzer};
-use crate::runner::{BLOCK_LEN, DriveState, Runner};
+use crate::analysis::field::{Field, FieldKind};
+use crate::analysis::fx::Fx;
+use crate::analysis::geometry::Pt;
+use crate::analysis::rest::{Analysis, Analyzer};
+use crate::drive::plant::{Plant, PlantParams};
+use crate::drive::runner::{BLOCK_LEN, Runner};
+use crate::icd::link::DriveState;
+use crate::icd::link::{self, Envelope, Request, Response};
+use crate::icd::plan::{DeviceLimits, Plan, Step};
 
 /// FNV-1a, 64-bit: small, dependency-free, and plenty to tell two bit patterns apart.
 #[derive(Debug, Clone, Copy)]
@@ -146,8 +147,8 @@ fn drive_link_frames() -> Result<u64, &'static str> {
     let responses = [
         Response::Status(runner.status()),
         Response::Ack,
-        Response::Rejected(crate::runner::DriveError::Plan(crate::plan::PlanError::Empty)),
-        Response::Rejected(crate::runner::DriveError::Busy),
+        Response::Rejected(crate::icd::link::DriveError::Plan(crate::icd::plan::PlanError::Empty)),
+        Response::Rejected(crate::icd::link::DriveError::Busy),
     ];
     for body in responses {
         let env = Envelope { version: link::PROTOCOL_VERSION, id: 9, body };
@@ -160,10 +161,10 @@ fn drive_link_frames() -> Result<u64, &'static str> {
 fn plant_response() -> Result<u64, &'static str> {
     let mut d = Digest::new();
     let mut plant = Plant::new(PlantParams::DEFAULT);
-    let mut dds = crate::dds::Dds::new(crate::dds::tuning_word(180_000));
+    let mut dds = crate::drive::dds::Dds::new(crate::drive::dds::tuning_word(180_000));
     let mut block = [0u16; BLOCK_LEN];
     for _ in 0..40 {
-        dds.fill_steady(&mut block, crate::dds::gain_of_q15(16384));
+        dds.fill_steady(&mut block, crate::drive::dds::gain_of_q15(16384));
         for &c in &block {
             d.u64(plant.step(c).to_bits() as u64);
         }

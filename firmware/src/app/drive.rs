@@ -11,9 +11,10 @@
 use core::cell::Cell;
 use core::future::Future;
 
-use chladni_shared::plan::{DeviceLimits, Plan};
-use chladni_shared::plant::{Plant, PlantParams};
-use chladni_shared::runner::{BLOCK_LEN, DriveError, DriveState, Runner, StatusReport};
+use chladni_shared::drive::plant::{Plant, PlantParams};
+use chladni_shared::drive::runner::{BLOCK_LEN, Runner};
+use chladni_shared::icd::link::{DriveError, DriveState, StatusReport};
+use chladni_shared::icd::plan::{DeviceLimits, Plan};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
@@ -35,8 +36,6 @@ pub enum Command {
     },
     /// Ramp to zero and idle.
     Stop,
-    /// Ramp to zero and latch a fault.
-    Fault,
 }
 
 /// Status of a runner that has never run.
@@ -45,7 +44,7 @@ const IDLE: StatusReport = StatusReport {
     step: None,
     run: 0,
     elapsed_samples: 0,
-    sample_rate: chladni_shared::dds::SAMPLE_RATE,
+    sample_rate: chladni_shared::drive::dds::SAMPLE_RATE,
     freq_mhz: 0,
     amplitude_q15: 0,
     underruns: 0,
@@ -89,12 +88,7 @@ impl DriveShared {
                 .limits
                 .check_setpoint(*freq_mhz, *amplitude_q15)
                 .map_err(DriveError::Setpoint)?,
-            Command::Stop | Command::Fault => {}
-        }
-        if matches!(command, Command::RunPlan(_) | Command::Drive { .. })
-            && self.status().state == DriveState::Faulted
-        {
-            return Err(DriveError::Faulted);
+            Command::Stop => {}
         }
         self.commands.try_send(command).map_err(|_| DriveError::Busy)
     }
@@ -136,10 +130,6 @@ impl<'a> DriveCore<'a> {
                     self.runner.stop();
                     Ok(())
                 }
-                Command::Fault => {
-                    self.runner.fault();
-                    Ok(())
-                }
             };
             if let Err(e) = result {
                 defmt::warn!("drive: command refused: {}", e);
@@ -147,6 +137,15 @@ impl<'a> DriveCore<'a> {
         }
         self.runner.fill(block);
         self.publish();
+    }
+
+    /// One turn of the drive: refill `block`, hand it to `output`, count an underrun if the
+    /// output had run dry.
+    pub async fn play_block<O: SampleOutput>(&mut self, block: &mut [u16], output: &mut O) {
+        self.refill(block);
+        if output.write_block(block).await.is_err() {
+            self.note_underrun();
+        }
     }
 
     /// Counts a missed refill.
@@ -177,16 +176,14 @@ pub async fn run<O: SampleOutput>(shared: &DriveShared, output: &mut O) -> ! {
     let mut core = DriveCore::new(shared);
     let mut block = [0u16; BLOCK_LEN];
     loop {
-        core.refill(&mut block);
-        if output.write_block(&block).await.is_err() {
-            core.note_underrun();
-        }
+        core.play_block(&mut block, output).await;
     }
 }
 
 /// Block period: [`BLOCK_LEN`] samples at the sample rate.
-pub const BLOCK_PERIOD: Duration =
-    Duration::from_micros(BLOCK_LEN as u64 * 1_000_000 / chladni_shared::dds::SAMPLE_RATE as u64);
+pub const BLOCK_PERIOD: Duration = Duration::from_micros(
+    BLOCK_LEN as u64 * 1_000_000 / chladni_shared::drive::dds::SAMPLE_RATE as u64,
+);
 
 /// A DAC that exists only in time: it takes one block per [`BLOCK_PERIOD`] (paced by
 /// embassy-time) and drives the simulated shaker + plate with it. A block that arrives more
@@ -196,7 +193,6 @@ pub const BLOCK_PERIOD: Duration =
 pub struct SimulatedDac {
     plant: Plant,
     next: Option<Instant>,
-    peak: f32,
 }
 
 impl Default for SimulatedDac {
@@ -208,12 +204,7 @@ impl Default for SimulatedDac {
 impl SimulatedDac {
     /// A plant at rest with the default parameters.
     pub fn new() -> Self {
-        Self { plant: Plant::new(PlantParams::DEFAULT), next: None, peak: 0.0 }
-    }
-
-    /// Largest |acceleration| of the simulated plate in the last block, m/s².
-    pub fn peak_acceleration(&self) -> f32 {
-        self.peak
+        Self { plant: Plant::new(PlantParams::DEFAULT), next: None }
     }
 }
 
@@ -226,7 +217,7 @@ impl SampleOutput for SimulatedDac {
             Some(next) if now > next + BLOCK_PERIOD => (now, Err(Underrun)),
             Some(next) => (next, Ok(())),
         };
-        self.peak = self.plant.run(block);
+        self.plant.run(block);
         self.next = Some(start + BLOCK_PERIOD);
         // Double buffering: the block just handed over plays while the next one is filled.
         Timer::at(start).await;

@@ -3,8 +3,9 @@
 //! Garbage never stops the loop: a bad frame costs one error response, and the reader
 //! resynchronises at the next delimiter.
 
-use chladni_shared::link::{
-    self, Board, DeviceInfo, Envelope, FrameReader, MAX_FRAME, PROTOCOL_VERSION, Request, Response,
+use chladni_shared::icd::link::{
+    self, Board, DeviceInfo, Envelope, FrameReader, LinkError, MAX_FRAME, PROTOCOL_VERSION,
+    Request, Response,
 };
 use embedded_io_async::{Read, Write};
 
@@ -45,6 +46,29 @@ pub fn handle(identity: &Identity, drive: &DriveShared, request: &Request) -> Re
     }
 }
 
+/// The response to one frame from [`FrameReader::push`]: the answer to its request, or the
+/// error that kept it from being read (with the frame's id when it got that far, else 0).
+pub fn respond(
+    identity: &Identity,
+    drive: &DriveShared,
+    frame: Result<&mut [u8], LinkError>,
+) -> Envelope<Response> {
+    let (id, body) = match frame {
+        Ok(frame) => match link::decode::<Request>(frame) {
+            Ok(env) => {
+                defmt::debug!("link: request {} {}", env.id, env.body);
+                (env.id, handle(identity, drive, &env.body))
+            }
+            Err(e) => (e.id, Response::Error(e.error)),
+        },
+        Err(error) => (0, Response::Error(error)),
+    };
+    if let Response::Error(e) = &body {
+        defmt::warn!("link: refused frame (id {}): {}", id, e);
+    }
+    Envelope { version: PROTOCOL_VERSION, id, body }
+}
+
 /// Runs the link forever on `port`.
 pub async fn serve<P: Read + Write>(identity: Identity, drive: &DriveShared, port: &mut P) -> ! {
     let mut reader = FrameReader::<MAX_FRAME>::new();
@@ -64,20 +88,8 @@ pub async fn serve<P: Read + Write>(identity: Identity, drive: &DriveShared, por
         };
         for &byte in &rx[..n] {
             let Some(frame) = reader.push(byte) else { continue };
-            let (id, response) = match frame {
-                Ok(frame) => match link::decode::<Request>(frame) {
-                    Ok(env) => {
-                        defmt::debug!("link: request {} {}", env.id, env.body);
-                        (env.id, handle(&identity, drive, &env.body))
-                    }
-                    Err(e) => (e.id, Response::Error(e.error)),
-                },
-                Err(error) => (0, Response::Error(error)),
-            };
-            if let Response::Error(e) = &response {
-                defmt::warn!("link: refused frame (id {}): {}", id, e);
-            }
-            let envelope = Envelope { version: PROTOCOL_VERSION, id, body: response };
+            let envelope = respond(&identity, drive, frame);
+            let id = envelope.id;
             match link::encode(&envelope, &mut tx) {
                 Ok(bytes) => {
                     if port.write_all(bytes).await.is_err() {

@@ -10,9 +10,9 @@
 #![no_main]
 
 use chladni_firmware::board;
-use chladni_shared::dds::{Dds, gain_of_q15, tuning_word};
-use chladni_shared::plan::{DeviceLimits, Plan, Step};
-use chladni_shared::runner::{BLOCK_LEN, Runner};
+use chladni_shared::drive::dds::{Dds, gain_of_q15, tuning_word};
+use chladni_shared::drive::runner::{BLOCK_LEN, Runner};
+use chladni_shared::icd::plan::{DeviceLimits, Plan, Step};
 use core::hint::black_box;
 use embassy_time::Instant;
 

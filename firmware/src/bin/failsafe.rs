@@ -12,7 +12,7 @@
 
 use chladni_firmware::app::drive::{self, Command, DriveShared};
 use chladni_firmware::board::{self, qemu::failsafe, qemu::flash};
-use chladni_shared::dds::DAC_MID;
+use chladni_shared::drive::dds::DAC_MID;
 use embassy_time::{Duration, Instant, Timer};
 
 /// Exit code: no crash happened (bad argument, or the drive never left mid-scale).

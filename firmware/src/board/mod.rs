@@ -1,7 +1,7 @@
 //! Board support: the only place with registers and `unsafe`.
 //!
 //! Each board exposes the same surface to `main`: `init() -> Board`, a `Link` type for the host
-//! link (an `embedded_io_async` byte stream) and the board's [`chladni_shared::link::Board`] id.
+//! link (an `embedded_io_async` byte stream) and the board's [`chladni_shared::icd::link::Board`] id.
 
 #[cfg(feature = "board-qemu")]
 pub mod qemu;

@@ -19,8 +19,8 @@
 
 pub mod failsafe;
 
-use chladni_shared::dds::SAMPLE_RATE;
-use chladni_shared::runner::BLOCK_LEN;
+use chladni_shared::drive::dds::SAMPLE_RATE;
+use chladni_shared::drive::runner::BLOCK_LEN;
 use defmt_rtt as _;
 use embassy_stm32::dac::{self, DacChannel};
 use embassy_stm32::dma::{self, TransferOptions, WritableRingBuffer};
@@ -35,7 +35,7 @@ use stm32_metapac as pac;
 use crate::app::drive::{SampleOutput, Underrun};
 
 /// This board's identity on the link.
-pub const BOARD: chladni_shared::link::Board = chladni_shared::link::Board::Stm32l475;
+pub const BOARD: chladni_shared::icd::link::Board = chladni_shared::icd::link::Board::Stm32l475;
 
 /// The host link: USART1 through the ST-LINK virtual COM port.
 pub type Link = BufferedUart<'static>;
@@ -71,7 +71,7 @@ impl DacOutput {
         tim6: embassy_stm32::Peri<'static, peripherals::TIM6>,
     ) -> Self {
         static BUF: StaticCell<[u32; 2 * BLOCK_LEN]> = StaticCell::new();
-        let buf = BUF.init([u32::from(chladni_shared::dds::DAC_MID); 2 * BLOCK_LEN]);
+        let buf = BUF.init([u32::from(chladni_shared::drive::dds::DAC_MID); 2 * BLOCK_LEN]);
 
         // The DAC channel (clock, analog pin); then trigger and DMA request by register, since
         // the ring buffer owns the DMA channel rather than the DAC driver.

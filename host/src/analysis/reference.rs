@@ -1,4 +1,4 @@
-//! The f64 reference for the rest analysis of `chladni_shared::rest`, written independently
+//! The f64 reference for the rest analysis of `chladni_shared::analysis::rest`, written independently
 //! on purpose: explicit Sutherland–Hodgman clipping of every ring at the node, side
 //! integrals by Gauss–Legendre quadrature of Green's boundary integrals (exact for the
 //! polynomial laws, ~1e-15 for the sine law), balance by plain bisection, roots by dense
@@ -7,7 +7,7 @@
 
 use crate::model::part::Part;
 
-/// Field law, as in `chladni_shared::field::FieldKind` but in f64.
+/// Field law, as in `chladni_shared::analysis::field::FieldKind` but in f64.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Law {
     /// f = −k sign(x).

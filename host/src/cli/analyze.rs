@@ -5,9 +5,9 @@ use std::process::ExitCode;
 
 use chladni::model::part::{Part, from_fx, to_fx};
 use chladni::plot::analysis::{self, PlotData};
-use chladni_shared::field::{Field, FieldKind};
-use chladni_shared::fx::{Bam, Fx};
-use chladni_shared::rest::{Analysis, AnalysisError, Analyzer};
+use chladni_shared::analysis::field::{Field, FieldKind};
+use chladni_shared::analysis::fx::{Bam, Fx};
+use chladni_shared::analysis::rest::{Analysis, AnalysisError, Analyzer};
 use clap::{Args, ValueEnum};
 
 use super::InputError;
@@ -106,7 +106,7 @@ impl AnalyzeArgs {
         let part =
             Part::load(&self.part).map_err(|e| bad(format!("{}: {e}", self.part.display())))?;
         let rings = part.to_fixed();
-        let slices: Vec<&[chladni_shared::geometry::Pt]> =
+        let slices: Vec<&[chladni_shared::analysis::geometry::Pt]> =
             rings.iter().map(Vec::as_slice).collect();
         let an = Analyzer::new(&slices, field).map_err(|e| match e {
             AnalysisError::WavelengthTooShort => {

@@ -6,8 +6,8 @@ use std::process::ExitCode;
 use anyhow::Context;
 use chladni::controller::client::DeviceClient;
 use chladni::model::plan_file::PlanFile;
-use chladni_shared::plan::{DeviceLimits, Plan};
-use chladni_shared::runner::StatusReport;
+use chladni_shared::icd::link::StatusReport;
+use chladni_shared::icd::plan::{DeviceLimits, Plan};
 use clap::{Args, Subcommand};
 
 use super::InputError;
@@ -211,7 +211,7 @@ impl DeviceCommand {
 /// Polls the controller until its drive is idle, with a progress bar over the plan's length;
 /// prints what happened. A fault, or a drive that stops answering, fails the command.
 fn watch_plan(client: &mut DeviceClient, steps: usize, total_ms: u64) -> anyhow::Result<ExitCode> {
-    use chladni_shared::runner::DriveState;
+    use chladni_shared::icd::link::DriveState;
     let bar = indicatif::ProgressBar::new(total_ms.max(1));
     bar.set_style(
         indicatif::ProgressStyle::with_template("{bar:40.cyan/blue} {pos:>7}/{len} ms  {msg}")
@@ -255,7 +255,7 @@ fn watch_plan(client: &mut DeviceClient, steps: usize, total_ms: u64) -> anyhow:
 #[cfg(test)]
 mod tests {
     use super::*;
-    use chladni_shared::runner::DriveState;
+    use chladni_shared::icd::link::DriveState;
 
     #[test]
     fn status_json_has_exactly_the_documented_fields() {

@@ -10,7 +10,7 @@ use chladni::motion::sim::{Body, FieldModel, Pose, SimStep, run_plan};
 use chladni::planner::feed::{self, FeedRegion};
 use chladni::planner::{self, PlanOptions};
 use chladni::plot::plan as plan_plot;
-use chladni_shared::plan::DeviceLimits;
+use chladni_shared::icd::plan::DeviceLimits;
 use clap::Args;
 
 use super::InputError;

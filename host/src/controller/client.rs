@@ -1,13 +1,13 @@
 //! Client for the controller's link: a serial port (the board's USB CDC / ST-LINK VCP) or
 //! `tcp://HOST:PORT` (QEMU's `-chardev socket`). Frames are the ones of
-//! [`chladni_shared::link`]; every request gets a fresh id and the client waits for the
+//! [`chladni_shared::icd::link`]; every request gets a fresh id and the client waits for the
 //! response with that id, skipping stale answers (for example to garbage sent earlier).
 
 use std::io::{ErrorKind, Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
-use chladni_shared::link::{
+use chladni_shared::icd::link::{
     self, DeviceInfo, DriveError, Envelope, FrameReader, LinkError, MAX_FRAME, PROTOCOL_VERSION,
     Plan, Request, Response, StatusReport,
 };

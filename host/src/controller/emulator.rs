@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use chladni_shared::link::Board;
+use chladni_shared::icd::link::Board;
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use chladni_shared::link::Board;
+use chladni_shared::icd::link::Board;
 
 /// Why an image could not be had.
 #[derive(Debug, thiserror::Error)]

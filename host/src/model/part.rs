@@ -1,5 +1,5 @@
 //! Planar parts: import from JSON (DESIGN.md §2) or SVG, validation, conversion to the
-//! fixed-point rings of `chladni_shared::rest`.
+//! fixed-point rings of `chladni_shared::analysis::rest`.
 //!
 //! JSON: `{"name": "...", "outline": [[x,y],...], "holes": [[[x,y],...],...]}`, mm, any
 //! winding, y up. SVG: every `<polygon>` and every sub-path of every `<path>` (straight
@@ -14,8 +14,8 @@
 use std::fmt;
 use std::path::Path;
 
-use chladni_shared::fx::Fx;
-use chladni_shared::geometry::Pt;
+use chladni_shared::analysis::fx::Fx;
+use chladni_shared::analysis::geometry::Pt;
 
 /// Coordinates beyond this (mm) are rejected as absurd.
 pub const MAX_COORD_MM: f64 = 1.0e5;
@@ -398,7 +398,7 @@ impl Part {
         self.rings().map(Vec::len).sum()
     }
 
-    /// The rings in Q31.32 (mm), for `chladni_shared::rest::Analyzer`.
+    /// The rings in Q31.32 (mm), for `chladni_shared::analysis::rest::Analyzer`.
     pub fn to_fixed(&self) -> Vec<Vec<Pt>> {
         self.rings()
             .map(|r| r.iter().map(|p| Pt::new(to_fx(p[0]), to_fx(p[1]))).collect())

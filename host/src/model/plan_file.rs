@@ -6,11 +6,11 @@
 //!  "steps": [{"freq_hz": 60.0, "duration_ms": 2500, "amplitude": 0.8, "ramp_ms": 20}],
 //!  "final_orientation_deg": 110.7, "period_deg": 180.0, "final_position_mm": null}
 //! ```
-//! Converted to and from [`chladni_shared::plan::Plan`] (the value the firmware stores and
+//! Converted to and from [`chladni_shared::icd::plan::Plan`] (the value the firmware stores and
 //! runs): frequency Hz → mHz and amplitude 0..1 → Q15 rounded to nearest, then validated
 //! against [`DeviceLimits`].
 
-use chladni_shared::plan::{DeviceLimits, MAX_NAME, MAX_STEPS, Plan, PlanError, Step};
+use chladni_shared::icd::plan::{DeviceLimits, MAX_NAME, MAX_STEPS, Plan, PlanError, Step};
 use serde::{Deserialize, Serialize};
 
 /// One step as written.

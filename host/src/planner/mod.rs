@@ -30,10 +30,10 @@
 
 use std::collections::{HashMap, VecDeque};
 
-use chladni_shared::field::{Field, FieldKind};
-use chladni_shared::fx::Bam;
-use chladni_shared::geometry::Pt;
-use chladni_shared::rest::Analyzer;
+use chladni_shared::analysis::field::{Field, FieldKind};
+use chladni_shared::analysis::fx::Bam;
+use chladni_shared::analysis::geometry::Pt;
+use chladni_shared::analysis::rest::Analyzer;
 
 use crate::analysis::reference::{self, RefField, Reference};
 use crate::model::part::{Part, to_fx};

@@ -9,8 +9,8 @@
 
 use core::sync::atomic::{AtomicBool, AtomicU16, Ordering};
 
-use chladni_shared::dds::DAC_MID;
-use chladni_shared::runner::BLOCK_LEN;
+use chladni_shared::drive::dds::DAC_MID;
+use chladni_shared::drive::runner::BLOCK_LEN;
 
 use crate::app::drive::{SampleOutput, SimulatedDac, Underrun};
 

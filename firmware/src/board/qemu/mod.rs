@@ -20,7 +20,7 @@ pub mod usart;
 use defmt_semihosting as _;
 
 /// This board's identity on the link.
-pub const BOARD: chladni_shared::link::Board = chladni_shared::link::Board::Qemu;
+pub const BOARD: chladni_shared::icd::link::Board = chladni_shared::icd::link::Board::Qemu;
 
 /// The host link: USART1, reached by the host through QEMU's `-serial` chardev.
 pub type Link = usart::Usart1;

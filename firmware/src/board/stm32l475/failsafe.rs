@@ -17,7 +17,7 @@
 
 use core::sync::atomic::{AtomicBool, Ordering};
 
-use chladni_shared::dds::DAC_MID;
+use chladni_shared::drive::dds::DAC_MID;
 use stm32_metapac as pac;
 
 /// DAC1 channel 1 (index 0 in the metapac's per-channel fields).

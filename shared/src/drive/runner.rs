@@ -9,10 +9,9 @@
 //! gain); each segment is one call of the DDS's tight loop ([`Dds::fill_steady`] /
 //! [`Dds::fill_ramp`]), so the per-sample cost carries no state-machine branches.
 
-use serde::{Deserialize, Serialize};
-
-use crate::dds::{self, DAC_MID, Dds, SAMPLE_RATE, SAMPLES_PER_MS};
-use crate::plan::{DeviceLimits, Plan, PlanError};
+use crate::drive::dds::{self, DAC_MID, Dds, SAMPLE_RATE, SAMPLES_PER_MS};
+use crate::icd::link::{DriveError, DriveState, StatusReport};
+use crate::icd::plan::{DeviceLimits, Plan};
 
 /// Samples per block: one DMA half-buffer on the board, one tick of the QEMU pacer (5 ms).
 pub const BLOCK_LEN: usize = 250;
@@ -20,93 +19,6 @@ pub const BLOCK_LEN: usize = 250;
 pub const STOP_RAMP_MS: u32 = 20;
 /// Ramp of the amplitude when a manual setpoint ([`Runner::drive`]) changes.
 pub const MANUAL_RAMP_MS: u32 = 20;
-
-/// What the drive is doing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum DriveState {
-    /// No output (mid-scale).
-    Idle,
-    /// Amplitude rising towards the step's (or setpoint's) target.
-    RampUp,
-    /// Steady amplitude.
-    Running,
-    /// Amplitude falling towards a lower target within a plan or setpoint.
-    RampDown,
-    /// Ramping to zero after a stop request or the end of a plan; then idle.
-    Stopping,
-    /// Ramped to zero after a fault; stays silent until a stop request clears it.
-    Faulted,
-}
-
-impl DriveState {
-    /// Lowercase name as printed by the CLI (`stopping` is reported as `ramp_down`).
-    pub const fn name(self) -> &'static str {
-        match self {
-            DriveState::Idle => "idle",
-            DriveState::RampUp => "ramp_up",
-            DriveState::Running => "running",
-            DriveState::RampDown | DriveState::Stopping => "ramp_down",
-            DriveState::Faulted => "faulted",
-        }
-    }
-}
-
-/// A snapshot of the drive, as answered to [`crate::link::Request::Status`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct StatusReport {
-    /// What the drive is doing.
-    pub state: DriveState,
-    /// Index of the plan step being run; `None` outside a plan (idle, manual, final ramp).
-    pub step: Option<u16>,
-    /// Which repetition of the plan is running (0-based).
-    pub run: u16,
-    /// Samples output since the current plan or manual drive started (kept when idle).
-    pub elapsed_samples: u64,
-    /// Samples per second, to turn `elapsed_samples` into time.
-    pub sample_rate: u32,
-    /// Frequency being output, millihertz.
-    pub freq_mhz: u32,
-    /// Amplitude being output right now (ramps included), Q15.
-    pub amplitude_q15: u16,
-    /// Sample blocks the output needed before they were ready (missed refills).
-    pub underruns: u32,
-    /// Commands applied so far (start, drive, stop, fault).
-    pub commands: u32,
-}
-
-impl StatusReport {
-    /// `elapsed_samples` in milliseconds.
-    pub fn elapsed_ms(&self) -> f64 {
-        self.elapsed_samples as f64 * 1000.0 / self.sample_rate as f64
-    }
-}
-
-/// Why a command was not applied.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum DriveError {
-    /// The plan does not fit the device's limits.
-    Plan(PlanError),
-    /// The manual setpoint does not fit the device's limits.
-    Setpoint(PlanError),
-    /// The drive is faulted; send a stop to clear it first.
-    Faulted,
-    /// The drive's command queue is full; try again.
-    Busy,
-}
-
-impl core::fmt::Display for DriveError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            DriveError::Plan(e) => write!(f, "invalid plan: {e}"),
-            DriveError::Setpoint(e) => write!(f, "invalid setpoint: {e}"),
-            DriveError::Faulted => write!(f, "drive is faulted (send stop to clear)"),
-            DriveError::Busy => write!(f, "drive command queue full"),
-        }
-    }
-}
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Mode {
@@ -250,7 +162,7 @@ impl Runner {
         }
     }
 
-    /// A snapshot for [`crate::link::Request::Status`].
+    /// A snapshot for [`crate::icd::link::Request::Status`].
     pub fn status(&self) -> StatusReport {
         let (step, run) = match self.mode {
             Mode::Plan { step, run, .. } => (Some(step), run),
@@ -361,7 +273,7 @@ impl Runner {
 mod tests {
     extern crate std;
     use super::*;
-    use crate::plan::Step;
+    use crate::icd::plan::{PlanError, Step};
     use std::vec::Vec;
 
     fn plan(steps: &[Step], repeat: u16) -> Plan {

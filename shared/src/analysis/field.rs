@@ -1,10 +1,10 @@
 //! Force fields of a straight node, and their exact integrals over polygon pieces.
 //!
-//! The node is the plate's y-axis, `d = x` (DESIGN.md §2). The force per unit area is along
+//! The node is the plate's y-axis, `d = x`. The force per unit area is along
 //! x, `f_x = −k(x)·g(x)`, with `k = gain_right` for x > 0 and `gain_left` for x < 0:
 //! - sign:   g = sign x
 //! - linear: g = x
-//! - sine:   g = sin(πx/w)·(w/π), i.e. the DESIGN.md field scaled by w/π so that it tends
+//! - sine:   g = sin(πx/w)·(w/π), i.e. the field sin(πx/w) scaled by w/π so that it tends
 //!   to the linear field as w → ∞ (a positive factor: rest orientations are unchanged).
 //!
 //! On one side of the node (x ≥ 0 or x ≤ 0) a region's integrals follow from Green's
@@ -13,7 +13,7 @@
 //! clipped region's integrals are sums over the boundary *pieces* lying on that side:
 //! clipping needs no buffer. [`piece`] gives the exact integral along one straight piece.
 
-use crate::fx::{self, Fx};
+use crate::analysis::fx::{self, Fx};
 
 /// Which field law.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

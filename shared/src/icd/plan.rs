@@ -2,7 +2,7 @@
 //! against the limits of a device.
 //!
 //! A plan is the same value on the host (written as JSON by the planner, read by
-//! `chladni device run-file`) and on the wire ([`crate::link::Request::RunPlan`]). Units are
+//! `chladni device run-file`) and on the wire ([`crate::icd::link::Request::RunPlan`]). Units are
 //! integers so that both sides compute the same sample counts: frequency in millihertz,
 //! amplitude in Q15 (32767 ≈ full scale of the DAC), times in milliseconds.
 //!
@@ -14,7 +14,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::dds::SAMPLES_PER_MS;
+use crate::drive::dds::SAMPLES_PER_MS;
 
 /// Most steps a plan may hold (it must fit one link frame).
 pub const MAX_STEPS: usize = 32;
@@ -49,7 +49,7 @@ impl Step {
 }
 
 /// A named sequence of steps, run `repeat` times (1 = once). At its end the drive ramps to zero
-/// over the last step's ramp (at least [`crate::runner::STOP_RAMP_MS`]) and goes idle.
+/// over the last step's ramp (at least [`crate::drive::runner::STOP_RAMP_MS`]) and goes idle.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Plan {
@@ -128,19 +128,17 @@ impl DeviceLimits {
         max_total_ms: 3_600_000,
     };
 
-    /// Checks a manual setpoint (frequency and amplitude). Errors name step 0.
-    pub fn check_setpoint(&self, freq_mhz: u32, amplitude_q15: u16) -> Result<(), PlanError> {
+    /// Checks a setpoint (frequency and amplitude), a manual drive's or a plan step's.
+    pub fn check_setpoint(&self, freq_mhz: u32, amplitude_q15: u16) -> Result<(), SetpointError> {
         if freq_mhz < self.min_freq_mhz || freq_mhz > self.max_freq_mhz {
-            return Err(PlanError::FrequencyOutOfRange {
-                step: 0,
+            return Err(SetpointError::FrequencyOutOfRange {
                 freq_mhz,
                 min_mhz: self.min_freq_mhz,
                 max_mhz: self.max_freq_mhz,
             });
         }
         if amplitude_q15 > self.max_amplitude_q15 {
-            return Err(PlanError::AmplitudeTooHigh {
-                step: 0,
+            return Err(SetpointError::AmplitudeTooHigh {
                 amplitude_q15,
                 max_q15: self.max_amplitude_q15,
             });
@@ -155,7 +153,7 @@ impl Default for DeviceLimits {
     }
 }
 
-/// Why a plan (or a manual setpoint) was refused.
+/// Why a plan was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum PlanError {
@@ -172,7 +170,7 @@ pub enum PlanError {
     ZeroRepeat,
     /// A step's frequency is outside the device's range.
     FrequencyOutOfRange {
-        /// Step index (0 for a manual setpoint).
+        /// Step index.
         step: u16,
         /// The frequency asked for, mHz.
         freq_mhz: u32,
@@ -183,7 +181,7 @@ pub enum PlanError {
     },
     /// A step's amplitude is above the device's maximum.
     AmplitudeTooHigh {
-        /// Step index (0 for a manual setpoint).
+        /// Step index.
         step: u16,
         /// The amplitude asked for, Q15.
         amplitude_q15: u16,
@@ -213,23 +211,73 @@ pub enum PlanError {
     },
 }
 
-impl PlanError {
-    fn at_step(self, i: u16) -> Self {
+/// Why a setpoint (frequency, amplitude) is outside the device's limits. A manual drive is
+/// refused with this error alone; a plan step's becomes a [`PlanError`] naming the step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SetpointError {
+    /// The frequency is outside the device's range.
+    FrequencyOutOfRange {
+        /// The frequency asked for, mHz.
+        freq_mhz: u32,
+        /// Lowest allowed, mHz.
+        min_mhz: u32,
+        /// Highest allowed, mHz.
+        max_mhz: u32,
+    },
+    /// The amplitude is above the device's maximum.
+    AmplitudeTooHigh {
+        /// The amplitude asked for, Q15.
+        amplitude_q15: u16,
+        /// Highest allowed, Q15.
+        max_q15: u16,
+    },
+}
+
+impl SetpointError {
+    /// The same problem, found in plan step `step`.
+    pub const fn at_step(self, step: u16) -> PlanError {
         match self {
-            PlanError::FrequencyOutOfRange { freq_mhz, min_mhz, max_mhz, .. } => {
-                PlanError::FrequencyOutOfRange { step: i, freq_mhz, min_mhz, max_mhz }
+            SetpointError::FrequencyOutOfRange { freq_mhz, min_mhz, max_mhz } => {
+                PlanError::FrequencyOutOfRange { step, freq_mhz, min_mhz, max_mhz }
             }
-            PlanError::AmplitudeTooHigh { amplitude_q15, max_q15, .. } => {
-                PlanError::AmplitudeTooHigh { step: i, amplitude_q15, max_q15 }
+            SetpointError::AmplitudeTooHigh { amplitude_q15, max_q15 } => {
+                PlanError::AmplitudeTooHigh { step, amplitude_q15, max_q15 }
             }
-            other => other,
         }
     }
 }
 
+/// `mhz` as `Hz.mmm` (exact: no float formatting on the controller).
+struct Hz(u32);
+
+impl core::fmt::Display for Hz {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{}.{:03}", self.0 / 1000, self.0 % 1000)
+    }
+}
+
+impl core::fmt::Display for SetpointError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            SetpointError::FrequencyOutOfRange { freq_mhz, min_mhz, max_mhz } => write!(
+                f,
+                "frequency {} Hz outside {}..={} Hz",
+                Hz(freq_mhz),
+                Hz(min_mhz),
+                Hz(max_mhz)
+            ),
+            SetpointError::AmplitudeTooHigh { amplitude_q15, max_q15 } => {
+                write!(f, "amplitude {amplitude_q15}/32768 above the maximum {max_q15}/32768")
+            }
+        }
+    }
+}
+
+impl core::error::Error for SetpointError {}
+
 impl core::fmt::Display for PlanError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        let hz = |mhz: u32| (mhz / 1000, mhz % 1000);
         match *self {
             PlanError::Empty => write!(f, "plan has no steps"),
             PlanError::TooManySteps { count, max } => {
@@ -237,17 +285,13 @@ impl core::fmt::Display for PlanError {
             }
             PlanError::ZeroRepeat => write!(f, "repeat must be at least 1"),
             PlanError::FrequencyOutOfRange { step, freq_mhz, min_mhz, max_mhz } => {
-                let (a, b, c) = (hz(freq_mhz), hz(min_mhz), hz(max_mhz));
-                write!(
-                    f,
-                    "step {step}: frequency {}.{:03} Hz outside {}.{:03}..={}.{:03} Hz",
-                    a.0, a.1, b.0, b.1, c.0, c.1
-                )
+                let e = SetpointError::FrequencyOutOfRange { freq_mhz, min_mhz, max_mhz };
+                write!(f, "step {step}: {e}")
             }
-            PlanError::AmplitudeTooHigh { step, amplitude_q15, max_q15 } => write!(
-                f,
-                "step {step}: amplitude {amplitude_q15}/32768 above the maximum {max_q15}/32768"
-            ),
+            PlanError::AmplitudeTooHigh { step, amplitude_q15, max_q15 } => {
+                let e = SetpointError::AmplitudeTooHigh { amplitude_q15, max_q15 };
+                write!(f, "step {step}: {e}")
+            }
             PlanError::ZeroDuration { step } => write!(f, "step {step}: duration is 0 ms"),
             PlanError::RampLongerThanStep { step, ramp_ms, duration_ms } => {
                 write!(f, "step {step}: ramp {ramp_ms} ms longer than the step ({duration_ms} ms)")
@@ -329,6 +373,29 @@ mod tests {
     }
 
     #[test]
+    fn setpoint_errors_name_the_value_and_range_and_no_step() {
+        let l = DeviceLimits::DEFAULT;
+        assert_eq!(l.check_setpoint(2_000_000, 32767), Ok(()));
+        let fast = l.check_setpoint(5_000_000, 1).unwrap_err();
+        assert_eq!(
+            fast,
+            SetpointError::FrequencyOutOfRange {
+                freq_mhz: 5_000_000,
+                min_mhz: 1_000,
+                max_mhz: 2_000_000
+            }
+        );
+        assert_eq!(std::format!("{fast}"), "frequency 5000.000 Hz outside 1.000..=2000.000 Hz");
+        let loud = l.check_setpoint(440_000, 40_000).unwrap_err();
+        assert_eq!(std::format!("{loud}"), "amplitude 40000/32768 above the maximum 32767/32768");
+        // In a plan, the same problem names its step.
+        assert_eq!(
+            std::format!("{}", fast.at_step(3)),
+            "step 3: frequency 5000.000 Hz outside 1.000..=2000.000 Hz"
+        );
+    }
+
+    #[test]
     fn largest_plan_fits_a_link_frame() {
         let s = step(u32::MAX, u16::MAX, u32::MAX, u32::MAX);
         let p = Plan {
@@ -336,14 +403,14 @@ mod tests {
             repeat: u16::MAX,
             steps: heapless::Vec::from_slice(&[s; MAX_STEPS]).unwrap(),
         };
-        let env = crate::link::Envelope {
-            version: crate::link::PROTOCOL_VERSION,
+        let env = crate::icd::link::Envelope {
+            version: crate::icd::link::PROTOCOL_VERSION,
             id: u32::MAX,
-            body: crate::link::Request::RunPlan(p),
+            body: crate::icd::link::Request::RunPlan(p),
         };
-        let mut buf = [0u8; crate::link::MAX_FRAME + 2];
-        let n = crate::link::encode(&env, &mut buf).expect("largest plan must fit").len();
-        assert!(n <= crate::link::MAX_FRAME + 2);
+        let mut buf = [0u8; crate::icd::link::MAX_FRAME + 2];
+        let n = crate::icd::link::encode(&env, &mut buf).expect("largest plan must fit").len();
+        assert!(n <= crate::icd::link::MAX_FRAME + 2);
     }
 
     extern crate std;

@@ -2,7 +2,7 @@
 //!
 //! # Why our own Q31.32 and not the `fixed` crate
 //! The rest analysis must give identical bits on x86-64 and on Cortex-M (QEMU), so the whole
-//! path is integer arithmetic. One format suffices because [`crate::rest`] first normalises
+//! path is integer arithmetic. One format suffices because [`crate::analysis::rest`] first normalises
 //! every part by a power of two (an exact shift) so that all coordinates lie in (−1, 1):
 //! areas, moments and turn-function values are then O(1) and a single Q31.32 covers them with
 //! 2⁻³² ≈ 2.3·10⁻¹⁰ resolution and ±2·10⁹ headroom. What we need beyond `+ − × ÷` are

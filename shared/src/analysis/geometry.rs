@@ -3,10 +3,10 @@
 //! A *shape* is a slice of rings: ring 0 is the outline, counter-clockwise; the others are
 //! holes, clockwise. With that winding every integral below is a plain sum over all rings
 //! (holes contribute negatively by their winding). Coordinates are [`Fx`]; callers keep them
-//! O(1) (see [`crate::rest`], which normalises parts by a power of two) so that products of
+//! O(1) (see [`crate::analysis::rest`], which normalises parts by a power of two) so that products of
 //! up to four coordinates stay well inside Q31.32.
 
-use crate::fx::Fx;
+use crate::analysis::fx::Fx;
 
 /// A point (or vector) in the plane.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -4,7 +4,7 @@ use std::vec::Vec as StdVec;
 use proptest::prelude::*;
 
 use super::*;
-use crate::geometry::{HalfPlane, clip_ring, ring_moments};
+use crate::analysis::geometry::{HalfPlane, clip_ring, ring_moments};
 
 fn q(x: f64) -> Fx {
     Fx((x * 4294967296.0).round() as i64)

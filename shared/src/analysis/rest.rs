@@ -1,18 +1,18 @@
 //! Rest orientations of a planar part at a straight node: balance offset, turn function
 //! t(θ), exact roots with stable/unstable classification, alignment function a(θ).
 //!
-//! Conventions (DESIGN.md §2): the node is the plate's y-axis (d = x). Orientation θ turns
+//! Conventions: the node is the plate's y-axis (d = x). Orientation θ turns
 //! the part, as drawn in its file, counter-clockwise about its centroid c. For each θ the
 //! part is translated along x by the *balance offset* s (position of c) until the force
 //! F = ∫ f_x dA vanishes; then `t(θ) = M`, the moment about c. t > 0 turns the part
 //! counter-clockwise. A root where t goes from + to − (increasing θ) is stable.
 //!
-//! Method, all in Q31.32 ([`crate::fx`]):
+//! Method, all in Q31.32 ([`crate::analysis::fx`]):
 //! 1. Normalise: subtract the bounding-box centre and shift by a power of two (exact) so the
 //!    part lies within (−½, ½)²; subtract the centroid. Results are scale-free (the sine
 //!    wavelength is scaled by the same power of two).
 //! 2. One *pass* over the edges at (θ, s) rotates each vertex, splits edges at the node and
-//!    sums the exact piece integrals of [`crate::field::piece`]: it yields F, ∂F/∂s and M in
+//!    sums the exact piece integrals of [`crate::analysis::field::piece`]: it yields F, ∂F/∂s and M in
 //!    O(n), with no clipped polygon stored.
 //! 3. Balance: safeguarded Newton on s within [−R, R] (R = the part's radius about c), F is
 //!    decreasing in s; started from the extrapolation of the previous samples.
@@ -24,9 +24,9 @@
 
 use heapless::Vec;
 
-use crate::field::{Field, FieldKind, Law, PieceSums, piece};
-use crate::fx::{self, Bam, Fx, HALF_TURN};
-use crate::geometry::{self, Pt};
+use crate::analysis::field::{Field, FieldKind, Law, PieceSums, piece};
+use crate::analysis::fx::{self, Bam, Fx, HALF_TURN};
+use crate::analysis::geometry::{self, Pt};
 
 /// Turn-function samples per field period before root refinement.
 pub const SAMPLES: usize = 128;
@@ -141,6 +141,28 @@ pub struct Analyzer<'a> {
     symmetric: bool,
 }
 
+/// Bounding-box centre of the part, and the largest shift that brings it within (−½, ½)².
+fn normalisation(rings: &[&[Pt]]) -> Result<(Pt, i32), AnalysisError> {
+    let (mut lo, mut hi) = (rings[0][0], rings[0][0]);
+    for p in rings.iter().flat_map(|r| r.iter()) {
+        lo = Pt::new(lo.x.min(p.x), lo.y.min(p.y));
+        hi = Pt::new(hi.x.max(p.x), hi.y.max(p.y));
+    }
+    let limit = Fx::from_int(1 << 29);
+    if (hi.x.half() - lo.x.half()) > limit || (hi.y.half() - lo.y.half()) > limit {
+        return Err(AnalysisError::TooLarge);
+    }
+    let origin = Pt::new(lo.x.half() + hi.x.half(), lo.y.half() + hi.y.half());
+    let extent = (hi.x - origin.x).max(origin.x - lo.x).max(hi.y - origin.y).max(origin.y - lo.y);
+    if extent <= Fx::ZERO {
+        return Err(AnalysisError::ZeroArea);
+    }
+    // Largest shift with extent · 2^shift < ½.
+    let bits = 64 - extent.raw().leading_zeros() as i32;
+    let shift = 31 - bits;
+    Ok((origin, shift))
+}
+
 impl<'a> Analyzer<'a> {
     /// Prepares a part: `rings[0]` is the outline (counter-clockwise), the others holes
     /// (clockwise), coordinates in mm. Validity of the polygon itself (simple, holes inside)
@@ -154,25 +176,7 @@ impl<'a> Analyzer<'a> {
                 return Err(AnalysisError::TooFewVertices { ring: i });
             }
         }
-        // Bounding box.
-        let (mut lo, mut hi) = (rings[0][0], rings[0][0]);
-        for p in rings.iter().flat_map(|r| r.iter()) {
-            lo = Pt::new(lo.x.min(p.x), lo.y.min(p.y));
-            hi = Pt::new(hi.x.max(p.x), hi.y.max(p.y));
-        }
-        let limit = Fx::from_int(1 << 29);
-        if (hi.x.half() - lo.x.half()) > limit || (hi.y.half() - lo.y.half()) > limit {
-            return Err(AnalysisError::TooLarge);
-        }
-        let origin = Pt::new(lo.x.half() + hi.x.half(), lo.y.half() + hi.y.half());
-        let extent =
-            (hi.x - origin.x).max(origin.x - lo.x).max(hi.y - origin.y).max(origin.y - lo.y);
-        if extent <= Fx::ZERO {
-            return Err(AnalysisError::ZeroArea);
-        }
-        // Largest shift with extent · 2^shift < ½.
-        let bits = 64 - extent.raw().leading_zeros() as i32;
-        let shift = 31 - bits;
+        let (origin, shift) = normalisation(rings)?;
         let mut me = Analyzer {
             rings,
             origin,
@@ -185,11 +189,17 @@ impl<'a> Analyzer<'a> {
             k_right: Fx::ONE,
             symmetric: true,
         };
-        // Winding and moments in normalised coordinates.
+        me.measure()?;
+        me.apply_field(field)?;
+        Ok(me)
+    }
+
+    /// Winding and moments in normalised coordinates: area, centroid and radius of the part.
+    fn measure(&mut self) -> Result<(), AnalysisError> {
         let mut total = geometry::Moments::default();
-        for (i, r) in rings.iter().enumerate() {
+        for (i, r) in self.rings.iter().enumerate() {
             let m = geometry::edge_moments(
-                geometry::edges(r).map(|(a, b)| (me.to_box(a), me.to_box(b))),
+                geometry::edges(r).map(|(a, b)| (self.to_box(a), self.to_box(b))),
             );
             if (i == 0) != (m.area > Fx::ZERO) || m.area.is_zero() {
                 return Err(AnalysisError::Winding { ring: i });
@@ -199,43 +209,48 @@ impl<'a> Analyzer<'a> {
         if total.area <= Fx::ZERO {
             return Err(AnalysisError::ZeroArea);
         }
-        me.area = total.area;
-        me.centroid = total.centroid().ok_or(AnalysisError::ZeroArea)?;
+        self.area = total.area;
+        self.centroid = total.centroid().ok_or(AnalysisError::ZeroArea)?;
         let mut r2 = Fx::ZERO;
-        for p in rings.iter().flat_map(|r| r.iter()) {
-            let q = me.normalized(*p);
+        for p in self.rings.iter().flat_map(|r| r.iter()) {
+            let q = self.normalized(*p);
             r2 = r2.max(q.x * q.x + q.y * q.y);
         }
-        me.radius = r2.sqrt() + Fx(16);
-        // Field.
+        self.radius = r2.sqrt() + Fx(16);
+        Ok(())
+    }
+
+    /// The field in normalised form: gains relative to the larger one, the wavelength in the
+    /// normalised box's units.
+    fn apply_field(&mut self, field: Field) -> Result<(), AnalysisError> {
         if field.gain_left <= Fx::ZERO || field.gain_right <= Fx::ZERO {
             return Err(AnalysisError::BadGain);
         }
         let kmax = field.gain_left.max(field.gain_right);
-        me.k_left = field.gain_left / kmax;
-        me.k_right = field.gain_right / kmax;
-        me.symmetric = field.is_symmetric();
-        me.law = match field.kind {
+        self.k_left = field.gain_left / kmax;
+        self.k_right = field.gain_right / kmax;
+        self.symmetric = field.is_symmetric();
+        self.law = match field.kind {
             FieldKind::Sign => Law::Sign,
             FieldKind::Linear => Law::Linear,
             FieldKind::Sine { wavelength } => {
                 if wavelength <= Fx::ZERO {
                     return Err(AnalysisError::WavelengthTooShort);
                 }
-                let w = if shift >= 0 {
+                let w = if self.shift >= 0 {
                     // Saturate: a wavelength beyond the range is "infinite" for this part.
-                    let max_w = Fx::from_int(1 << 24).shl(-shift.min(24));
-                    wavelength.min(max_w).shl(shift)
+                    let max_w = Fx::from_int(1 << 24).shl(-self.shift.min(24));
+                    wavelength.min(max_w).shl(self.shift)
                 } else {
-                    wavelength.shl(shift)
+                    wavelength.shl(self.shift)
                 };
-                if w < me.radius + me.radius {
+                if w < self.radius + self.radius {
                     return Err(AnalysisError::WavelengthTooShort);
                 }
                 Law::Sine { a: Fx::PI / w }
             }
         };
-        Ok(me)
+        Ok(())
     }
 
     /// Bounding-box-centred, scaled coordinates of an input point.

@@ -6,7 +6,7 @@
 //! bits on the host and on the Cortex-M4F's FPU, so the QEMU board's plant is deterministic.
 //! The sensing issue will read [`Plant::acceleration`] through a simulated accelerometer.
 
-use crate::dds::{DAC_MID, SAMPLE_RATE};
+use crate::drive::dds::{DAC_MID, SAMPLE_RATE};
 
 /// Parameters of the simulated shaker + plate.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -84,7 +84,7 @@ impl Plant {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::dds::{Dds, gain_of_q15, tuning_word};
+    use crate::drive::dds::{Dds, gain_of_q15, tuning_word};
 
     fn steady_peak(freq_mhz: u32) -> f32 {
         let mut plant = Plant::new(PlantParams::DEFAULT);

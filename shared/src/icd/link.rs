@@ -11,11 +11,10 @@
 
 use serde::{Deserialize, Serialize};
 
-pub use crate::plan::{Plan, PlanError};
-pub use crate::runner::{DriveError, DriveState, StatusReport};
+pub use crate::icd::plan::{Plan, PlanError, SetpointError};
 
 /// Version of this protocol; bumped on any incompatible change of [`Request`] or [`Response`].
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 
 /// Largest COBS-encoded frame (without delimiters) either side accepts, in bytes.
 pub const MAX_FRAME: usize = 1024;
@@ -81,6 +80,97 @@ pub enum Response {
     /// The drive refused the command (invalid plan or setpoint, faulted, busy).
     Rejected(DriveError),
 }
+
+// ---- The drive's status and refusals ----
+
+/// What the drive is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DriveState {
+    /// No output (mid-scale).
+    Idle,
+    /// Amplitude rising towards the step's (or setpoint's) target.
+    RampUp,
+    /// Steady amplitude.
+    Running,
+    /// Amplitude falling towards a lower target within a plan or setpoint.
+    RampDown,
+    /// Ramping to zero after a stop request or the end of a plan; then idle.
+    Stopping,
+    /// Ramped to zero after a fault; stays silent until a stop request clears it.
+    Faulted,
+}
+
+impl DriveState {
+    /// Lowercase name as printed by the CLI (`stopping` is reported as `ramp_down`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            DriveState::Idle => "idle",
+            DriveState::RampUp => "ramp_up",
+            DriveState::Running => "running",
+            DriveState::RampDown | DriveState::Stopping => "ramp_down",
+            DriveState::Faulted => "faulted",
+        }
+    }
+}
+
+/// A snapshot of the drive, as answered to [`crate::icd::link::Request::Status`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StatusReport {
+    /// What the drive is doing.
+    pub state: DriveState,
+    /// Index of the plan step being run; `None` outside a plan (idle, manual, final ramp).
+    pub step: Option<u16>,
+    /// Which repetition of the plan is running (0-based).
+    pub run: u16,
+    /// Samples output since the current plan or manual drive started (kept when idle).
+    pub elapsed_samples: u64,
+    /// Samples per second, to turn `elapsed_samples` into time.
+    pub sample_rate: u32,
+    /// Frequency being output, millihertz.
+    pub freq_mhz: u32,
+    /// Amplitude being output right now (ramps included), Q15.
+    pub amplitude_q15: u16,
+    /// Sample blocks the output needed before they were ready (missed refills).
+    pub underruns: u32,
+    /// Commands applied so far (start, drive, stop, fault).
+    pub commands: u32,
+}
+
+impl StatusReport {
+    /// `elapsed_samples` in milliseconds.
+    pub fn elapsed_ms(&self) -> f64 {
+        self.elapsed_samples as f64 * 1000.0 / self.sample_rate as f64
+    }
+}
+
+/// Why a command was not applied.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DriveError {
+    /// The plan does not fit the device's limits.
+    Plan(PlanError),
+    /// The manual setpoint does not fit the device's limits.
+    Setpoint(SetpointError),
+    /// The drive is faulted; send a stop to clear it first.
+    Faulted,
+    /// The drive's command queue is full; try again.
+    Busy,
+}
+
+impl core::fmt::Display for DriveError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            DriveError::Plan(e) => write!(f, "invalid plan: {e}"),
+            DriveError::Setpoint(e) => write!(f, "invalid setpoint: {e}"),
+            DriveError::Faulted => write!(f, "drive is faulted (send stop to clear)"),
+            DriveError::Busy => write!(f, "drive command queue full"),
+        }
+    }
+}
+
+// ---- Device identity ----
 
 /// Which hardware the firmware was built for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -280,7 +370,11 @@ mod tests {
         let got = frames_of(&bytes);
         assert_eq!(
             got,
-            [Ok(Envelope { version: 1, id: 7, body: Request::Ping { nonce: 0xdead_beef } })]
+            [Ok(Envelope {
+                version: PROTOCOL_VERSION,
+                id: 7,
+                body: Request::Ping { nonce: 0xdead_beef }
+            })]
         );
     }
 
@@ -315,16 +409,20 @@ mod tests {
 
     #[test]
     fn unknown_variant_and_trailing_bytes_are_malformed() {
-        // version 1, id 5, variant 200 (no such request)
-        let mut raw = postcard::to_stdvec(&(1u16, 5u32)).unwrap();
+        // this version, id 5, variant 200 (no such request)
+        let mut raw = postcard::to_stdvec(&(PROTOCOL_VERSION, 5u32)).unwrap();
         raw.push(200);
         let mut frame = cobs::encode_vec(&raw);
         assert_eq!(
             decode::<Request>(&mut frame),
             Err(FrameError { id: 5, error: LinkError::Malformed })
         );
-        let mut raw =
-            postcard::to_stdvec(&Envelope { version: 1, id: 6, body: Request::GetInfo }).unwrap();
+        let mut raw = postcard::to_stdvec(&Envelope {
+            version: PROTOCOL_VERSION,
+            id: 6,
+            body: Request::GetInfo,
+        })
+        .unwrap();
         raw.push(0x55);
         let mut frame = cobs::encode_vec(&raw);
         assert_eq!(
@@ -344,7 +442,10 @@ mod tests {
             got[0],
             Err(FrameError { id: 0, error: LinkError::FrameTooLong { max: MAX_FRAME as u16 } })
         );
-        assert_eq!(got[1], Ok(Envelope { version: 1, id: 3, body: Request::GetInfo }));
+        assert_eq!(
+            got[1],
+            Ok(Envelope { version: PROTOCOL_VERSION, id: 3, body: Request::GetInfo })
+        );
     }
 
     proptest::proptest! {
@@ -356,7 +457,7 @@ mod tests {
             let got = frames_of(&bytes);
             proptest::prop_assert_eq!(
                 got.last().cloned(),
-                Some(Ok(Envelope { version: 1, id: 0xabcd, body: Request::Ping { nonce } }))
+                Some(Ok(Envelope { version: PROTOCOL_VERSION, id: 0xabcd, body: Request::Ping { nonce } }))
             );
         }
     }

@@ -1,0 +1,9 @@
+//! The drive: the signal the controller sends to the shaker, computed sample by sample.
+//!
+//! - [`dds`]: sine synthesis (phase accumulator, interpolated table, 12-bit DAC codes).
+//! - [`runner`]: the plan runner filling sample blocks, step boundaries exact to the sample.
+//! - [`plant`]: a simulated shaker + plate (resonant second-order system) for the QEMU board.
+
+pub mod dds;
+pub mod plant;
+pub mod runner;

@@ -1,0 +1,290 @@
+//! Units: the one conversion for each pair of units the host and the controller share.
+//!
+//! - [`MilliHz`]: drive frequency, Hz (`f64`) ↔ millihertz (`u32`, as on the wire). One
+//!   validity check, one range (the drive's, [`DeviceLimits`]), one error ([`FrequencyError`]).
+//! - [`Q15`]: drive amplitude, fraction of the DAC's full scale (`f64`, 0..=1) ↔ Q15 (`u16`,
+//!   1.0 ↦ 32767), one error ([`AmplitudeError`]).
+//! - [`Fx`] ↔ `f64` ([`Fx::from_f64`], [`Fx::to_f64`]) and binary angles ↔ degrees or radians
+//!   ([`bam_from_deg`], [`deg_from_bam`], [`bam_from_rad`], [`rad_from_bam`]).
+//!
+//! The crate is `no_std`, so `f64::round` is not available: [`round_half_away`] is its exact
+//! equivalent (tested against `std` bit for bit), and every conversion here gives the same
+//! bits the host computed with `std` before this module existed.
+
+use crate::analysis::fx::{Bam, Fx};
+use crate::icd::plan::DeviceLimits;
+
+/// 2³²: one unit of [`Fx`], and one turn of a [`Bam`].
+const TWO_POW_32: f64 = 4_294_967_296.0;
+/// Q15 value of full scale (amplitude 1.0).
+const Q15_FULL: f64 = 32767.0;
+
+/// `x` rounded to the nearest integer, halves away from zero, as `x.round() as i64` with `std`:
+/// NaN gives 0 and values beyond `i64` saturate.
+pub fn round_half_away(x: f64) -> i64 {
+    let t = x as i64; // truncates toward zero (saturating; NaN → 0)
+    // Exact for |x| < 2⁵³ (the fraction of a double is representable); beyond, x is an integer.
+    let frac = x - t as f64;
+    if frac >= 0.5 {
+        t.saturating_add(1)
+    } else if frac <= -0.5 {
+        t.saturating_sub(1)
+    } else {
+        t
+    }
+}
+
+/// `x` modulo `m` in [0, m) for m > 0, as `x.rem_euclid(m)` with `std`.
+fn rem_euclid(x: f64, m: f64) -> f64 {
+    let r = x % m;
+    if r < 0.0 { r + m.abs() } else { r }
+}
+
+// ---- Frequency ----
+
+/// A drive frequency in millihertz, as plans and the link carry it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct MilliHz(pub u32);
+
+/// A frequency the drive cannot produce.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrequencyError {
+    /// The frequency asked for, Hz (may be NaN or infinite).
+    pub hz: f64,
+    /// Lowest the drive produces, Hz.
+    pub min_hz: f64,
+    /// Highest the drive produces, Hz.
+    pub max_hz: f64,
+}
+
+impl core::fmt::Display for FrequencyError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "frequency {} Hz is outside the drive's range {}..={} Hz",
+            self.hz, self.min_hz, self.max_hz
+        )
+    }
+}
+
+impl core::error::Error for FrequencyError {}
+
+impl MilliHz {
+    /// `hz` rounded to the nearest millihertz, within the controller's range
+    /// ([`DeviceLimits::DEFAULT`]).
+    pub fn from_hz(hz: f64) -> Result<MilliHz, FrequencyError> {
+        Self::from_hz_within(hz, &DeviceLimits::DEFAULT)
+    }
+
+    /// `hz` rounded to the nearest millihertz, within the range of `limits`.
+    pub fn from_hz_within(hz: f64, limits: &DeviceLimits) -> Result<MilliHz, FrequencyError> {
+        let (min, max) = (limits.min_freq_mhz, limits.max_freq_mhz);
+        let mhz = round_half_away(hz * 1000.0);
+        if !hz.is_finite() || mhz < min as i64 || mhz > max as i64 {
+            return Err(FrequencyError {
+                hz,
+                min_hz: MilliHz(min).to_hz(),
+                max_hz: MilliHz(max).to_hz(),
+            });
+        }
+        Ok(MilliHz(mhz as u32))
+    }
+
+    /// The frequency in Hz.
+    pub fn to_hz(self) -> f64 {
+        self.0 as f64 / 1000.0
+    }
+}
+
+// ---- Amplitude ----
+
+/// A drive amplitude in Q15 (32767 = the DAC's full scale), as plans and the link carry it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Q15(pub u16);
+
+/// An amplitude that is not a fraction of full scale in 0..=1.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AmplitudeError {
+    /// The amplitude asked for (may be NaN).
+    pub value: f64,
+}
+
+impl core::fmt::Display for AmplitudeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "amplitude {} outside 0..=1 (fraction of full scale)", self.value)
+    }
+}
+
+impl core::error::Error for AmplitudeError {}
+
+impl Q15 {
+    /// Full scale (amplitude 1.0).
+    pub const FULL: Q15 = Q15(32767);
+
+    /// The Q15 value of a fraction of full scale, rounded to the nearest step.
+    pub fn from_fraction(value: f64) -> Result<Q15, AmplitudeError> {
+        if !(0.0..=1.0).contains(&value) {
+            return Err(AmplitudeError { value });
+        }
+        Ok(Q15(round_half_away(value * Q15_FULL) as u16))
+    }
+
+    /// The amplitude as a fraction of full scale.
+    pub fn to_fraction(self) -> f64 {
+        self.0 as f64 / Q15_FULL
+    }
+}
+
+// ---- Fixed point and binary angles ----
+
+impl Fx {
+    /// The nearest [`Fx`] to `v` (halves away from zero; saturates beyond the range).
+    pub fn from_f64(v: f64) -> Fx {
+        Fx(round_half_away(v * TWO_POW_32))
+    }
+
+    /// The value as `f64` (exact for |raw| < 2⁵³).
+    pub fn to_f64(self) -> f64 {
+        self.0 as f64 / TWO_POW_32
+    }
+}
+
+/// The nearest binary angle to `deg` degrees (any range; wraps, 360° ↦ 0).
+pub fn bam_from_deg(deg: f64) -> Bam {
+    round_half_away(rem_euclid(deg, 360.0) / 360.0 * TWO_POW_32) as u64 as u32
+}
+
+/// A binary angle in degrees, [0, 360).
+pub fn deg_from_bam(a: Bam) -> f64 {
+    a as f64 * 360.0 / TWO_POW_32
+}
+
+/// The nearest binary angle to `rad` radians (any range; wraps).
+pub fn bam_from_rad(rad: f64) -> Bam {
+    bam_from_deg(rad.to_degrees())
+}
+
+/// A binary angle in radians, [0, 2π).
+pub fn rad_from_bam(a: Bam) -> f64 {
+    deg_from_bam(a).to_radians()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    extern crate std;
+
+    /// Values around every rounding edge, the ranges' ends, and the non-finite ones.
+    fn awkward() -> std::vec::Vec<f64> {
+        let mut v = std::vec![
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            2.5,
+            -2.5,
+            0.49999999999999994,
+            -0.49999999999999994,
+            4503599627370495.5,
+            4503599627370497.0,
+            9007199254740993.0,
+            9.3e18,
+            -9.3e18,
+            1e300,
+            f64::MAX,
+            f64::MIN,
+            f64::MIN_POSITIVE,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        // A deterministic spread over many magnitudes (xorshift of the bit pattern).
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        for _ in 0..20_000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let x = f64::from_bits(s);
+            v.push(x);
+            let small = (s >> 11) as f64 / (1u64 << 20) as f64 - 4096.0;
+            v.push(small);
+            v.push(small.trunc() + 0.5);
+        }
+        v
+    }
+
+    #[test]
+    fn rounding_matches_std_bit_for_bit() {
+        for x in awkward() {
+            assert_eq!(round_half_away(x), x.round() as i64, "{x:e}");
+            assert_eq!(rem_euclid(x, 360.0).to_bits(), x.rem_euclid(360.0).to_bits(), "{x:e}");
+        }
+    }
+
+    #[test]
+    fn conversions_match_the_host_formulas() {
+        // The expressions the host wrote before this module, with std.
+        for x in awkward() {
+            assert_eq!(Fx::from_f64(x), Fx((x * 4_294_967_296.0).round() as i64), "{x:e}");
+            let host_bam = (x.rem_euclid(360.0) / 360.0 * 4_294_967_296.0).round() as u64 as u32;
+            assert_eq!(bam_from_deg(x), host_bam, "{x:e}");
+            if (0.0..=1.0).contains(&x) {
+                assert_eq!(Q15::from_fraction(x).unwrap().0, (x * 32767.0).round() as u16);
+            }
+            if let Ok(f) = MilliHz::from_hz(x) {
+                assert_eq!(f.0, (x * 1000.0).round() as u32, "{x:e}");
+            }
+        }
+        for raw in [0i64, 1, -1, i64::MAX, i64::MIN, 0x1_2345_6789] {
+            assert_eq!(Fx(raw).to_f64(), raw as f64 / 4_294_967_296.0);
+            assert_eq!(Fx::from_f64(Fx(raw).to_f64()), Fx(raw), "{raw}");
+        }
+        for a in [0u32, 1, 0x4000_0000, 0x8000_0000, u32::MAX] {
+            assert_eq!(deg_from_bam(a), a as f64 * 360.0 / 4_294_967_296.0);
+            assert_eq!(bam_from_deg(deg_from_bam(a)), a);
+        }
+        assert_eq!(bam_from_deg(360.0), 0);
+        assert_eq!(bam_from_deg(-90.0), 3 << 30);
+        assert_eq!(bam_from_rad(core::f64::consts::FRAC_PI_2), 1 << 30);
+        assert!((rad_from_bam(1 << 31) - core::f64::consts::PI).abs() < 1e-15);
+    }
+
+    #[test]
+    fn frequency_has_one_range_and_one_error() {
+        assert_eq!(MilliHz::from_hz(440.125), Ok(MilliHz(440_125)));
+        assert_eq!(MilliHz::from_hz(1.0), Ok(MilliHz(1_000)));
+        assert_eq!(MilliHz::from_hz(2000.0), Ok(MilliHz(2_000_000)));
+        assert_eq!(MilliHz(181_500).to_hz(), 181.5);
+        for bad in [0.0, 0.9994, 2000.0006, -5.0, 5e6, f64::NAN, f64::INFINITY] {
+            let e = MilliHz::from_hz(bad).unwrap_err();
+            assert_eq!((e.min_hz, e.max_hz), (1.0, 2000.0));
+            assert!(e.hz.to_bits() == bad.to_bits());
+        }
+        let e = MilliHz::from_hz(5e6).unwrap_err();
+        assert_eq!(
+            std::format!("{e}"),
+            "frequency 5000000 Hz is outside the drive's range 1..=2000 Hz"
+        );
+        let narrow =
+            DeviceLimits { min_freq_mhz: 50_000, max_freq_mhz: 60_000, ..Default::default() };
+        assert_eq!(MilliHz::from_hz_within(55.0, &narrow), Ok(MilliHz(55_000)));
+        assert_eq!(MilliHz::from_hz_within(61.0, &narrow).unwrap_err().max_hz, 60.0);
+    }
+
+    #[test]
+    fn amplitude_is_a_checked_fraction() {
+        assert_eq!(Q15::from_fraction(1.0), Ok(Q15::FULL));
+        assert_eq!(Q15::from_fraction(0.5), Ok(Q15(16384)));
+        assert_eq!(Q15::from_fraction(0.0), Ok(Q15(0)));
+        assert_eq!(Q15(32767).to_fraction(), 1.0);
+        for bad in [-0.01, 1.0001, f64::NAN, f64::INFINITY] {
+            assert!(Q15::from_fraction(bad).is_err(), "{bad}");
+        }
+        assert_eq!(
+            std::format!("{}", Q15::from_fraction(1.5).unwrap_err()),
+            "amplitude 1.5 outside 0..=1 (fraction of full scale)"
+        );
+    }
+}
