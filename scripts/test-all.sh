@@ -25,6 +25,11 @@ done
 step "tests (host, on-target in QEMU, end-to-end)"
 cargo test
 
+# The firmware's board-independent app (link, drive) on the host: its lib is `test = false`
+# so that the Cortex-M builds never try a std test harness; asked for by name here.
+step "firmware app on the host"
+cargo test -p chladni-firmware --lib
+
 # scripts/hitl.sh runs the end-to-end suite against a port instead of its own QEMU; try that
 # path here against a standalone `chladni emulator` (no board on CI).
 step "hardware-in-the-loop path (scripts/hitl.sh against a standalone emulator)"

@@ -7,7 +7,7 @@ use std::process::{Command, Output};
 
 use chladni::controller::firmware;
 use chladni_e2e::root;
-use chladni_shared::link::Board;
+use chladni_shared::icd::link::Board;
 
 fn run(elf: &str) -> Output {
     Command::new(root().join("scripts/qemu-run.sh"))

@@ -8,7 +8,7 @@ mod support {
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
-use chladni_shared::link::Board;
+use chladni_shared::icd::link::Board;
 use support::elf::{EM_ARM, Segment, elf};
 
 fn chladni(args: &[&str]) -> Output {

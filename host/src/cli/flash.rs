@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use chladni::controller::flash::{self, CheckedImage, FlashError, FlashReport, ProbeSelector};
-use chladni_shared::link::Board;
+use chladni_shared::icd::link::Board;
 use clap::Args;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use probe_rs::flashing::{ProgressEvent, ProgressOperation};
