@@ -4,3 +4,4 @@
 pub mod client;
 pub mod emulator;
 pub mod firmware;
+pub mod units;

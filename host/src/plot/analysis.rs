@@ -1,16 +1,14 @@
 //! Plots of a rest analysis like the paper's Fig. 8: the part at rest on the node, the turn
 //! function t(θ) with its roots, and the alignment function a(θ). PNG or SVG by extension.
 //!
-//! PNG text uses the Ubuntu Light font shipped inside the `epaint_default_fonts` crate and
-//! rendered by plotters' `ab_glyph` backend, so no system font is needed (fresh CI machines).
+//! The font and the error type are the module's ([`crate::plot`]).
 
 use std::path::Path;
-use std::sync::Once;
 
-use anyhow::{Context, anyhow};
 use plotters::coord::Shift;
 use plotters::prelude::*;
-use plotters::style::FontStyle;
+
+use super::{PlotError, check_extension, text, write_figure};
 
 /// What to draw.
 #[derive(Debug, Clone)]
@@ -31,46 +29,32 @@ pub struct PlotData {
     pub neutral: bool,
 }
 
-static FONT: Once = Once::new();
-
-fn register_font() {
-    FONT.call_once(|| {
-        for style in [FontStyle::Normal, FontStyle::Bold] {
-            // The bytes are a valid TTF shipped by the crate; failure would be a packaging bug.
-            let _ = plotters::style::register_font(
-                "sans-serif",
-                style,
-                epaint_default_fonts::UBUNTU_LIGHT,
-            );
-        }
-    });
-}
-
-/// Writes the plot; the format follows the extension (`.png` or `.svg`).
-pub fn write(path: &Path, data: &PlotData) -> anyhow::Result<()> {
+/// Writes the plot; the format follows the extension (`.png` or `.svg`, checked first).
+pub fn write(path: &Path, data: &PlotData) -> Result<(), PlotError> {
+    check_extension("--plot", path, &EXTENSIONS)?;
+    let svg = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("svg"));
     let size = (1200, 420);
-    // Text is measured with the registered font for both backends.
-    register_font();
-    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
-        Some("svg") => {
-            let root = SVGBackend::new(path, size).into_drawing_area();
+    write_figure(path, |tmp| {
+        if svg {
+            let root = SVGBackend::new(tmp, size).into_drawing_area();
             draw(&root, data)?;
-            root.present().map_err(|e| anyhow!("{e}")).with_context(|| path.display().to_string())
-        }
-        Some("png") => {
-            let root = BitMapBackend::new(path, size).into_drawing_area();
+            root.present().map_err(text)
+        } else {
+            let root = BitMapBackend::new(tmp, size).into_drawing_area();
             draw(&root, data)?;
-            root.present().map_err(|e| anyhow!("{e}")).with_context(|| path.display().to_string())
+            root.present().map_err(text)
         }
-        _ => Err(anyhow!("plot file must end in .png or .svg: {}", path.display())),
-    }
+    })
 }
 
-fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
-    anyhow!("plotting: {e}")
+/// The file types [`write`] can draw.
+pub const EXTENSIONS: [&str; 2] = ["png", "svg"];
+
+fn err<E: std::fmt::Display>(e: E) -> String {
+    text(e)
 }
 
-fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, data: &PlotData) -> anyhow::Result<()>
+fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, data: &PlotData) -> Result<(), String>
 where
     DB::ErrorType: 'static,
 {
