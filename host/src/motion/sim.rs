@@ -567,21 +567,23 @@ pub fn run(body: &Body, field: &FieldModel, p: SimParams, start: Pose) -> Run {
         t = p.t_limit;
         trace.push((t, pose));
     }
-    // Settle time: the last time the part was still moving across its node (speed above
-    // 2 % of R per T0; a slow creep along a curved node does not count) or its orientation
-    // was more than 0.5° from the final one.
+    let settle = settle_time(&trace, pose, 0.02 * r / t0);
+    Run { pose, settle_s: settle, t_end: t, trace, rested, steps }
+}
+
+/// Settle time: the last time the part was still moving across its node (speed above
+/// `v_move`, 2 % of R per T0; a slow creep along a curved node does not count) or its
+/// orientation was more than 0.5° from the final one.
+fn settle_time(trace: &[(f64, Pose)], end: Pose, v_move: f64) -> f64 {
     let band_th = 0.5f64.to_radians();
-    let v_move = 0.02 * r / t0;
-    let mut settle = 0.0;
     for k in (1..trace.len()).rev() {
         let ((ta, a), (tb, b)) = (trace[k - 1], trace[k]);
         let v = if tb > ta { (b.x - a.x).hypot(b.y - a.y) / (tb - ta) } else { 0.0 };
-        if v > v_move || (b.theta - pose.theta).abs() > band_th {
-            settle = tb;
-            break;
+        if v > v_move || (b.theta - end.theta).abs() > band_th {
+            return tb;
         }
     }
-    Run { pose, settle_s: settle, t_end: t, trace, rested, steps }
+    0.0
 }
 
 /// One step of a plan to simulate: the mode, how long, and the drive amplitude relative to

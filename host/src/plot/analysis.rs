@@ -61,13 +61,27 @@ where
     root.fill(&WHITE).map_err(err)?;
     let root = root.titled(&data.title, ("sans-serif", 20)).map_err(err)?;
     let panels = root.split_evenly((1, 3));
-    let stable_col = RGBColor(0, 120, 60);
-    let unstable_col = RGBColor(200, 40, 40);
+    draw_rest(&panels[0], data)?;
+    draw_turn(&panels[1], data)?;
+    draw_align(&panels[2], data)?;
+    Ok(())
+}
 
+const STABLE: RGBColor = RGBColor(0, 120, 60);
+const UNSTABLE: RGBColor = RGBColor(200, 40, 40);
+
+/// (a) The part at rest on the node.
+fn draw_rest<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    data: &PlotData,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
     // (a) The part at rest on the node.
     let all = data.rest_pose.iter().flatten();
     let r = all.fold(1e-9f64, |m, p| m.max(p[0].abs()).max(p[1].abs())) * 1.15;
-    let mut part = ChartBuilder::on(&panels[0])
+    let mut part = ChartBuilder::on(area)
         .caption(format!("part at rest, θ = {:.1}°", data.rest_pose_deg), ("sans-serif", 16))
         .margin(10)
         .x_label_area_size(30)
@@ -95,8 +109,20 @@ where
     )))
     .map_err(err)?;
 
+    Ok(())
+}
+
+/// (b) The turn function.
+fn draw_turn<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    data: &PlotData,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let (stable_col, unstable_col) = (STABLE, UNSTABLE);
     // (b) Turn function.
-    let mut turn = ChartBuilder::on(&panels[1])
+    let mut turn = ChartBuilder::on(area)
         .caption("turn function t(θ)", ("sans-serif", 16))
         .margin(10)
         .x_label_area_size(30)
@@ -128,8 +154,20 @@ where
         .map_err(err)?;
     }
 
+    Ok(())
+}
+
+/// (c) The alignment function.
+fn draw_align<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    data: &PlotData,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let (stable_col, unstable_col) = (STABLE, UNSTABLE);
     // (c) Alignment function.
-    let mut align = ChartBuilder::on(&panels[2])
+    let mut align = ChartBuilder::on(area)
         .caption("alignment function a(θ)", ("sans-serif", 16))
         .margin(10)
         .x_label_area_size(30)
