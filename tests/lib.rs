@@ -123,15 +123,8 @@ pub fn read_log(path: &std::path::Path) -> String {
     std::fs::read_to_string(path).unwrap_or_default()
 }
 
-/// xorshift64*: reproducible pseudo-random bytes without a dependency.
+/// Reproducible pseudo-random bytes from the host's one seeded generator.
 pub fn pseudo_random_bytes(seed: u64, len: usize) -> Vec<u8> {
-    let mut state = seed.max(1);
-    (0..len)
-        .map(|_| {
-            state ^= state >> 12;
-            state ^= state << 25;
-            state ^= state >> 27;
-            (state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 56) as u8
-        })
-        .collect()
+    let mut rng = chladni::rng::Rng::seeded(seed);
+    (0..len).map(|_| (rng.next_u64() >> 56) as u8).collect()
 }

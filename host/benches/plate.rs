@@ -7,7 +7,7 @@
 use std::hint::black_box;
 
 use chladni::model::plate_file::PlateFile;
-use chladni::motion::string::{self, Params as StringParams};
+use chladni::motion::string::{self, StringParams};
 use chladni::plate::contour::node_lines;
 use chladni::plate::photo::synth::{Scene, render};
 use chladni::plate::photo::{self, DEFAULT_SNAP, Params};

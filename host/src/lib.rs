@@ -10,12 +10,16 @@
 //!   plans by tracking simulated poses, [`planner::feed`]).
 //! - [`plot`]: figures of analyses, plans, traces and plate modes.
 //! - [`controller`]: the link client, the QEMU emulator, firmware builds.
+//! - [`output`]: output files written atomically, never over one of the command's inputs.
+//! - [`rng`]: the one seeded pseudo-random generator.
 #![forbid(unsafe_code)]
 
 pub mod analysis;
 pub mod controller;
 pub mod model;
 pub mod motion;
+pub mod output;
 pub mod planner;
 pub mod plate;
 pub mod plot;
+pub mod rng;

@@ -8,7 +8,7 @@ use std::process::Command;
 
 use chladni::model::part::Part;
 use chladni::model::plate::{Node, PlateModel};
-use chladni::motion::sim::{Body, FieldModel, Pose, run_plan};
+use chladni::motion::sim::{Body, FieldModel, Pose, simulate_plan};
 use chladni::planner::feed::{FeedRegion, FeedSearch};
 use chladni::planner::{self, PlanFailure, PlanOptions, cdist};
 
@@ -68,7 +68,7 @@ fn triangle_on_free_plate_modes_plans_only_from_a_feed_region() {
     for (x, y) in [(65.0, 45.0), (95.0, 50.0), (80.0, 60.0), (70.0, 75.0), (90.0, 78.0)] {
         for k in 0..6 {
             let start = Pose { x, y, theta: (10.0 + 60.0 * k as f64).to_radians() };
-            let (poses, _, _) = run_plan(&body, &plate, &fields, &steps, start);
+            let (poses, _, _) = simulate_plan(&body, &plate, &fields, &steps, start);
             let end = poses.last().unwrap();
             worst = worst.max(cdist(end.theta.to_degrees(), syn.final_orientation_deg, 360.0));
         }

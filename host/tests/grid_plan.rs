@@ -9,7 +9,7 @@ use std::process::Command;
 
 use chladni::model::part::Part;
 use chladni::model::plate::{Node, PlateModel};
-use chladni::motion::sim::{Body, FieldModel, Pose, run_plan};
+use chladni::motion::sim::{Body, FieldModel, Pose, simulate_plan};
 use chladni::planner::{self, PlanOptions, Problem, cdist};
 
 fn root() -> &'static Path {
@@ -66,7 +66,7 @@ fn rectangle_plan_on_solver_made_cantilever_modes_holds_in_simulation() {
             for k in 0..6 {
                 let th = 15.0 + 30.0 * k as f64;
                 let start = Pose { x, y, theta: th.to_radians() };
-                let (poses, _, _) = run_plan(&body, &plate, &fields, &steps, start);
+                let (poses, _, _) = simulate_plan(&body, &plate, &fields, &steps, start);
                 let end = poses.last().unwrap();
                 let err = cdist(end.theta.to_degrees(), syn.final_orientation_deg, 180.0);
                 assert!((end.y - 100.0).abs() < 2.0, "start {start:?} ended at {end:?}");
@@ -134,7 +134,7 @@ fn hinged_rod_plate_plans_on_its_forced_rocking_about_the_hinge() {
         for y in [40.0, 100.0, 160.0] {
             for k in 0..6 {
                 let start = Pose { x, y, theta: (15.0 + 30.0 * k as f64).to_radians() };
-                let (poses, _, _) = run_plan(&body, &plate, &fields, &steps, start);
+                let (poses, _, _) = simulate_plan(&body, &plate, &fields, &steps, start);
                 let end = poses.last().unwrap();
                 assert!((end.x - 150.0).abs() < 2.0, "start {start:?} ended at {end:?}");
                 worst = worst.max(cdist(end.theta.to_degrees(), syn.final_orientation_deg, 180.0));

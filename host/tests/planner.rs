@@ -7,7 +7,7 @@ use std::path::Path;
 use chladni::model::part::Part;
 use chladni::model::plate::{Node, PlateModel};
 use chladni::model::plate_file::PlateFile;
-use chladni::motion::sim::{Body, FieldModel, Pose, SimStep, run_plan};
+use chladni::motion::sim::{Body, FieldModel, Pose, SimStep, simulate_plan};
 use chladni::planner::{self, Backend, PlanFailure, PlanOptions, Problem, cdist, symmetry_order};
 use chladni::plate::solver::Grid;
 
@@ -58,7 +58,7 @@ fn verify(p: &Part, plate: &PlateModel, opt: &PlanOptions, step_deg: f64) -> (f6
             if first.boundaries.iter().any(|&b| cdist(b, th, 360.0) < 1.0) {
                 continue;
             }
-            let (poses, _, _) = run_plan(
+            let (poses, _, _) = simulate_plan(
                 &body,
                 plate,
                 &fields,

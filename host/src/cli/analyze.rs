@@ -9,8 +9,10 @@ use chladni_shared::analysis::field::{Field, FieldKind};
 use chladni_shared::analysis::fx::{Bam, Fx};
 use chladni_shared::analysis::rest::{Analysis, AnalysisError, Analyzer};
 use clap::{Args, ValueEnum};
+use serde::Serialize;
 
-use super::InputError;
+use super::parse::f64_where;
+use super::{InputError, check_plot, plot_error};
 
 /// Field law at the node.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -36,19 +38,20 @@ impl FieldArg {
 /// Rest orientations of a part at a straight node (the plate's y-axis).
 #[derive(Debug, Args)]
 pub struct AnalyzeArgs {
-    /// Part file: .json (DESIGN.md format) or .svg (<polygon>/<path>, straight segments).
+    /// Part file: .json (format in docs/analyze.md) or .svg (<polygon>/<path>, straight segments).
     part: PathBuf,
     /// Field law.
     #[arg(long, value_enum)]
     field: FieldArg,
     /// Sine field: distance from the node to the next antinode (mm).
-    #[arg(long, value_name = "MM")]
+    #[arg(long, value_name = "MM",
+          value_parser = f64_where("wavelength", "in (0, 1e7] mm", |w| w > 0.0 && w <= 1e7))]
     wavelength: Option<f64>,
     /// Gain on the left side of the node (x < 0).
-    #[arg(long, value_name = "G", default_value_t = 1.0)]
+    #[arg(long, value_name = "G", default_value_t = 1.0, value_parser = gain("gain-left"))]
     gain_left: f64,
     /// Gain on the right side of the node (x > 0).
-    #[arg(long, value_name = "G", default_value_t = 1.0)]
+    #[arg(long, value_name = "G", default_value_t = 1.0, value_parser = gain("gain-right"))]
     gain_right: f64,
     /// Print one JSON object instead of a table.
     #[arg(long)]
@@ -68,27 +71,35 @@ fn bam(d: f64) -> Bam {
     (d.rem_euclid(360.0) / 360.0 * 4_294_967_296.0).round() as u64 as u32
 }
 
+/// The `--json` object (keys in alphabetical order, as printed).
+#[derive(Debug, Serialize)]
+struct Report<'a> {
+    field: &'static str,
+    neutral: bool,
+    part: &'a str,
+    period_deg: f64,
+    stable_deg: Vec<f64>,
+    unstable_deg: Vec<f64>,
+}
+
+/// A field gain: a number in (0, 1e6].
+fn gain(
+    name: &'static str,
+) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
+    f64_where(name, "a number in (0, 1e6]", |g| g.is_finite() && g > 0.0 && g <= 1e6)
+}
+
 fn bad(msg: String) -> anyhow::Error {
     InputError(msg).into()
 }
 
 impl AnalyzeArgs {
     fn field(&self) -> anyhow::Result<Field> {
-        for (name, g) in [("--gain-left", self.gain_left), ("--gain-right", self.gain_right)] {
-            if !(g.is_finite() && g > 0.0 && g <= 1e6) {
-                return Err(bad(format!("{name} must be a number in (0, 1e6], got {g}")));
-            }
-        }
         let kind = match (self.field, self.wavelength) {
             (FieldArg::Sine, None) => {
                 return Err(bad("--field sine needs --wavelength MM".into()));
             }
-            (FieldArg::Sine, Some(w)) => {
-                if !(w.is_finite() && w > 0.0 && w <= 1e7) {
-                    return Err(bad(format!("--wavelength must be in (0, 1e7] mm, got {w}")));
-                }
-                FieldKind::Sine { wavelength: to_fx(w) }
-            }
+            (FieldArg::Sine, Some(w)) => FieldKind::Sine { wavelength: to_fx(w) },
             (f, Some(_)) => {
                 return Err(bad(format!(
                     "--wavelength only applies to --field sine, not {}",
@@ -103,6 +114,7 @@ impl AnalyzeArgs {
 
     pub fn run(&self) -> anyhow::Result<ExitCode> {
         let field = self.field()?;
+        check_plot("--plot", &self.plot, &analysis::EXTENSIONS, &[("part", &self.part)])?;
         let part =
             Part::load(&self.part).map_err(|e| bad(format!("{}: {e}", self.part.display())))?;
         let rings = part.to_fixed();
@@ -128,21 +140,21 @@ impl AnalyzeArgs {
             analysis.rests.iter().filter(|r| !r.stable).map(|r| deg(r.angle)).collect();
         let period = 360.0 / analysis.order as f64;
         if self.json {
-            let value = serde_json::json!({
-                "part": part.name,
-                "field": self.field.name(),
-                "stable_deg": stable,
-                "unstable_deg": unstable,
-                "neutral": analysis.neutral,
-                "period_deg": period,
-            });
-            println!("{value}");
+            let report = Report {
+                field: self.field.name(),
+                neutral: analysis.neutral,
+                part: &part.name,
+                period_deg: period,
+                stable_deg: stable,
+                unstable_deg: unstable,
+            };
+            println!("{}", serde_json::to_string(&report)?);
         } else {
             self.print_table(&part, &an, &analysis, period);
         }
         if let Some(path) = &self.plot {
             let data = plot_data(&part, &an, &analysis, self.field.name(), &self.describe_field());
-            analysis::write(path, &data)?;
+            analysis::write(path, &data).map_err(plot_error)?;
             if !self.json {
                 println!("plot       {}", path.display());
             }

@@ -8,9 +8,12 @@ use chladni::controller::client::DeviceClient;
 use chladni::model::plan_file::PlanFile;
 use chladni_shared::icd::link::StatusReport;
 use chladni_shared::icd::plan::{DeviceLimits, Plan};
+use chladni_shared::icd::units::{MilliHz, Q15};
 use clap::{Args, Subcommand};
+use serde::Serialize;
 
 use super::InputError;
+use super::parse::{drive_amplitude, drive_freq};
 
 /// Where the controller is.
 #[derive(Debug, Args)]
@@ -52,11 +55,11 @@ pub enum DeviceCommand {
         #[command(flatten)]
         port: PortArg,
         /// Frequency, Hz (1–2000, resolved to 1 mHz).
-        #[arg(long)]
-        freq: f64,
+        #[arg(long, value_name = "HZ", value_parser = drive_freq)]
+        freq: u32,
         /// Amplitude, fraction of the DAC's full scale (0–1).
-        #[arg(long)]
-        amplitude: f64,
+        #[arg(long, value_name = "A", value_parser = drive_amplitude)]
+        amplitude: u16,
     },
     /// Send a plan (JSON file) and run it.
     RunFile {
@@ -84,24 +87,6 @@ pub enum DeviceCommand {
     },
 }
 
-/// Q15 amplitude of a fraction of full scale (1.0 ↦ 32767).
-fn amplitude_q15(amplitude: f64) -> Result<u16, InputError> {
-    if !(0.0..=1.0).contains(&amplitude) {
-        return Err(InputError(format!(
-            "amplitude {amplitude} outside 0..=1 (fraction of full scale)"
-        )));
-    }
-    Ok((amplitude * 32767.0).round() as u16)
-}
-
-/// Millihertz of a frequency in Hz.
-fn freq_mhz(freq: f64) -> Result<u32, InputError> {
-    if !freq.is_finite() || freq <= 0.0 || freq * 1000.0 > u32::MAX as f64 {
-        return Err(InputError(format!("frequency {freq} Hz is not a valid drive frequency")));
-    }
-    Ok((freq * 1000.0).round() as u32)
-}
-
 /// Reads and validates a plan file; every problem is bad input (exit code 2).
 pub fn read_plan(path: &std::path::Path) -> Result<Plan, InputError> {
     let text = std::fs::read_to_string(path)
@@ -112,16 +97,51 @@ pub fn read_plan(path: &std::path::Path) -> Result<Plan, InputError> {
         .map_err(|e| InputError(format!("plan {} refused: {e}", path.display())))
 }
 
-/// The `status --json` object.
+/// The `status --json` object (keys in alphabetical order, as printed).
+#[derive(Debug, Serialize)]
+pub struct StatusJson {
+    amplitude: f64,
+    elapsed_ms: f64,
+    freq_hz: f64,
+    state: &'static str,
+    step: Option<u16>,
+    underruns: u32,
+}
+
+impl From<&StatusReport> for StatusJson {
+    fn from(s: &StatusReport) -> Self {
+        StatusJson {
+            amplitude: Q15(s.amplitude_q15).to_fraction(),
+            elapsed_ms: s.elapsed_ms(),
+            freq_hz: MilliHz(s.freq_mhz).to_hz(),
+            state: s.state.name(),
+            step: s.step,
+            underruns: s.underruns,
+        }
+    }
+}
+
+/// The `status --json` object as a JSON value.
+#[cfg(test)]
 pub fn status_json(s: &StatusReport) -> serde_json::Value {
-    serde_json::json!({
-        "state": s.state.name(),
-        "step": s.step,
-        "elapsed_ms": s.elapsed_ms(),
-        "freq_hz": s.freq_mhz as f64 / 1000.0,
-        "amplitude": s.amplitude_q15 as f64 / 32767.0,
-        "underruns": s.underruns,
-    })
+    serde_json::to_value(StatusJson::from(s)).unwrap_or_default()
+}
+
+/// The `info --json` object.
+#[derive(Debug, Serialize)]
+struct InfoJson<'a> {
+    board: &'static str,
+    build_id: String,
+    firmware_version: &'a str,
+    protocol_version: u16,
+}
+
+/// The `ping --json` object.
+#[derive(Debug, Serialize)]
+struct PingJson {
+    count: u32,
+    max_ms: f64,
+    mean_ms: f64,
 }
 
 impl DeviceCommand {
@@ -130,13 +150,13 @@ impl DeviceCommand {
             DeviceCommand::Info { port, json } => {
                 let info = port.open()?.info()?;
                 if *json {
-                    let value = serde_json::json!({
-                        "firmware_version": info.firmware_version.as_str(),
-                        "board": info.board.name(),
-                        "protocol_version": info.protocol_version,
-                        "build_id": format!("{:08x}", info.build_id),
-                    });
-                    println!("{value}");
+                    let value = InfoJson {
+                        board: info.board.name(),
+                        build_id: format!("{:08x}", info.build_id),
+                        firmware_version: info.firmware_version.as_str(),
+                        protocol_version: info.protocol_version,
+                    };
+                    println!("{}", serde_json::to_string(&value)?);
                 } else {
                     println!("firmware   {}", info.firmware_version);
                     println!("board      {}", info.board.name());
@@ -153,24 +173,22 @@ impl DeviceCommand {
                 let mean = rtts.iter().sum::<f64>() / rtts.len() as f64;
                 let max = rtts.iter().cloned().fold(0.0, f64::max);
                 if *json {
-                    println!(
-                        "{}",
-                        serde_json::json!({"count": count, "mean_ms": mean, "max_ms": max})
-                    );
+                    let value = PingJson { count: *count, max_ms: max, mean_ms: mean };
+                    println!("{}", serde_json::to_string(&value)?);
                 } else {
                     println!("{count} ping(s): mean {mean:.3} ms, max {max:.3} ms");
                 }
             }
             DeviceCommand::Drive { port, freq, amplitude } => {
-                let (f, a) = (freq_mhz(*freq)?, amplitude_q15(*amplitude)?);
+                let (f, a) = (*freq, *amplitude);
                 DeviceLimits::DEFAULT
                     .check_setpoint(f, a)
                     .map_err(|e| InputError(format!("drive refused: {e}")))?;
                 port.open()?.drive(f, a)?;
                 println!(
                     "driving {:.3} Hz at amplitude {:.4}",
-                    f as f64 / 1000.0,
-                    a as f64 / 32767.0
+                    MilliHz(f).to_hz(),
+                    Q15(a).to_fraction()
                 );
             }
             DeviceCommand::RunFile { port, plan, wait } => {
@@ -190,7 +208,7 @@ impl DeviceCommand {
             DeviceCommand::Status { port, json } => {
                 let s = port.open()?.status()?;
                 if *json {
-                    println!("{}", status_json(&s));
+                    println!("{}", serde_json::to_string(&StatusJson::from(&s))?);
                 } else {
                     println!("state      {}", s.state.name());
                     match s.step {
@@ -198,8 +216,8 @@ impl DeviceCommand {
                         None => println!("step       -"),
                     }
                     println!("elapsed    {:.2} ms ({} samples)", s.elapsed_ms(), s.elapsed_samples);
-                    println!("frequency  {:.3} Hz", s.freq_mhz as f64 / 1000.0);
-                    println!("amplitude  {:.4}", s.amplitude_q15 as f64 / 32767.0);
+                    println!("frequency  {:.3} Hz", MilliHz(s.freq_mhz).to_hz());
+                    println!("amplitude  {:.4}", Q15(s.amplitude_q15).to_fraction());
                     println!("underruns  {}", s.underruns);
                 }
             }
@@ -229,8 +247,8 @@ fn watch_plan(client: &mut DeviceClient, steps: usize, total_ms: u64) -> anyhow:
             s.state.name(),
             s.step.map_or("-".to_string(), |i| (i + 1).to_string()),
             steps,
-            s.freq_mhz as f64 / 1000.0,
-            s.amplitude_q15 as f64 / 32767.0
+            MilliHz(s.freq_mhz).to_hz(),
+            Q15(s.amplitude_q15).to_fraction()
         ));
         match s.state {
             DriveState::Idle => break s,
@@ -285,10 +303,11 @@ mod tests {
 
     #[test]
     fn bad_input_is_named() {
-        assert!(amplitude_q15(1.5).unwrap_err().0.contains("amplitude 1.5"));
-        assert_eq!(amplitude_q15(1.0).unwrap(), 32767);
-        assert!(freq_mhz(f64::NAN).is_err());
-        assert_eq!(freq_mhz(440.125).unwrap(), 440_125);
+        use super::super::parse::{drive_amplitude, drive_freq};
+        assert!(drive_amplitude("1.5").unwrap_err().contains("amplitude 1.5"));
+        assert_eq!(drive_amplitude("1.0"), Ok(32767));
+        assert!(drive_freq("NaN").is_err());
+        assert_eq!(drive_freq("440.125"), Ok(440_125));
         let dir = std::env::temp_dir().join(format!("chladni-plan-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("p.json");

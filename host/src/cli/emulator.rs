@@ -24,9 +24,18 @@ pub struct EmulatorArgs {
     /// Write the firmware's decoded log here instead of stderr.
     #[arg(long)]
     log: Option<PathBuf>,
-    /// Stop after this many seconds (default: run until Ctrl-C / SIGTERM).
-    #[arg(long)]
+    /// Stop after this many seconds, at least 1 (default: run until Ctrl-C / SIGTERM). Reaching
+    /// the limit is the end asked for: exit code 0, with a message saying so.
+    #[arg(long, value_name = "S", value_parser = time_limit)]
     time_limit_s: Option<u64>,
+}
+
+/// `--time-limit-s`: whole seconds, at least 1.
+fn time_limit(s: &str) -> Result<u64, String> {
+    match s.trim().parse::<u64>() {
+        Ok(v) if v >= 1 => Ok(v),
+        _ => Err(format!("--time-limit-s must be a whole number of seconds ≥ 1, got {s}")),
+    }
 }
 
 impl EmulatorArgs {
@@ -56,6 +65,13 @@ impl EmulatorArgs {
                 return Ok(ExitCode::SUCCESS);
             }
             if let Some(status) = emulator.try_exit_status()? {
+                if Emulator::ended_by_time_limit(&config, &status) {
+                    eprintln!(
+                        "time limit of {} s reached: the emulator stopped",
+                        self.time_limit_s.unwrap_or_default()
+                    );
+                    return Ok(ExitCode::SUCCESS);
+                }
                 eprintln!("QEMU exited: {status}");
                 return Ok(if status.success() { ExitCode::SUCCESS } else { ExitCode::FAILURE });
             }

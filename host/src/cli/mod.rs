@@ -1,14 +1,18 @@
 //! Command-line interface: one module per command group; each parses with clap and calls the
 //! library. Exit codes: 0 success, 1 the operation failed, 2 bad input (arguments, files).
 
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+use chladni::output::{OutputError, OutputGuard};
+use chladni::plot::{PlotError, check_extension};
 use clap::{Parser, Subcommand};
 
 mod analyze;
 mod device;
 mod emulator;
 mod flash;
+mod parse;
 mod physics;
 mod plan;
 mod plate;
@@ -17,6 +21,41 @@ mod plate;
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
 pub struct InputError(pub String);
+
+/// A plot error: a file name the figure cannot be written as is bad input.
+pub fn plot_error(e: PlotError) -> anyhow::Error {
+    if e.is_bad_input() { InputError(e.to_string()).into() } else { e.into() }
+}
+
+/// An output error: an output that names an input is bad input.
+pub fn output_error(e: OutputError) -> anyhow::Error {
+    if e.is_bad_input() { InputError(e.to_string()).into() } else { e.into() }
+}
+
+/// The guard of a command's inputs, `(role, path)`.
+pub fn guard(inputs: &[(&str, &Path)]) -> OutputGuard {
+    inputs.iter().fold(OutputGuard::new(), |g, (role, path)| g.input(role, path))
+}
+
+/// Checks an output file before any work: it overwrites none of `inputs`.
+pub fn check_output(flag: &str, path: &Path, inputs: &[(&str, &Path)]) -> anyhow::Result<()> {
+    guard(inputs).check(flag, path).map_err(output_error)
+}
+
+/// Checks an optional figure file before any work: its extension is one of `extensions` and
+/// it overwrites none of `inputs`.
+pub fn check_plot(
+    flag: &str,
+    path: &Option<PathBuf>,
+    extensions: &[&str],
+    inputs: &[(&str, &Path)],
+) -> anyhow::Result<()> {
+    if let Some(path) = path {
+        check_extension(flag, path, extensions).map_err(plot_error)?;
+        check_output(flag, path, inputs)?;
+    }
+    Ok(())
+}
 
 /// Exit code for an error: 2 for bad input, 1 for everything else.
 pub fn exit_code_of(err: &anyhow::Error) -> u8 {

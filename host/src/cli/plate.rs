@@ -8,13 +8,16 @@ use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
-use super::InputError;
+use super::parse::usize_in;
+use super::{InputError, check_output, output_error, plot_error};
 use chladni::model::modes_file;
 use chladni::model::plate_file::{Boundary, Plate, PlateFile, PlateTable};
+use chladni::output::write_atomic;
 use chladni::plate::contour::{node_lines, total_length};
 use chladni::plate::photo::rectify::rectify;
 use chladni::plate::{node_field, photo, solver};
 use chladni::plot::plate as plot;
+use serde::Serialize;
 
 #[derive(Debug, Subcommand)]
 pub enum PlateCommand {
@@ -37,7 +40,8 @@ impl PlateCommand {
 pub struct ModesArgs {
     /// Plate file (TOML with a `[plate]` table; see docs/plate.md).
     plate: PathBuf,
-    /// Number of elastic modes (rigid-body modes are left out).
+    /// Number of elastic modes (rigid-body modes are left out; at most a quarter of the Ritz
+    /// unknowns, terms² / 4).
     #[arg(long, default_value_t = 6)]
     count: usize,
     /// Print `{"modes": [{"freq_hz": f, "lambda": λ}, ...]}` instead of a table.
@@ -51,10 +55,10 @@ pub struct ModesArgs {
     #[arg(long, value_name = "FILE")]
     write_modes: Option<PathBuf>,
     /// Grid points along x for `--write-modes` (y follows the aspect ratio).
-    #[arg(long, default_value_t = 41)]
+    #[arg(long, default_value_t = 41, value_parser = usize_in("grid", 3, 401))]
     grid: usize,
     /// Legendre polynomials per direction in the Ritz basis (terms² unknowns).
-    #[arg(long, default_value_t = solver::DEFAULT_TERMS)]
+    #[arg(long, default_value_t = solver::DEFAULT_TERMS, value_parser = usize_in("terms", 4, 30))]
     terms: usize,
     /// Hinged-rod plates: drive frequency (Hz) of the rigid rocking about the hinge that the
     /// rod forces below the first elastic mode (the paper's setup 2 ran it at 10 Hz); written
@@ -72,9 +76,6 @@ impl ModesArgs {
     fn run(&self) -> anyhow::Result<ExitCode> {
         let file = PlateFile::load(&self.plate).map_err(|e| InputError(e.to_string()))?;
         let plate = file.plate.mechanics().map_err(|e| InputError(e.to_string()))?;
-        if !(4..=30).contains(&self.terms) {
-            return Err(InputError(format!("--terms must be in 4..=30, got {}", self.terms)).into());
-        }
         let available = self.terms * self.terms / 4;
         if self.count == 0 || self.count > available {
             return Err(InputError(format!(
@@ -83,42 +84,14 @@ impl ModesArgs {
             ))
             .into());
         }
-        if !(3..=401).contains(&self.grid) {
-            return Err(InputError(format!("--grid must be in 3..=401, got {}", self.grid)).into());
-        }
+        self.check_outputs()?;
         let spinner =
             ProgressBar::new_spinner().with_message(format!("solving ({0}×{0} terms)", self.terms));
         spinner.enable_steady_tick(std::time::Duration::from_millis(120));
         let sol = solver::solve(&plate, self.count, self.terms);
         spinner.finish_and_clear();
-
         if let Some(dir) = &self.plot {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-            let bar = ProgressBar::new(sol.modes.len() as u64).with_style(
-                ProgressStyle::with_template("plotting {bar:30} {pos}/{len}")
-                    .unwrap_or(ProgressStyle::default_bar()),
-            );
-            let (nx, ny) = grid_dims(121, plate.size_mm);
-            for (k, m) in sol.modes.iter().enumerate() {
-                let grid = sol.sample(k, nx, ny);
-                let lines = node_lines(&grid);
-                let title = format!(
-                    "{} — mode {}: {:.1} Hz, λ = {:.3}",
-                    plate.name,
-                    k + 1,
-                    m.freq_hz,
-                    m.lambda
-                );
-                plot::chladni_figure(
-                    &dir.join(format!("mode-{:02}.png", k + 1)),
-                    &title,
-                    &plate,
-                    &grid,
-                    &lines,
-                )?;
-                bar.inc(1);
-            }
-            bar.finish_and_clear();
+            plot_modes(dir, &plate, &sol)?;
         }
         let rocking = self.rocking_mode(&plate, &sol)?;
         if let Some(out) = &self.write_modes {
@@ -126,8 +99,7 @@ impl ModesArgs {
             let entries = rocking
                 .iter()
                 .cloned()
-                .chain((0..sol.modes.len()).map(|k| {
-                    let m = &sol.modes[k];
+                .chain(sol.modes.iter().enumerate().map(|(k, m)| {
                     modes_file::grid_mode(
                         &format!("mode {}", k + 1),
                         m.freq_hz,
@@ -136,54 +108,67 @@ impl ModesArgs {
                     )
                 }))
                 .collect();
-            let text = modes_file::render(&file.plate, entries)?;
-            write(out, &text)?;
+            write(out, &modes_file::render(&file.plate, entries)?)?;
         }
-
         if self.json {
-            let modes: Vec<_> = sol
-                .modes
-                .iter()
-                .map(|m| json!({"freq_hz": m.freq_hz, "lambda": m.lambda}))
-                .collect();
-            println!("{}", json!({ "modes": modes }));
+            let modes = sol.modes.iter().map(|m| ModeJson { freq_hz: m.freq_hz, lambda: m.lambda });
+            println!("{}", serde_json::to_string(&ModesJson { modes: modes.collect() })?);
         } else {
-            println!(
-                "{} ({:?}, {:.0}×{:.0} mm):",
-                plate.name, plate.boundary, plate.size_mm[0], plate.size_mm[1]
-            );
-            println!(
-                "{:>4} {:>12} {:>10} {:>8} {:>16}",
-                "mode", "freq (Hz)", "lambda", "lines", "node length (mm)"
-            );
-            let (nx, ny) = grid_dims(121, plate.size_mm);
-            for (k, m) in sol.modes.iter().enumerate() {
-                let lines = node_lines(&sol.sample(k, nx, ny));
-                println!(
-                    "{:>4} {:>12.2} {:>10.4} {:>8} {:>16.1}",
-                    k + 1,
-                    m.freq_hz,
-                    m.lambda,
-                    lines.len(),
-                    total_length(&lines) + 0.0
-                );
-            }
-            if rocking.is_some() {
-                println!(
-                    "forced: rigid rocking about the hinge at {} Hz, node = the hinge line x = {:.1} mm (linear field){}",
-                    self.rocking_hz,
-                    plate.hinge_x_mm,
-                    if self.write_modes.is_some() { ", written as the first mode" } else { "" }
-                );
-            }
+            self.print(&plate, &sol, rocking.is_some());
         }
         Ok(ExitCode::SUCCESS)
     }
 
+    /// Refuses, before solving, outputs that would overwrite the plate file.
+    fn check_outputs(&self) -> anyhow::Result<()> {
+        let inputs = [("plate", self.plate.as_path())];
+        if let Some(out) = &self.write_modes {
+            check_output("--write-modes", out, &inputs)?;
+        }
+        if let Some(dir) = &self.plot {
+            for k in 0..self.count {
+                check_output("--plot", &dir.join(mode_figure_name(k)), &inputs)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The modes as a table, and the forced rocking of a hinged-rod plate.
+    fn print(&self, plate: &Plate, sol: &solver::ModalSolution, rocking: bool) {
+        println!(
+            "{} ({:?}, {:.0}×{:.0} mm):",
+            plate.name, plate.boundary, plate.size_mm[0], plate.size_mm[1]
+        );
+        println!(
+            "{:>4} {:>12} {:>10} {:>8} {:>16}",
+            "mode", "freq (Hz)", "lambda", "lines", "node length (mm)"
+        );
+        let (nx, ny) = grid_dims(121, plate.size_mm);
+        for (k, m) in sol.modes.iter().enumerate() {
+            let lines = node_lines(&sol.sample(k, nx, ny));
+            println!(
+                "{:>4} {:>12.2} {:>10.4} {:>8} {:>16.1}",
+                k + 1,
+                m.freq_hz,
+                m.lambda,
+                lines.len(),
+                total_length(&lines) + 0.0
+            );
+        }
+        if rocking {
+            println!(
+                "forced: rigid rocking about the hinge at {} Hz, node = the hinge line x = {:.1} mm (linear field){}",
+                self.rocking_hz,
+                plate.hinge_x_mm,
+                if self.write_modes.is_some() { ", written as the first mode" } else { "" }
+            );
+        }
+    }
+
     /// The hinged-rod plate's forced rocking as a `[[mode]]` entry: below the first elastic
     /// mode the rod turns the plate rigidly about the hinge, w ∝ (x − hinge_x), so the node is
-    /// the hinge line and the pull grows linearly with the distance from it (DESIGN §2,
-    /// `linear`). `None` for other boundaries.
+    /// the hinge line and the pull grows linearly with the distance from it (the `linear`
+    /// field law, docs/motion.md). `None` for other boundaries.
     fn rocking_mode(
         &self,
         plate: &Plate,
@@ -213,8 +198,48 @@ impl ModesArgs {
     }
 }
 
+/// The file name of mode `k`'s figure (0-based) in the `--plot` directory.
+fn mode_figure_name(k: usize) -> String {
+    format!("mode-{:02}.png", k + 1)
+}
+
+/// One Chladni figure per mode in `dir`.
+fn plot_modes(dir: &Path, plate: &Plate, sol: &solver::ModalSolution) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let bar = ProgressBar::new(sol.modes.len() as u64).with_style(
+        ProgressStyle::with_template("plotting {bar:30} {pos}/{len}")
+            .unwrap_or(ProgressStyle::default_bar()),
+    );
+    let (nx, ny) = grid_dims(121, plate.size_mm);
+    for (k, m) in sol.modes.iter().enumerate() {
+        let grid = sol.sample(k, nx, ny);
+        let lines = node_lines(&grid);
+        let title =
+            format!("{} — mode {}: {:.1} Hz, λ = {:.3}", plate.name, k + 1, m.freq_hz, m.lambda);
+        plot::chladni_figure(&dir.join(mode_figure_name(k)), &title, plate, &grid, &lines)
+            .map_err(plot_error)?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok(())
+}
+
+/// The `--json` object of `plate modes`.
+#[derive(Debug, Serialize)]
+struct ModesJson {
+    modes: Vec<ModeJson>,
+}
+
+/// One mode in [`ModesJson`] (keys in alphabetical order, as printed).
+#[derive(Debug, Serialize)]
+struct ModeJson {
+    freq_hz: f64,
+    lambda: f64,
+}
+
+/// Writes a text file atomically.
 fn write(path: &Path, text: &str) -> anyhow::Result<()> {
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+    write_atomic(path, text.as_bytes()).map_err(output_error)
 }
 
 #[derive(Debug, Args)]

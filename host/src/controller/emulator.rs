@@ -208,6 +208,12 @@ impl Emulator {
         self.qemu.try_wait()
     }
 
+    /// True when `status` (from [`Emulator::try_exit_status`]) says the run ended because its
+    /// [`EmulatorConfig::time_limit`] expired: coreutils `timeout` then exits with 124.
+    pub fn ended_by_time_limit(config: &EmulatorConfig, status: &std::process::ExitStatus) -> bool {
+        config.time_limit.is_some() && status.code() == Some(124)
+    }
+
     /// Stops QEMU: SIGTERM (forwarded by `timeout` when present), then SIGKILL after 3 s.
     pub fn stop(&mut self) {
         if matches!(self.qemu.try_wait(), Ok(None)) {
@@ -265,8 +271,11 @@ pub fn qemu_command_line(elf: &Path, port: u16, flash: Option<&Path>) -> Vec<Str
 /// Checks the flash file (creating it erased if missing) and returns its absolute path.
 pub fn prepare_flash_file(path: &Path) -> Result<PathBuf, EmulatorError> {
     let fail = |reason: String| EmulatorError::FlashFile { path: path.to_path_buf(), reason };
+    if path.is_dir() {
+        return Err(fail("is a directory: pass a file path (created erased if missing)".into()));
+    }
     if !path.exists() {
-        std::fs::write(path, vec![0xffu8; FLASH_FILE_SIZE as usize])
+        crate::output::write_atomic(path, &vec![0xffu8; FLASH_FILE_SIZE as usize])
             .map_err(|e| fail(format!("cannot create it: {e}")))?;
     }
     let len = std::fs::metadata(path).map_err(|e| fail(e.to_string()))?.len();
@@ -312,11 +321,25 @@ mod tests {
         std::fs::write(&path, [0u8; 100]).unwrap();
         let err = prepare_flash_file(&path).unwrap_err().to_string();
         assert!(err.contains("is 100 bytes"), "{err}");
+        let err = prepare_flash_file(&dir).unwrap_err().to_string();
+        assert!(err.contains("is a directory") && !err.contains("bytes"), "{err}");
 
         let odd = dir.join("a,b.bin");
         let err = prepare_flash_file(&odd).unwrap_err().to_string();
         assert!(err.contains("commas"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn an_expired_time_limit_is_told_apart_from_a_failure() {
+        use std::os::unix::process::ExitStatusExt;
+        let limited =
+            EmulatorConfig { time_limit: Some(Duration::from_secs(5)), ..Default::default() };
+        let expired = std::process::ExitStatus::from_raw(124 << 8);
+        let failed = std::process::ExitStatus::from_raw(1 << 8);
+        assert!(Emulator::ended_by_time_limit(&limited, &expired));
+        assert!(!Emulator::ended_by_time_limit(&limited, &failed));
+        assert!(!Emulator::ended_by_time_limit(&EmulatorConfig::default(), &expired));
     }
 
     #[test]

@@ -1,4 +1,4 @@
-//! Quasi-static part motion on the plate (DESIGN.md §2): velocity = μ·F/area, angular
+//! Quasi-static part motion on the plate (docs/motion.md): velocity = μ·F/area, angular
 //! velocity = μ·M/J (J = polar moment of area about the centroid), integrated until F and M
 //! vanish. Force and moment:
 //! - straight nodes: exact, per polygon edge (split at the node, Green's theorem
@@ -12,6 +12,7 @@
 
 use crate::analysis::reference::GL;
 use crate::model::part::{Part, inside};
+use crate::model::plan_file::PlanFile;
 use crate::model::plate::{Law, Mode, Node, PlateModel};
 use crate::plate::solver::Grid;
 
@@ -566,25 +567,27 @@ pub fn run(body: &Body, field: &FieldModel, p: SimParams, start: Pose) -> Run {
         t = p.t_limit;
         trace.push((t, pose));
     }
-    // Settle time: the last time the part was still moving across its node (speed above
-    // 2 % of R per T0; a slow creep along a curved node does not count) or its orientation
-    // was more than 0.5° from the final one.
-    let band_th = 0.5f64.to_radians();
-    let v_move = 0.02 * r / t0;
-    let mut settle = 0.0;
-    for k in (1..trace.len()).rev() {
-        let ((ta, a), (tb, b)) = (trace[k - 1], trace[k]);
-        let v = if tb > ta { (b.x - a.x).hypot(b.y - a.y) / (tb - ta) } else { 0.0 };
-        if v > v_move || (b.theta - pose.theta).abs() > band_th {
-            settle = tb;
-            break;
-        }
-    }
+    let settle = settle_time(&trace, pose, 0.02 * r / t0);
     Run { pose, settle_s: settle, t_end: t, trace, rested, steps }
 }
 
+/// Settle time: the last time the part was still moving across its node (speed above
+/// `v_move`, 2 % of R per T0; a slow creep along a curved node does not count) or its
+/// orientation was more than 0.5° from the final one.
+fn settle_time(trace: &[(f64, Pose)], end: Pose, v_move: f64) -> f64 {
+    let band_th = 0.5f64.to_radians();
+    for k in (1..trace.len()).rev() {
+        let ((ta, a), (tb, b)) = (trace[k - 1], trace[k]);
+        let v = if tb > ta { (b.x - a.x).hypot(b.y - a.y) / (tb - ta) } else { 0.0 };
+        if v > v_move || (b.theta - end.theta).abs() > band_th {
+            return tb;
+        }
+    }
+    0.0
+}
+
 /// One step of a plan to simulate: the mode, how long, and the drive amplitude relative to
-/// the mode's own (speed scales with the square of the amplitude, DESIGN §2: K ∝ e·A²·ω).
+/// the mode's own (speed scales with the square of the amplitude, K ∝ e·A²·ω: docs/motion.md).
 #[derive(Debug, Clone, Copy)]
 pub struct SimStep {
     /// Index into the plate's modes.
@@ -595,9 +598,51 @@ pub struct SimStep {
     pub amplitude_ratio: f64,
 }
 
+impl SimStep {
+    /// A plan step as the simulator runs it: mode `mode` for `duration_ms`, driven at
+    /// `amplitude_ratio` times the mode's own amplitude.
+    pub fn new(mode: usize, duration_ms: u32, amplitude_ratio: f64) -> Self {
+        SimStep { mode, duration_s: duration_ms as f64 / 1000.0, amplitude_ratio }
+    }
+}
+
+/// A plan step whose frequency no mode of the plate has.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("plan step {step}: no mode at {freq_hz} Hz (modes: {modes})")]
+pub struct NoModeAt {
+    /// Step index (0-based).
+    pub step: usize,
+    /// The step's frequency.
+    pub freq_hz: f64,
+    /// The plate's mode frequencies, listed.
+    pub modes: String,
+}
+
+/// The steps of a plan file as the simulator runs them, `repeat` times over: each step on the
+/// plate's first mode at its frequency (within 1 mHz), at its amplitude relative to the mode's.
+pub fn plan_steps(file: &PlanFile, plate: &PlateModel) -> Result<Vec<SimStep>, NoModeAt> {
+    let mut steps = Vec::with_capacity(file.steps.len());
+    for (i, s) in file.steps.iter().enumerate() {
+        let k = plate.modes.iter().position(|m| (m.freq_hz - s.freq_hz).abs() < 1e-3).ok_or_else(
+            || NoModeAt {
+                step: i,
+                freq_hz: s.freq_hz,
+                modes: plate
+                    .modes
+                    .iter()
+                    .map(|m| format!("{} Hz", m.freq_hz))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            },
+        )?;
+        steps.push(SimStep::new(k, s.duration_ms, s.amplitude / plate.modes[k].amplitude));
+    }
+    Ok((0..file.repeat).flat_map(|_| steps.iter().copied()).collect())
+}
+
 /// Runs a whole plan from `start`: the pose before each step and at the end, the full trace
 /// (times continue across steps) and each step's end time.
-pub fn run_plan(
+pub fn simulate_plan(
     body: &Body,
     plate: &PlateModel,
     fields: &[FieldModel],

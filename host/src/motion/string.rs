@@ -20,7 +20,7 @@
 //! downhill and proportional to e. Downhill is towards the nearer node while the string is
 //! above its mean position (a hump) and towards the antinode while it is below (a dip).
 //!
-//! Option [`Params::beta`]: the paper's eq. 8 literally, `w_t⁺ = β w_t` with a constant β
+//! Option [`StringParams::beta`]: the paper's eq. 8 literally, `w_t⁺ = β w_t` with a constant β
 //! (a tangential coefficient of restitution, no Coulomb bound), so that for small α
 //! `ẋ⁺ ≈ β ẋ⁻ + (β + e) w_n sin α`.
 //!
@@ -50,9 +50,11 @@
 
 use std::f64::consts::PI;
 
+use serde::Serialize;
+
 /// Model parameters (SI units; x is the mode's phase coordinate on [0, π], in metres).
 #[derive(Debug, Clone, Copy)]
-pub struct Params {
+pub struct StringParams {
     /// String amplitude A (m).
     pub amplitude: f64,
     /// Drive frequency (Hz); ω = 2π f.
@@ -68,13 +70,13 @@ pub struct Params {
     pub beta: Option<f64>,
 }
 
-impl Default for Params {
+impl Default for StringParams {
     fn default() -> Self {
-        Params { amplitude: 0.02, freq_hz: 3.9, e: 0.9, mu: 0.3, g: 9.81, beta: None }
+        StringParams { amplitude: 0.02, freq_hz: 3.9, e: 0.9, mu: 0.3, g: 9.81, beta: None }
     }
 }
 
-impl Params {
+impl StringParams {
     fn omega(&self) -> f64 {
         2.0 * PI * self.freq_hz
     }
@@ -113,7 +115,7 @@ pub fn bounce_threshold(e: f64) -> f64 {
 /// Where the drift towards the node x = 0 stops: Γ sin x = [`bounce_threshold`] (and
 /// π − x for the node x = π). `None` when Γ is below the threshold: the particle cannot
 /// bounce anywhere on the string.
-pub fn stop_position(p: &Params) -> Option<f64> {
+pub fn stop_position(p: &StringParams) -> Option<f64> {
     let r = bounce_threshold(p.e) / p.gamma();
     (r <= 1.0).then(|| r.asin())
 }
@@ -130,7 +132,7 @@ struct State {
 }
 
 /// Impact law (see the module docs): velocities just before → just after.
-fn impact(p: &Params, x: f64, t: f64, u: f64, v: f64) -> (f64, f64) {
+fn impact(p: &StringParams, x: f64, t: f64, u: f64, v: f64) -> (f64, f64) {
     let ysd = p.ys_dot(x, t);
     let tan_a = p.slope(x, t);
     let cos_a = 1.0 / (1.0 + tan_a * tan_a).sqrt();
@@ -167,7 +169,7 @@ impl ImpactStats {
 /// Simulator. `hold_x` keeps the particle at its x (for force measurement): the ẋ each
 /// impact gives it is accumulated in `impulse` and reset to zero.
 struct Sim {
-    p: Params,
+    p: StringParams,
     s: State,
     dt: f64,
     hold_x: bool,
@@ -182,13 +184,13 @@ struct Sim {
 const MAX_BURST: u32 = 200;
 
 impl Sim {
-    fn new(p: Params, x0: f64, hold_x: bool) -> Self {
+    fn new(p: StringParams, x0: f64, hold_x: bool) -> Self {
         let s =
             State { t: 0.0, x: x0, y: p.ys(x0, 0.0), u: 0.0, v: p.ys_dot(x0, 0.0), riding: true };
         Sim::with_state(p, s, hold_x)
     }
 
-    fn with_state(p: Params, s: State, hold_x: bool) -> Self {
+    fn with_state(p: StringParams, s: State, hold_x: bool) -> Self {
         Sim {
             p,
             s,
@@ -363,7 +365,7 @@ impl Trajectory {
 
 /// Simulates a particle released at rest at `x0`, `drop` metres above the string's mean
 /// position (0: on the string), for `duration` seconds, sampling x every `sample_dt` seconds.
-pub fn simulate(p: &Params, x0: f64, drop: f64, duration: f64, sample_dt: f64) -> Trajectory {
+pub fn simulate(p: &StringParams, x0: f64, drop: f64, duration: f64, sample_dt: f64) -> Trajectory {
     let sim = if drop > 0.0 {
         let s = State { t: 0.0, x: x0, y: drop.max(p.amplitude), u: 0.0, v: 0.0, riding: false };
         Sim::with_state(*p, s, false)
@@ -388,7 +390,7 @@ fn record(mut sim: Sim, x0: f64, duration: f64, sample_dt: f64) -> Trajectory {
 /// Release state of ensemble member `k` of `members` at `x`: dropped from rest at drive phase
 /// 2π(k + ½)/members, from a height above the string's peak spread over
 /// [0, 2 g T²/8) (twice the period-1 bounce height) by a golden-ratio sequence.
-fn release(p: &Params, x: f64, k: usize, members: usize) -> State {
+fn release(p: &StringParams, x: f64, k: usize, members: usize) -> State {
     let period = p.period();
     let h1 = p.g * period * period / 8.0;
     let t0 = period * (k as f64 + 0.5) / members.max(1) as f64;
@@ -399,7 +401,7 @@ fn release(p: &Params, x: f64, k: usize, members: usize) -> State {
 /// Trajectories of `members` particles dropped near `x0` (see [`release`]; member k is
 /// released at time t0 < T and sampled from t = 0 with x = x0 until then).
 pub fn simulate_ensemble(
-    p: &Params,
+    p: &StringParams,
     x0: f64,
     members: usize,
     duration: f64,
@@ -417,7 +419,12 @@ pub fn simulate_ensemble(
 /// total ẋ the impacts give it, per unit time, averaged over `members` particles dropped at
 /// different drive phases from different heights (see [`release`]), each followed for
 /// `duration` seconds after a 10-period transient.
-pub fn average_force(p: &Params, x: f64, duration: f64, members: usize) -> (f64, ImpactStats) {
+pub fn average_force(
+    p: &StringParams,
+    x: f64,
+    duration: f64,
+    members: usize,
+) -> (f64, ImpactStats) {
     let period = p.period();
     let mut total = 0.0;
     let mut stats = ImpactStats::default();
@@ -439,7 +446,7 @@ pub fn average_force(p: &Params, x: f64, duration: f64, members: usize) -> (f64,
 
 /// Ensemble-averaged force at `n` points spread over (0, π) (endpoints excluded).
 pub fn force_profile(
-    p: &Params,
+    p: &StringParams,
     n: usize,
     duration: f64,
     members: usize,
@@ -468,7 +475,7 @@ pub struct Fit {
 }
 
 /// Fits `−c sin 2x` to a force profile.
-pub fn fit_sin2x(p: &Params, profile: &[(f64, f64)]) -> Fit {
+pub fn fit_sin2x(p: &StringParams, profile: &[(f64, f64)]) -> Fit {
     let s: Vec<f64> = profile.iter().map(|(x, _)| -(2.0 * x).sin()).collect();
     let sf: f64 = profile.iter().zip(&s).map(|((_, f), s)| f * s).sum();
     let ss: f64 = s.iter().map(|s| s * s).sum();
@@ -479,12 +486,192 @@ pub fn fit_sin2x(p: &Params, profile: &[(f64, f64)]) -> Fit {
     Fit { c, r2: 1.0 - res / tot, per_e_a2_omega: c / (p.e * p.amplitude.powi(2) * p.omega()) }
 }
 
+/// Points of the force profile of an [`experiment`].
+pub const PROFILE_POINTS: usize = 16;
+/// Particles averaged per point of the force profile of an [`experiment`].
+pub const PROFILE_MEMBERS: usize = 8;
+
+/// The period-1 bounce height g/(8 f²) (m): the default release height.
+pub fn period1_drop(p: &StringParams) -> f64 {
+    p.g / (8.0 * p.freq_hz * p.freq_hz)
+}
+
+/// What `chladni physics string` computes: one trajectory from `x0`, the averaged force
+/// profile with its `−c sin 2x` fit, and where bouncing (and so the drift) stops.
+#[derive(Debug, Clone)]
+pub struct Experiment {
+    /// The string and particle.
+    pub params: StringParams,
+    /// Start position.
+    pub x0: f64,
+    /// Release height (m).
+    pub drop_m: f64,
+    /// Simulated time (s).
+    pub duration_s: f64,
+    /// The trajectory, sampled 600 times.
+    pub trajectory: Trajectory,
+    /// Averaged force at [`PROFILE_POINTS`] points: (x, F).
+    pub profile: Vec<(f64, f64)>,
+    /// The fit of the profile.
+    pub fit: Fit,
+    /// Γ sin x at which bouncing ends, π(1−e)/(1+e).
+    pub threshold: f64,
+    /// Where the drift towards the nodes stops, if the particle bounces at all.
+    pub stop_x: Option<f64>,
+}
+
+/// Runs the experiment: `duration` s from `x0` released `drop` m above the string, and the
+/// force profile averaged `average` s per particle; `progress` is called after the
+/// trajectory and after each profile point ([`PROFILE_POINTS`] + 1 calls).
+pub fn experiment(
+    p: &StringParams,
+    x0: f64,
+    drop: f64,
+    duration: f64,
+    average: f64,
+    mut progress: impl FnMut(),
+) -> Experiment {
+    let trajectory = simulate(p, x0, drop, duration, duration / 600.0);
+    progress();
+    let profile = force_profile(p, PROFILE_POINTS, average, PROFILE_MEMBERS, progress);
+    Experiment {
+        params: *p,
+        x0,
+        drop_m: drop,
+        duration_s: duration,
+        fit: fit_sin2x(p, &profile),
+        trajectory,
+        profile,
+        threshold: bounce_threshold(p.e),
+        stop_x: stop_position(p),
+    }
+}
+
+impl Experiment {
+    /// The last sampled x (`x0` if nothing was sampled).
+    pub fn x_end(&self) -> f64 {
+        self.trajectory.samples.last().map_or(self.x0, |s| s.1)
+    }
+
+    /// The lowest drive frequency at which the particle can just keep bouncing at `x0`
+    /// (Γ ∝ f²).
+    pub fn min_bouncing_freq_hz(&self) -> f64 {
+        let p = &self.params;
+        p.freq_hz * (self.threshold / (p.gamma() * self.x0.sin())).sqrt()
+    }
+
+    /// The `--json` report.
+    pub fn report(&self) -> ExperimentReport {
+        let (p, t) = (&self.params, &self.trajectory);
+        ExperimentReport {
+            bouncing: Bouncing { stop_x: self.stop_x, threshold_gamma_sin_x: self.threshold },
+            fit: FitReport {
+                c: self.fit.c,
+                c_per_e_a2_omega: self.fit.per_e_a2_omega,
+                model: "F = -c sin 2x",
+                r2: self.fit.r2,
+            },
+            force: self.profile.iter().map(|&(x, f)| [x, f]).collect(),
+            params: ParamsReport {
+                amplitude_m: p.amplitude,
+                beta: p.beta,
+                e: p.e,
+                freq_hz: p.freq_hz,
+                gamma: p.gamma(),
+                mu: p.mu,
+            },
+            trajectory: TrajectoryReport {
+                drop_m: self.drop_m,
+                duration_s: self.duration_s,
+                impacts: t.stats.impacts,
+                impacts_above_mean: t.stats.above_mean,
+                samples: t.samples.iter().step_by(10).map(|s| [s.0, s.1]).collect(),
+                x0: self.x0,
+                x_end: self.x_end(),
+            },
+        }
+    }
+}
+
+/// The `chladni physics string --json` object (keys in alphabetical order, as printed).
+#[derive(Debug, Clone, Serialize)]
+pub struct ExperimentReport {
+    /// Where bouncing ends.
+    pub bouncing: Bouncing,
+    /// The fit of the force profile.
+    pub fit: FitReport,
+    /// The force profile: `[x, F]`.
+    pub force: Vec<[f64; 2]>,
+    /// The parameters.
+    pub params: ParamsReport,
+    /// The trajectory.
+    pub trajectory: TrajectoryReport,
+}
+
+/// Where bouncing ends.
+#[derive(Debug, Clone, Serialize)]
+pub struct Bouncing {
+    /// The drift stops at this x (and π − x); `None`: the particle never bounces.
+    pub stop_x: Option<f64>,
+    /// π(1−e)/(1+e).
+    pub threshold_gamma_sin_x: f64,
+}
+
+/// The fit of the force profile.
+#[derive(Debug, Clone, Serialize)]
+pub struct FitReport {
+    /// Coefficient c (m/s²).
+    pub c: f64,
+    /// c / (e A² ω).
+    pub c_per_e_a2_omega: f64,
+    /// The fitted law.
+    pub model: &'static str,
+    /// Coefficient of determination.
+    pub r2: f64,
+}
+
+/// The parameters of the experiment.
+#[derive(Debug, Clone, Serialize)]
+pub struct ParamsReport {
+    /// String amplitude (m).
+    pub amplitude_m: f64,
+    /// Tangential impact factor, if used.
+    pub beta: Option<f64>,
+    /// Restitution.
+    pub e: f64,
+    /// Drive frequency.
+    pub freq_hz: f64,
+    /// Γ = Aω²/g.
+    pub gamma: f64,
+    /// Friction.
+    pub mu: f64,
+}
+
+/// The trajectory: start, end, impacts and every tenth sample `[t, x]`.
+#[derive(Debug, Clone, Serialize)]
+pub struct TrajectoryReport {
+    /// Release height (m).
+    pub drop_m: f64,
+    /// Simulated time (s).
+    pub duration_s: f64,
+    /// Impacts.
+    pub impacts: u64,
+    /// Impacts above the string's mean position.
+    pub impacts_above_mean: u64,
+    /// Every tenth sample.
+    pub samples: Vec<[f64; 2]>,
+    /// Start.
+    pub x0: f64,
+    /// End.
+    pub x_end: f64,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn with_e(e: f64) -> Params {
-        Params { e, ..Params::default() }
+    fn with_e(e: f64) -> StringParams {
+        StringParams { e, ..StringParams::default() }
     }
 
     #[test]
@@ -498,7 +685,7 @@ mod tests {
         // |w_t| = 0.2 < μ P_n = 0.3 · 1.5 · (1 + ẏ_s): friction stops the slip.
         assert!(u.abs() < 1e-12, "{u}");
         // Frictionless: the tangential velocity is kept.
-        let (u, _) = impact(&Params { mu: 0.0, ..p }, x, 0.0, 0.2, -1.0);
+        let (u, _) = impact(&StringParams { mu: 0.0, ..p }, x, 0.0, 0.2, -1.0);
         assert!((u - 0.2).abs() < 1e-12, "{u}");
     }
 
@@ -534,7 +721,7 @@ mod tests {
 
     #[test]
     fn particle_stays_on_the_string_and_leaves_it_only_where_gamma_sin_x_exceeds_one() {
-        let p = Params { freq_hz: 6.0, ..with_e(0.9) };
+        let p = StringParams { freq_hz: 6.0, ..with_e(0.9) };
         // Near the node Γ sin x < 1: the string never throws the particle up.
         let near = simulate(&p, 0.2, 0.0, 5.0, 0.5);
         assert_eq!(near.stats.impacts, 0);
@@ -553,7 +740,7 @@ mod tests {
         assert!(tr.stats.impacts > 0 && (tr.stats.impacts as f64) < 20.0 * periods);
     }
 
-    fn mean_end(p: &Params, x0: f64, secs: f64) -> (f64, Vec<Trajectory>) {
+    fn mean_end(p: &StringParams, x0: f64, secs: f64) -> (f64, Vec<Trajectory>) {
         let tr = simulate_ensemble(p, x0, 8, secs, 1.0);
         (tr.iter().map(Trajectory::x_end).sum::<f64>() / tr.len() as f64, tr)
     }
@@ -602,7 +789,7 @@ mod tests {
     // stop where Γ sin x = 2.57 (x = 1.035; mirror image from the other half).
     #[test]
     fn low_restitution_particle_drifts_slowly_to_the_node_where_it_can_bounce() {
-        let p = Params { freq_hz: 6.1, ..with_e(0.1) };
+        let p = StringParams { freq_hz: 6.1, ..with_e(0.1) };
         let stop = stop_position(&p).unwrap();
         assert!((stop - 1.035).abs() < 0.01, "{stop}");
         for (x0, end) in [(1.45, stop), (PI - 1.45, PI - stop)] {
@@ -620,7 +807,7 @@ mod tests {
     // (Γ = 1.22 resp. 2.99), the time to move 0.2 towards the node from rest near the antinode.
     #[test]
     fn high_restitution_drifts_many_times_faster_than_low() {
-        let time_to_move = |p: &Params, x0: f64, secs: f64| -> f64 {
+        let time_to_move = |p: &StringParams, x0: f64, secs: f64| -> f64 {
             let tr = simulate_ensemble(p, x0, 8, secs, 1.0);
             let mut t: Vec<f64> = tr
                 .iter()
@@ -630,14 +817,14 @@ mod tests {
             t[t.len() / 2]
         };
         let hi = time_to_move(&with_e(0.9), 1.2, 200.0);
-        let lo = time_to_move(&Params { freq_hz: 6.1, ..with_e(0.1) }, 1.45, 1500.0);
+        let lo = time_to_move(&StringParams { freq_hz: 6.1, ..with_e(0.1) }, 1.45, 1500.0);
         println!("median time to move 0.2 towards the node: e = 0.9 {hi} s, e = 0.1 {lo} s");
         assert!(hi.is_finite() && lo.is_finite() && lo > 5.0 * hi, "{hi} vs {lo}");
     }
 
     #[test]
     fn constant_beta_law_is_the_papers_eq_8_for_small_slope() {
-        let p = Params { beta: Some(0.5), ..with_e(0.1) };
+        let p = StringParams { beta: Some(0.5), ..with_e(0.1) };
         let (x, t) = (0.7, 0.3 / p.freq_hz);
         let (u0, v0) = (0.05, -0.8);
         let (u, v) = impact(&p, x, t, u0, v0);
@@ -654,11 +841,11 @@ mod tests {
     // locked particle that can slide goes to the antinode, not the node.
     #[test]
     fn frictionless_contact_sliding_drifts_to_the_antinode() {
-        let p = Params { mu: 0.0, beta: Some(0.5), ..with_e(0.1) };
+        let p = StringParams { mu: 0.0, beta: Some(0.5), ..with_e(0.1) };
         let tr = simulate(&p, 1.2, 0.0, 30.0, 1.0);
         assert!(tr.x_end() > 1.3, "{}", tr.x_end());
         // With friction μ = 0.3 > slope the same particle is held in place.
-        let held = simulate(&Params { mu: 0.3, ..p }, 1.2, 0.0, 30.0, 1.0);
+        let held = simulate(&StringParams { mu: 0.3, ..p }, 1.2, 0.0, 30.0, 1.0);
         assert!((held.x_end() - 1.2).abs() < 1e-3, "{}", held.x_end());
     }
 
@@ -713,7 +900,7 @@ mod scan {
     fn scan_models() {
         let x0: f64 = std::env::var("STRING_X0").ok().and_then(|s| s.parse().ok()).unwrap_or(1.2);
         for (e, beta, mu, f, secs) in spec() {
-            let p = Params { e, beta, mu, freq_hz: f, ..Params::default() };
+            let p = StringParams { e, beta, mu, freq_hz: f, ..StringParams::default() };
             let t0 = std::time::Instant::now();
             let tr = simulate_ensemble(&p, x0, 8, secs, secs / 6.0);
             let ends: Vec<String> = tr.iter().map(|t| format!("{:.2}", t.x_end())).collect();

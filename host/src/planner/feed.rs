@@ -15,7 +15,7 @@
 //!    Each such sequence of the shortest length is confirmed from scratch: all starts tracked
 //!    without clustering, durations from their settle times
 //!    (× safety + ramp, as [`super::plan_with`]), then the plan run as the simulator runs it
-//!    (fixed durations, [`run_plan`]) from interleaved starts (grid shifted half a cell,
+//!    (fixed durations, [`simulate_plan`]) from interleaved starts (grid shifted half a cell,
 //!    orientations half a step; and from the tracked starts again when some lingered and
 //!    were left out of the durations); every end must lie within the margin of the
 //!    predicted orientation. The fastest confirmed sequence wins.
@@ -30,7 +30,7 @@ use super::{
 };
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
-use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams, SimStep, run_plan};
+use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams, SimStep, simulate_plan};
 
 /// A rectangle of the plate (mm) where parts are dropped.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -486,17 +486,11 @@ fn checked_error<'p>(
     starts: impl Iterator<Item = &'p Pose>,
     theta: f64,
 ) -> f64 {
-    let sim_steps: Vec<SimStep> = steps
-        .iter()
-        .map(|s| SimStep {
-            mode: s.mode,
-            duration_s: s.duration_ms as f64 / 1000.0,
-            amplitude_ratio: 1.0,
-        })
-        .collect();
+    let sim_steps: Vec<SimStep> =
+        steps.iter().map(|s| SimStep::new(s.mode, s.duration_ms, 1.0)).collect();
     starts
         .map(|&q| {
-            let (ends, _, _) = run_plan(&t.body, t.plate, &t.fields, &sim_steps, q);
+            let (ends, _, _) = simulate_plan(&t.body, t.plate, &t.fields, &sim_steps, q);
             let end = ends.last().copied().unwrap_or(q);
             cdist(end.theta.to_degrees(), theta, t.period)
         })

@@ -846,14 +846,7 @@ fn final_position(
 impl Synthesis {
     /// The steps as the simulator runs them (each at its mode's own amplitude).
     pub fn sim_steps(&self) -> Vec<sim::SimStep> {
-        self.steps
-            .iter()
-            .map(|s| sim::SimStep {
-                mode: s.mode,
-                duration_s: s.duration_ms as f64 / 1000.0,
-                amplitude_ratio: 1.0,
-            })
-            .collect()
+        self.steps.iter().map(|s| sim::SimStep::new(s.mode, s.duration_ms, 1.0)).collect()
     }
 
     /// The plan file (device steps plus predictions).

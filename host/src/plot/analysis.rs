@@ -1,16 +1,14 @@
 //! Plots of a rest analysis like the paper's Fig. 8: the part at rest on the node, the turn
 //! function t(θ) with its roots, and the alignment function a(θ). PNG or SVG by extension.
 //!
-//! PNG text uses the Ubuntu Light font shipped inside the `epaint_default_fonts` crate and
-//! rendered by plotters' `ab_glyph` backend, so no system font is needed (fresh CI machines).
+//! The font and the error type are the module's ([`crate::plot`]).
 
 use std::path::Path;
-use std::sync::Once;
 
-use anyhow::{Context, anyhow};
 use plotters::coord::Shift;
 use plotters::prelude::*;
-use plotters::style::FontStyle;
+
+use super::{PlotError, check_extension, text, write_figure};
 
 /// What to draw.
 #[derive(Debug, Clone)]
@@ -31,59 +29,59 @@ pub struct PlotData {
     pub neutral: bool,
 }
 
-static FONT: Once = Once::new();
-
-fn register_font() {
-    FONT.call_once(|| {
-        for style in [FontStyle::Normal, FontStyle::Bold] {
-            // The bytes are a valid TTF shipped by the crate; failure would be a packaging bug.
-            let _ = plotters::style::register_font(
-                "sans-serif",
-                style,
-                epaint_default_fonts::UBUNTU_LIGHT,
-            );
-        }
-    });
-}
-
-/// Writes the plot; the format follows the extension (`.png` or `.svg`).
-pub fn write(path: &Path, data: &PlotData) -> anyhow::Result<()> {
+/// Writes the plot; the format follows the extension (`.png` or `.svg`, checked first).
+pub fn write(path: &Path, data: &PlotData) -> Result<(), PlotError> {
+    check_extension("--plot", path, &EXTENSIONS)?;
+    let svg = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("svg"));
     let size = (1200, 420);
-    // Text is measured with the registered font for both backends.
-    register_font();
-    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
-        Some("svg") => {
-            let root = SVGBackend::new(path, size).into_drawing_area();
+    write_figure(path, |tmp| {
+        if svg {
+            let root = SVGBackend::new(tmp, size).into_drawing_area();
             draw(&root, data)?;
-            root.present().map_err(|e| anyhow!("{e}")).with_context(|| path.display().to_string())
-        }
-        Some("png") => {
-            let root = BitMapBackend::new(path, size).into_drawing_area();
+            root.present().map_err(text)
+        } else {
+            let root = BitMapBackend::new(tmp, size).into_drawing_area();
             draw(&root, data)?;
-            root.present().map_err(|e| anyhow!("{e}")).with_context(|| path.display().to_string())
+            root.present().map_err(text)
         }
-        _ => Err(anyhow!("plot file must end in .png or .svg: {}", path.display())),
-    }
+    })
 }
 
-fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
-    anyhow!("plotting: {e}")
+/// The file types [`write`] can draw.
+pub const EXTENSIONS: [&str; 2] = ["png", "svg"];
+
+fn err<E: std::fmt::Display>(e: E) -> String {
+    text(e)
 }
 
-fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, data: &PlotData) -> anyhow::Result<()>
+fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, data: &PlotData) -> Result<(), String>
 where
     DB::ErrorType: 'static,
 {
     root.fill(&WHITE).map_err(err)?;
     let root = root.titled(&data.title, ("sans-serif", 20)).map_err(err)?;
     let panels = root.split_evenly((1, 3));
-    let stable_col = RGBColor(0, 120, 60);
-    let unstable_col = RGBColor(200, 40, 40);
+    draw_rest(&panels[0], data)?;
+    draw_turn(&panels[1], data)?;
+    draw_align(&panels[2], data)?;
+    Ok(())
+}
 
+const STABLE: RGBColor = RGBColor(0, 120, 60);
+const UNSTABLE: RGBColor = RGBColor(200, 40, 40);
+
+/// (a) The part at rest on the node.
+fn draw_rest<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    data: &PlotData,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
     // (a) The part at rest on the node.
     let all = data.rest_pose.iter().flatten();
     let r = all.fold(1e-9f64, |m, p| m.max(p[0].abs()).max(p[1].abs())) * 1.15;
-    let mut part = ChartBuilder::on(&panels[0])
+    let mut part = ChartBuilder::on(area)
         .caption(format!("part at rest, θ = {:.1}°", data.rest_pose_deg), ("sans-serif", 16))
         .margin(10)
         .x_label_area_size(30)
@@ -111,8 +109,20 @@ where
     )))
     .map_err(err)?;
 
+    Ok(())
+}
+
+/// (b) The turn function.
+fn draw_turn<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    data: &PlotData,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let (stable_col, unstable_col) = (STABLE, UNSTABLE);
     // (b) Turn function.
-    let mut turn = ChartBuilder::on(&panels[1])
+    let mut turn = ChartBuilder::on(area)
         .caption("turn function t(θ)", ("sans-serif", 16))
         .margin(10)
         .x_label_area_size(30)
@@ -144,8 +154,20 @@ where
         .map_err(err)?;
     }
 
+    Ok(())
+}
+
+/// (c) The alignment function.
+fn draw_align<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    data: &PlotData,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let (stable_col, unstable_col) = (STABLE, UNSTABLE);
     // (c) Alignment function.
-    let mut align = ChartBuilder::on(&panels[2])
+    let mut align = ChartBuilder::on(area)
         .caption("alignment function a(θ)", ("sans-serif", 16))
         .margin(10)
         .x_label_area_size(30)

@@ -5,15 +5,16 @@
 
 use std::path::Path;
 
-use anyhow::anyhow;
 use plotters::prelude::*;
+
+use super::{PlotError, text, write_figure};
 
 use crate::model::plate::{Mode, Node, PlateModel};
 use crate::motion::sim::{Body, Pose};
 use crate::plate::contour;
 
-fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
-    anyhow!("plotting: {e}")
+fn err<E: std::fmt::Display>(e: E) -> String {
+    text(e)
 }
 
 /// Polylines of a mode's node inside the plate (mm).
@@ -77,7 +78,7 @@ fn draw_part<DB: DrawingBackend>(
     body: &Body,
     pose: Pose,
     fill: RGBColor,
-) -> anyhow::Result<()>
+) -> Result<(), String>
 where
     DB::ErrorType: 'static,
 {
@@ -105,8 +106,18 @@ pub fn plan_figure(
     plate: &PlateModel,
     modes: &[usize],
     examples: &[Example],
-) -> anyhow::Result<()> {
-    crate::plot::plate::ensure_font();
+) -> Result<(), PlotError> {
+    write_figure(path, |tmp| draw_plan(tmp, title, body, plate, modes, examples))
+}
+
+fn draw_plan(
+    path: &Path,
+    title: &str,
+    body: &Body,
+    plate: &PlateModel,
+    modes: &[usize],
+    examples: &[Example],
+) -> Result<(), String> {
     let [w, h] = plate.size_mm;
     let cols = modes.len().max(1);
     let rows = examples.len().max(1);
@@ -166,34 +177,60 @@ pub fn plan_figure(
 /// One trial's trace: (t, pose) over the whole plan.
 pub type Trace = Vec<(f64, Pose)>;
 
+/// The traces figure: what [`traces_figure`] draws.
+#[derive(Debug, Clone, Copy)]
+pub struct TracesFigure<'a> {
+    /// Title line.
+    pub title: &'a str,
+    /// The part.
+    pub body: &'a Body,
+    /// The plate.
+    pub plate: &'a PlateModel,
+    /// The mode of each step.
+    pub modes: &'a [usize],
+    /// The trials' traces.
+    pub traces: &'a [Trace],
+    /// End time of each step.
+    pub step_ends: &'a [f64],
+    /// Predicted final orientation and its period (degrees).
+    pub target: Option<(f64, f64)>,
+}
+
+const PALETTE: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+];
+
 /// Traces: the plate with every step's node, centroid paths with the part drawn along them;
 /// θ(t) with step boundaries and the target orientation.
-#[allow(clippy::too_many_arguments)]
-pub fn traces_figure(
-    path: &Path,
-    title: &str,
-    body: &Body,
-    plate: &PlateModel,
-    modes: &[usize],
-    traces: &[Trace],
-    step_ends: &[f64],
-    target: Option<(f64, f64)>,
-) -> anyhow::Result<()> {
-    crate::plot::plate::ensure_font();
+pub fn traces_figure(path: &Path, fig: &TracesFigure<'_>) -> Result<(), PlotError> {
+    write_figure(path, |tmp| {
+        let root = BitMapBackend::new(tmp, (1300, 560)).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        let root = root.titled(fig.title, ("sans-serif", 18)).map_err(err)?;
+        let (left, right) = root.split_horizontally(680);
+        draw_paths(&left, fig)?;
+        draw_orientation(&right, fig)?;
+        root.present().map_err(err)
+    })
+}
+
+/// Left panel of the traces figure: nodes, centroid paths, the part along them.
+fn draw_paths<DB: DrawingBackend>(
+    left: &DrawingArea<DB, plotters::coord::Shift>,
+    fig: &TracesFigure<'_>,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let TracesFigure { body, plate, modes, traces, .. } = *fig;
     let [w, h] = plate.size_mm;
-    let root = BitMapBackend::new(path, (1300, 560)).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
-    let root = root.titled(title, ("sans-serif", 18)).map_err(err)?;
-    let (left, right) = root.split_horizontally(680);
-    let palette = [
-        RGBColor(31, 119, 180),
-        RGBColor(255, 127, 14),
-        RGBColor(44, 160, 44),
-        RGBColor(214, 39, 40),
-        RGBColor(148, 103, 189),
-        RGBColor(140, 86, 75),
-    ];
-    let mut chart = ChartBuilder::on(&left)
+    let palette = PALETTE;
+    let mut chart = ChartBuilder::on(left)
         .caption("part motion (white: start, dark: end of plan)", ("sans-serif", 14))
         .margin(10)
         .x_label_area_size(30)
@@ -241,9 +278,21 @@ pub fn traces_figure(
         draw_part(&mut chart, body, tr[0].1, WHITE)?;
         draw_part(&mut chart, body, tr[n - 1].1, col)?;
     }
-    // θ(t).
+    Ok(())
+}
+
+/// Right panel of the traces figure: θ(t) with step boundaries and the target orientation.
+fn draw_orientation<DB: DrawingBackend>(
+    right: &DrawingArea<DB, plotters::coord::Shift>,
+    fig: &TracesFigure<'_>,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let TracesFigure { traces, step_ends, target, .. } = *fig;
+    let palette = PALETTE;
     let t_end = step_ends.last().copied().unwrap_or(1.0).max(1e-6);
-    let mut th = ChartBuilder::on(&right)
+    let mut th = ChartBuilder::on(right)
         .caption("orientation θ(t)", ("sans-serif", 14))
         .margin(10)
         .x_label_area_size(30)
@@ -295,6 +344,5 @@ pub fn traces_figure(
         th.draw_series(std::iter::once(PathElement::new(piece, col.stroke_width(2))))
             .map_err(err)?;
     }
-    root.present().map_err(err)?;
     Ok(())
 }
