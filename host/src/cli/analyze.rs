@@ -3,35 +3,15 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use chladni::model::field::Law;
 use chladni::model::part::{Part, from_fx, to_fx};
 use chladni::plot::analysis::{self, PlotData};
-use chladni_shared::field::{Field, FieldKind};
+use chladni_shared::field::Field;
 use chladni_shared::fx::{Bam, Fx};
 use chladni_shared::rest::{Analysis, AnalysisError, Analyzer};
-use clap::{Args, ValueEnum};
+use clap::Args;
 
 use super::InputError;
-
-/// Field law at the node.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum FieldArg {
-    /// Constant force towards the node (paper eq. 5).
-    Sign,
-    /// Force proportional to the distance from the node (paper §5.2).
-    Linear,
-    /// sin(π d / w): needs --wavelength.
-    Sine,
-}
-
-impl FieldArg {
-    fn name(self) -> &'static str {
-        match self {
-            FieldArg::Sign => "sign",
-            FieldArg::Linear => "linear",
-            FieldArg::Sine => "sine",
-        }
-    }
-}
 
 /// Rest orientations of a part at a straight node (the plate's y-axis).
 #[derive(Debug, Args)]
@@ -40,7 +20,7 @@ pub struct AnalyzeArgs {
     part: PathBuf,
     /// Field law.
     #[arg(long, value_enum)]
-    field: FieldArg,
+    field: Law,
     /// Sine field: distance from the node to the next antinode (mm).
     #[arg(long, value_name = "MM")]
     wavelength: Option<f64>,
@@ -80,14 +60,14 @@ impl AnalyzeArgs {
             }
         }
         let kind = match (self.field, self.wavelength) {
-            (FieldArg::Sine, None) => {
+            (Law::Sine { .. }, None) => {
                 return Err(bad("--field sine needs --wavelength MM".into()));
             }
-            (FieldArg::Sine, Some(w)) => {
+            (Law::Sine { .. }, Some(w)) => {
                 if !(w.is_finite() && w > 0.0 && w <= 1e7) {
                     return Err(bad(format!("--wavelength must be in (0, 1e7] mm, got {w}")));
                 }
-                FieldKind::Sine { wavelength: to_fx(w) }
+                Law::Sine { wavelength_mm: w }.to_fixed()
             }
             (f, Some(_)) => {
                 return Err(bad(format!(
@@ -95,8 +75,7 @@ impl AnalyzeArgs {
                     f.name()
                 )));
             }
-            (FieldArg::Sign, None) => FieldKind::Sign,
-            (FieldArg::Linear, None) => FieldKind::Linear,
+            (law, None) => law.to_fixed(),
         };
         Ok(Field { kind, gain_left: to_fx(self.gain_left), gain_right: to_fx(self.gain_right) })
     }

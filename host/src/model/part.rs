@@ -1,4 +1,4 @@
-//! Planar parts: import from JSON (DESIGN.md §2) or SVG, validation, conversion to the
+//! Planar parts: import from JSON (format in docs/analyze.md) or SVG, validation, conversion to the
 //! fixed-point rings of `chladni_shared::rest`.
 //!
 //! JSON: `{"name": "...", "outline": [[x,y],...], "holes": [[[x,y],...],...]}`, mm, any
@@ -16,6 +16,9 @@ use std::path::Path;
 
 use chladni_shared::fx::Fx;
 use chladni_shared::geometry::Pt;
+
+use crate::model::geometry::{self, orient, segments_meet};
+pub use crate::model::geometry::{inside, signed_area};
 
 /// Coordinates beyond this (mm) are rejected as absurd.
 pub const MAX_COORD_MM: f64 = 1.0e5;
@@ -188,18 +191,6 @@ struct PartJson {
     outline: Vec<[f64; 2]>,
     #[serde(default)]
     holes: Vec<Vec<[f64; 2]>>,
-}
-
-/// Signed area (counter-clockwise positive).
-pub fn signed_area(ring: &[[f64; 2]]) -> f64 {
-    let n = ring.len();
-    (0..n)
-        .map(|i| {
-            let (a, b) = (ring[i], ring[(i + 1) % n]);
-            a[0] * b[1] - b[0] * a[1]
-        })
-        .sum::<f64>()
-        / 2.0
 }
 
 impl Part {
@@ -380,17 +371,7 @@ impl Part {
 
     /// Centroid of the contact surface (outline minus holes), mm.
     pub fn centroid(&self) -> [f64; 2] {
-        let (mut a, mut sx, mut sy) = (0.0, 0.0, 0.0);
-        for r in self.rings() {
-            for (i, &p) in r.iter().enumerate() {
-                let q = r[(i + 1) % r.len()];
-                let c = p[0] * q[1] - q[0] * p[1];
-                a += c / 2.0;
-                sx += (p[0] + q[0]) * c / 6.0;
-                sy += (p[1] + q[1]) * c / 6.0;
-            }
-        }
-        [sx / a, sy / a]
+        geometry::centroid(self.rings().map(Vec::as_slice))
     }
 
     /// Number of vertices over all rings.
@@ -439,48 +420,6 @@ fn transform_of(node: roxmltree::Node<'_, '_>) -> Result<svgtypes::Transform, St
         }
     }
     Ok(ts)
-}
-
-/// Point strictly inside a ring (even–odd rule).
-pub(crate) fn inside(p: [f64; 2], ring: &[[f64; 2]]) -> bool {
-    let n = ring.len();
-    let mut c = false;
-    for i in 0..n {
-        let (a, b) = (ring[i], ring[(i + 1) % n]);
-        if (a[1] > p[1]) != (b[1] > p[1]) {
-            let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
-            if p[0] < x {
-                c = !c;
-            }
-        }
-    }
-    c
-}
-
-fn orient(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
-    (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
-}
-
-fn on_segment(a: [f64; 2], b: [f64; 2], p: [f64; 2]) -> bool {
-    p[0] >= a[0].min(b[0])
-        && p[0] <= a[0].max(b[0])
-        && p[1] >= a[1].min(b[1])
-        && p[1] <= a[1].max(b[1])
-}
-
-/// Do closed segments ab and cd share a point?
-fn segments_meet(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
-    let (d1, d2) = (orient(c, d, a), orient(c, d, b));
-    let (d3, d4) = (orient(a, b, c), orient(a, b, d));
-    if ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0))
-        && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
-    {
-        return true;
-    }
-    (d1 == 0.0 && on_segment(c, d, a))
-        || (d2 == 0.0 && on_segment(c, d, b))
-        || (d3 == 0.0 && on_segment(a, b, c))
-        || (d4 == 0.0 && on_segment(a, b, d))
 }
 
 /// Adjacent edges of one ring meet only at their shared vertex (no fold-back).

@@ -13,6 +13,32 @@
 use chladni_shared::plan::{DeviceLimits, MAX_NAME, MAX_STEPS, Plan, PlanError, Step};
 use serde::{Deserialize, Serialize};
 
+/// The drive's frequency range (Hz): [`DeviceLimits::DEFAULT`], the controller's.
+pub fn drive_range_hz() -> (f64, f64) {
+    let l = DeviceLimits::DEFAULT;
+    (l.min_freq_mhz as f64 / 1000.0, l.max_freq_mhz as f64 / 1000.0)
+}
+
+/// A frequency the drive cannot take; the one message for plate files, plan files and the
+/// command line.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error("the drive takes {}..={} Hz", drive_range_hz().0, drive_range_hz().1)]
+pub struct DriveFreqError;
+
+/// Hz → mHz, rounded to nearest: `None` unless finite and within 1..=u32::MAX mHz once
+/// rounded (≥ 0.5 mHz). The one conversion of a frequency to the device's unit.
+pub fn freq_mhz(hz: f64) -> Option<u32> {
+    let mhz = hz * 1000.0;
+    (mhz.is_finite() && mhz >= 0.5 && mhz < u32::MAX as f64).then(|| mhz.round() as u32)
+}
+
+/// The one check of a drive frequency (Hz) against the controller's limits
+/// ([`DeviceLimits::DEFAULT`]): the frequency in mHz, or [`DriveFreqError`].
+pub fn check_drive_freq(hz: f64) -> Result<u32, DriveFreqError> {
+    let l = DeviceLimits::DEFAULT;
+    freq_mhz(hz).filter(|m| (l.min_freq_mhz..=l.max_freq_mhz).contains(m)).ok_or(DriveFreqError)
+}
+
 /// One step as written.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -64,8 +90,10 @@ pub enum PlanFileError {
     /// Not JSON of the right shape.
     #[error("not a valid plan: {0}")]
     Json(String),
-    /// A frequency that is not a positive finite number of Hz.
-    #[error("step {step}: freq_hz {value} is not a valid frequency (give Hz, e.g. 60.0)")]
+    /// A frequency that is not a positive finite number of Hz the device can represent.
+    #[error(
+        "step {step}: freq_hz {value} is not a valid frequency: {DriveFreqError} (give Hz, e.g. 60.0)"
+    )]
     Frequency {
         /// Step index.
         step: usize,
@@ -104,15 +132,14 @@ impl PlanFile {
         }
         let mut steps = heapless::Vec::new();
         for (i, s) in self.steps.iter().enumerate() {
-            let mhz = s.freq_hz * 1000.0;
-            if !(mhz.is_finite() && mhz >= 0.5 && mhz < u32::MAX as f64) {
+            let Some(freq_mhz) = freq_mhz(s.freq_hz) else {
                 return Err(PlanFileError::Frequency { step: i, value: s.freq_hz });
-            }
+            };
             if !(0.0..=1.0).contains(&s.amplitude) {
                 return Err(PlanFileError::Amplitude { step: i, value: s.amplitude });
             }
             let step = Step {
-                freq_mhz: mhz.round() as u32,
+                freq_mhz,
                 amplitude_q15: (s.amplitude * 32767.0).round() as u16,
                 duration_ms: s.duration_ms,
                 ramp_ms: s.ramp_ms,

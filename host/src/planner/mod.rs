@@ -30,15 +30,15 @@
 
 use std::collections::{HashMap, VecDeque};
 
-use chladni_shared::field::{Field, FieldKind};
+use chladni_shared::field::Field;
 use chladni_shared::fx::Bam;
 use chladni_shared::geometry::Pt;
 use chladni_shared::rest::Analyzer;
 
-use crate::analysis::reference::{self, RefField, Reference};
+use crate::analysis::reference::{RefField, Reference};
 use crate::model::part::{Part, to_fx};
 use crate::model::plan_file::{PlanFile, StepJson};
-use crate::model::plate::{Law, Mode, Node, PlateModel};
+use crate::model::plate::{Mode, Node, PlateModel};
 use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
 
 pub mod feed;
@@ -218,11 +218,7 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, S
         Backend::Fixed => {
             let rings = part.to_fixed();
             let slices: Vec<&[Pt]> = rings.iter().map(Vec::as_slice).collect();
-            let kind = match mode.law {
-                Law::Sign => FieldKind::Sign,
-                Law::Linear => FieldKind::Linear,
-                Law::Sine { wavelength_mm } => FieldKind::Sine { wavelength: to_fx(wavelength_mm) },
-            };
+            let kind = mode.law.to_fixed();
             let field = Field {
                 kind,
                 gain_left: to_fx(mode.gain_left),
@@ -793,12 +789,10 @@ pub fn plan_with(
 
 /// The f64 reference analysis of `part` under a straight-node mode's field law and gains.
 fn reference_for(part: &Part, mode: &Mode) -> Reference {
-    let law = match mode.law {
-        Law::Sign => reference::Law::Sign,
-        Law::Linear => reference::Law::Linear,
-        Law::Sine { wavelength_mm } => reference::Law::Sine(wavelength_mm),
-    };
-    Reference::new(part, RefField { law, gain_left: mode.gain_left, gain_right: mode.gain_right })
+    Reference::new(
+        part,
+        RefField { law: mode.law, gain_left: mode.gain_left, gain_right: mode.gain_right },
+    )
 }
 
 /// Centroid offset across a straight node at a rest orientation (mm, along x̂ = −n̂ from the
