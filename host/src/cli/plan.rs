@@ -125,6 +125,10 @@ impl PlanArgs {
         check_png(&self.plot)?;
         let part = load_part(&self.part)?;
         let plate = load_plate(&self.plate)?;
+        planner::check_input(&part, &plate).map_err(|e| bad(e.to_string()))?;
+        if let (_, Some(warning)) = planner::plan_name(&part.name) {
+            eprintln!("warning: {warning}");
+        }
         let region = feed_region(&self.feed, &plate)?;
         let opt = PlanOptions {
             margin_deg: self.margin_deg,
@@ -281,6 +285,7 @@ impl SimulateArgs {
         }
         let part = load_part(&self.part)?;
         let plate = load_plate(&self.plate)?;
+        planner::check_input(&part, &plate).map_err(|e| bad(e.to_string()))?;
         let region = feed_region(&self.feed, &plate)?;
         let text = std::fs::read_to_string(&self.plan)
             .map_err(|e| bad(format!("cannot read plan {}: {e}", self.plan.display())))?;

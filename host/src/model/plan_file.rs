@@ -175,20 +175,12 @@ impl PlanFile {
         }
     }
 
-    /// The documented JSON object: steps, final_orientation_deg, period_deg,
-    /// final_position_mm (null when not fixed), name, repeat.
+    /// The documented JSON object (the derived serialisation): steps,
+    /// final_orientation_deg, period_deg, final_position_mm (null when not fixed), name,
+    /// repeat.
     pub fn to_json(&self) -> serde_json::Value {
-        serde_json::json!({
-            "name": self.name,
-            "repeat": self.repeat,
-            "steps": self.steps.iter().map(|s| serde_json::json!({
-                "freq_hz": s.freq_hz, "duration_ms": s.duration_ms,
-                "amplitude": s.amplitude, "ramp_ms": s.ramp_ms,
-            })).collect::<Vec<_>>(),
-            "final_orientation_deg": self.final_orientation_deg,
-            "period_deg": self.period_deg,
-            "final_position_mm": self.final_position_mm,
-        })
+        // Serialising plain numbers, strings and options into a Value cannot fail.
+        serde_json::to_value(self).unwrap_or_default()
     }
 }
 

@@ -1,4 +1,4 @@
-//! Sensorless plan synthesis (DESIGN.md §2, paper §6): the shortest sequence of modes that
+//! Sensorless plan synthesis (docs/plan.md, paper §6): the shortest sequence of modes that
 //! brings every start orientation to one final orientation.
 //!
 //! 1. **Step maps.** Each mode gives a map θ ↦ θ' (plate frame) with its basin boundaries:
@@ -33,6 +33,7 @@ use std::collections::{HashMap, VecDeque};
 use chladni_shared::field::Field;
 use chladni_shared::fx::Bam;
 use chladni_shared::geometry::Pt;
+use chladni_shared::plan::MAX_NAME;
 use chladni_shared::rest::Analyzer;
 
 use crate::analysis::reference::{RefField, Reference};
@@ -403,6 +404,123 @@ pub enum PlanFailure {
     Model(String),
 }
 
+/// The image of a set of orientation ids under mode `k` (sorted, deduplicated); `None` when
+/// some orientation has no allowed transition.
+fn set_image(set: &[usize], trans: &[Vec<Option<usize>>], k: usize) -> Option<Vec<usize>> {
+    let mut img = set.iter().map(|&u| trans[u][k]).collect::<Option<Vec<usize>>>()?;
+    img.sort_unstable();
+    img.dedup();
+    Some(img)
+}
+
+/// The steps from a start set to search node `g`: (mode, orientations after it).
+fn path_to(
+    nodes: &[(Vec<usize>, usize, usize)],
+    uni: &[f64],
+    mut g: usize,
+) -> Vec<(usize, Vec<f64>)> {
+    let mut path = Vec::new();
+    loop {
+        let (set, parent, k) = &nodes[g];
+        path.push((*k, set.iter().map(|&u| uni[u]).collect()));
+        if *parent == usize::MAX {
+            break;
+        }
+        g = *parent;
+    }
+    path.reverse();
+    path
+}
+
+/// Most vertices (all rings) a part may have for planning and simulation: the planner's cost
+/// grows with the vertex count (the step maps analyse the whole outline hundreds of times).
+/// Measured with `chladni plan` on an N-gon (release build, four-lines plate); see
+/// docs/plan.md.
+pub const MAX_PLAN_VERTICES: usize = 20_000;
+
+/// A part and plate the planner refuses before any work (bad input, exit code 2).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanInputError {
+    /// Too many vertices for a plan in reasonable time.
+    #[error(
+        "part {name}: {count} vertices, more than the planner's limit of {MAX_PLAN_VERTICES} \
+         (planning time grows with the vertex count): simplify the outline"
+    )]
+    TooManyVertices {
+        /// Part name.
+        name: String,
+        /// Its vertex count.
+        count: usize,
+    },
+    /// The part cannot lie on the plate in any orientation.
+    #[error(
+        "part {name} is {width_mm:.1} mm wide at its narrowest, wider than the {w}×{h} mm plate \
+         ({side} mm side): it cannot lie on the plate in any orientation; check that the part is \
+         in mm and the plate's size_mm"
+    )]
+    TooLarge {
+        /// Part name.
+        name: String,
+        /// Its smallest width over all directions (mm).
+        width_mm: f64,
+        /// Plate width (mm).
+        w: f64,
+        /// Plate height (mm).
+        h: f64,
+        /// The plate's shorter side (mm).
+        side: f64,
+    },
+}
+
+/// Checks a part against the planner's limits and the plate's size, before any work.
+pub fn check_input(part: &Part, plate: &PlateModel) -> Result<(), PlanInputError> {
+    let count = part.vertex_count();
+    if count > MAX_PLAN_VERTICES {
+        return Err(PlanInputError::TooManyVertices { name: part.name.clone(), count });
+    }
+    let [w, h] = plate.size_mm;
+    let side = w.min(h);
+    let width_mm = min_width(&part.outline);
+    if width_mm > side {
+        return Err(PlanInputError::TooLarge { name: part.name.clone(), width_mm, w, h, side });
+    }
+    Ok(())
+}
+
+/// The smallest width of a ring over 360 directions (0.5° apart; at most 0.004 % above the
+/// true minimum, which only matters for a part that fits the plate within that margin).
+fn min_width(ring: &[[f64; 2]]) -> f64 {
+    (0..360)
+        .map(|k| {
+            let (s, c) = (k as f64 * 0.5).to_radians().sin_cos();
+            let (lo, hi) = ring.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                let d = c * p[0] + s * p[1];
+                (lo.min(d), hi.max(d))
+            });
+            hi - lo
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The plan name for a part name: at most [`MAX_NAME`] bytes (the controller stores no more),
+/// cut at a character boundary, and a warning naming the cut when there was one.
+pub fn plan_name(name: &str) -> (String, Option<String>) {
+    if name.len() <= MAX_NAME {
+        return (name.to_string(), None);
+    }
+    let mut end = MAX_NAME;
+    while !name.is_char_boundary(end) {
+        end -= 1;
+    }
+    let cut = name[..end].to_string();
+    let warning = format!(
+        "the part's name is {} bytes; a plan name holds at most {MAX_NAME} (the controller's \
+         limit), so the plan is named \"{cut}\" (rename the part to choose)",
+        name.len()
+    );
+    (cut, Some(warning))
+}
+
 /// The period P = 360°/m orientations are taken modulo: m = the part's rotational symmetry
 /// order, doubled (lcm with 2) when every mode is a straight node with equal gains.
 pub fn plan_period(part: &Part, plate: &PlateModel) -> f64 {
@@ -507,24 +625,10 @@ impl Problem {
             if nodes.len() > opt.max_states {
                 break;
             }
-            #[allow(clippy::needless_range_loop)]
             for k in 0..nm {
-                let mut img = Vec::with_capacity(nodes[i].0.len());
-                let mut ok = true;
-                for &u in &nodes[i].0 {
-                    match trans[u][k] {
-                        Some(v) => img.push(v),
-                        None => {
-                            ok = false;
-                            break;
-                        }
-                    }
-                }
-                if !ok {
+                let Some(img) = set_image(&nodes[i].0, &trans, k) else {
                     continue;
-                }
-                img.sort_unstable();
-                img.dedup();
+                };
                 if !seen.contains_key(&img) {
                     seen.insert(img.clone(), nodes.len());
                     queue.push_back(nodes.len());
@@ -533,20 +637,10 @@ impl Problem {
             }
             close(&mut uni, &mut trans);
         }
-        let Some(mut g) = goal else {
+        let Some(g) = goal else {
             return Err(PlanFailure::NoPlan(self.explain(&nodes, &uni, opt)));
         };
-        let mut path = Vec::new();
-        loop {
-            let (set, parent, k) = &nodes[g];
-            path.push((*k, set.iter().map(|&u| uni[u]).collect()));
-            if *parent == usize::MAX {
-                break;
-            }
-            g = *parent;
-        }
-        path.reverse();
-        Ok(path)
+        Ok(path_to(&nodes, &uni, g))
     }
 
     fn explain(
@@ -852,10 +946,7 @@ impl Synthesis {
 
     /// The plan file (device steps plus predictions).
     pub fn to_file(&self, plate: &PlateModel, name: &str) -> PlanFile {
-        let mut name: String = name.chars().take(32).collect();
-        while name.len() > 32 {
-            name.pop();
-        }
+        let (name, _) = plan_name(name);
         PlanFile {
             name,
             repeat: 1,
