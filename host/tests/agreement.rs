@@ -21,7 +21,7 @@ fn compare(part: &Part, law: Law, gl: f64, gr: f64) -> f64 {
     let kind = match law {
         Law::Sign => FieldKind::Sign,
         Law::Linear => FieldKind::Linear,
-        Law::Sine(w) => FieldKind::Sine { wavelength: to_fx(w) },
+        Law::Sine { wavelength_mm: w } => FieldKind::Sine { wavelength: to_fx(w) },
     };
     let rings = part.to_fixed();
     let slices: Vec<&[Pt]> = rings.iter().map(Vec::as_slice).collect();
@@ -59,7 +59,7 @@ fn check(part: &Part) -> f64 {
     for (law, gl, gr) in [
         (Law::Sign, 1.0, 1.0),
         (Law::Linear, 1.0, 1.0),
-        (Law::Sine(w), 1.0, 1.0),
+        (Law::Sine { wavelength_mm: w }, 1.0, 1.0),
         (Law::Sign, 1.0, 2.5),
         (Law::Linear, 3.0, 1.0),
     ] {

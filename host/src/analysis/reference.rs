@@ -5,18 +5,8 @@
 //! sampling (0.5°) over the full turn and bisection. Slow and simple; used by the tests to
 //! check the fixed-point code (agreement within 0.05° on stable orientations).
 
+pub use crate::model::field::Law;
 use crate::model::part::Part;
-
-/// Field law, as in `chladni_shared::analysis::field::FieldKind` but in f64.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Law {
-    /// f = −k sign(x).
-    Sign,
-    /// f = −k x.
-    Linear,
-    /// f = −k sin(πx/w); `w` in mm.
-    Sine(f64),
-}
 
 /// A straight-node field with a gain per side.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -71,11 +61,13 @@ impl Reference {
         Reference { rings, field, radius, scale }
     }
 
+    /// g(x) up to a constant factor (the linear law without its length scale, which changes
+    /// no rest orientation): the reference's own, independent of [`Law::g`].
     fn g(&self, x: f64) -> f64 {
         match self.field.law {
             Law::Sign => x.signum(),
             Law::Linear => x,
-            Law::Sine(w) => (std::f64::consts::PI * x / w).sin(),
+            Law::Sine { wavelength_mm: w } => (std::f64::consts::PI * x / w).sin(),
         }
     }
 
@@ -84,7 +76,7 @@ impl Reference {
         match self.field.law {
             Law::Sign => side * x,
             Law::Linear => 0.5 * x * x,
-            Law::Sine(_) => {
+            Law::Sine { .. } => {
                 GL.iter().map(|(v, wv)| wv * self.g(0.5 * x * (v + 1.0))).sum::<f64>() * 0.5 * x
             }
         }

@@ -3,37 +3,17 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use chladni::model::field::Law;
 use chladni::model::part::{Part, from_fx, to_fx};
 use chladni::plot::analysis::{self, PlotData};
-use chladni_shared::analysis::field::{Field, FieldKind};
+use chladni_shared::analysis::field::Field;
 use chladni_shared::analysis::fx::{Bam, Fx};
 use chladni_shared::analysis::rest::{Analysis, AnalysisError, Analyzer};
-use clap::{Args, ValueEnum};
+use clap::Args;
 use serde::Serialize;
 
 use super::parse::f64_where;
 use super::{InputError, check_plot, plot_error};
-
-/// Field law at the node.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum FieldArg {
-    /// Constant force towards the node (paper eq. 5).
-    Sign,
-    /// Force proportional to the distance from the node (paper §5.2).
-    Linear,
-    /// sin(π d / w): needs --wavelength.
-    Sine,
-}
-
-impl FieldArg {
-    fn name(self) -> &'static str {
-        match self {
-            FieldArg::Sign => "sign",
-            FieldArg::Linear => "linear",
-            FieldArg::Sine => "sine",
-        }
-    }
-}
 
 /// Rest orientations of a part at a straight node (the plate's y-axis).
 #[derive(Debug, Args)]
@@ -42,7 +22,7 @@ pub struct AnalyzeArgs {
     part: PathBuf,
     /// Field law.
     #[arg(long, value_enum)]
-    field: FieldArg,
+    field: Law,
     /// Sine field: distance from the node to the next antinode (mm).
     #[arg(long, value_name = "MM",
           value_parser = f64_where("wavelength", "in (0, 1e7] mm", |w| w > 0.0 && w <= 1e7))]
@@ -96,18 +76,17 @@ fn bad(msg: String) -> anyhow::Error {
 impl AnalyzeArgs {
     fn field(&self) -> anyhow::Result<Field> {
         let kind = match (self.field, self.wavelength) {
-            (FieldArg::Sine, None) => {
+            (Law::Sine { .. }, None) => {
                 return Err(bad("--field sine needs --wavelength MM".into()));
             }
-            (FieldArg::Sine, Some(w)) => FieldKind::Sine { wavelength: to_fx(w) },
+            (Law::Sine { .. }, Some(w)) => Law::Sine { wavelength_mm: w }.to_fixed(),
             (f, Some(_)) => {
                 return Err(bad(format!(
                     "--wavelength only applies to --field sine, not {}",
                     f.name()
                 )));
             }
-            (FieldArg::Sign, None) => FieldKind::Sign,
-            (FieldArg::Linear, None) => FieldKind::Linear,
+            (law, None) => law.to_fixed(),
         };
         Ok(Field { kind, gain_left: to_fx(self.gain_left), gain_right: to_fx(self.gain_right) })
     }

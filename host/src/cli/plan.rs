@@ -94,6 +94,10 @@ impl PlanArgs {
         }
         let part = load_part(&self.part)?;
         let plate = load_plate(&self.plate)?;
+        planner::check_input(&part, &plate).map_err(|e| bad(e.to_string()))?;
+        if let (_, Some(warning)) = planner::plan_name(&part.name) {
+            eprintln!("warning: {warning}");
+        }
         let region = feed_region(&self.feed, &plate)?;
         let syn = self.synthesize(&part, &plate, region)?;
         let file = syn.to_file(&plate, &part.name);
@@ -281,6 +285,7 @@ impl SimulateArgs {
         }
         let part = load_part(&self.part)?;
         let plate = load_plate(&self.plate)?;
+        planner::check_input(&part, &plate).map_err(|e| bad(e.to_string()))?;
         let region = feed_region(&self.feed, &plate)?;
         let file = self.read_plan()?;
         let steps = sim::plan_steps(&file, &plate).map_err(|e| {

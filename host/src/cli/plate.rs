@@ -11,7 +11,7 @@ use serde_json::json;
 use super::parse::usize_in;
 use super::{InputError, check_output, output_error, plot_error};
 use chladni::model::modes_file;
-use chladni::model::plate_file::{Boundary, Plate, PlateFile, PlateTable};
+use chladni::model::plate_file::{Boundary, ModeEntry, Plate, PlateFile, PlateTable};
 use chladni::output::write_atomic;
 use chladni::plate::contour::{node_lines, total_length};
 use chladni::plate::photo::rectify::rectify;
@@ -173,7 +173,7 @@ impl ModesArgs {
         &self,
         plate: &Plate,
         sol: &solver::ModalSolution,
-    ) -> Result<Option<toml::Table>, InputError> {
+    ) -> Result<Option<ModeEntry>, InputError> {
         if plate.boundary != Boundary::HingedRod {
             return Ok(None);
         }
@@ -193,7 +193,7 @@ impl ModesArgs {
             90.0,
             plate.hinge_x_mm - plate.size_mm[0] / 2.0,
         );
-        m.insert("field".into(), "linear".into());
+        m.field = Some("linear".into());
         Ok(Some(m))
     }
 }
@@ -394,7 +394,7 @@ impl FromPhotoArgs {
     }
 
     /// The `[[mode]]` entries: one grid entry if there is a grid, else one line entry each.
-    fn entries(&self, found: &photo::Found, grid: Option<&PhotoGrid>) -> Vec<toml::Table> {
+    fn entries(&self, found: &photo::Found, grid: Option<&PhotoGrid>) -> Vec<ModeEntry> {
         match grid {
             Some(Ok(field)) => {
                 vec![modes_file::sampled_mode(&self.entry_name("nodes"), self.freq_hz, &field.grid)]

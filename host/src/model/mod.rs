@@ -1,6 +1,9 @@
 //! The files a user writes and the tool reads and writes: parts (JSON, SVG), plates (TOML:
-//! material, size and the menu of modes), plans (JSON, the same plan the controller runs).
+//! material, size and the menu of modes), plans (JSON, the same plan the controller runs);
+//! the field law of a node ([`field`]) and the polygon helpers every room uses ([`geometry`]).
 
+pub mod field;
+pub mod geometry;
 pub mod modes_file;
 pub mod part;
 pub mod plan_file;

@@ -2,9 +2,7 @@
 //! "grid"`), photo-derived straight nodes (`node.kind = "line"`) and photo-derived curved
 //! nodes as a sampled signed distance (`node.kind = "grid"`). Schema in docs/plate.md.
 
-use toml::{Table, Value};
-
-use crate::model::plate_file::{PlateFile, PlateTable};
+use crate::model::plate_file::{ModeEntry, NodeEntry, PlateFile, PlateTable};
 use crate::plate::solver::Grid;
 
 /// Rounds to `digits` decimals so files stay small and diff well.
@@ -14,72 +12,68 @@ fn round(v: f64, digits: i32) -> f64 {
 }
 
 /// A `[[mode]]` entry holding a sampled mode shape.
-pub fn grid_mode(name: &str, freq_hz: f64, lambda: f64, grid: &Grid) -> Table {
-    let mut m = Table::new();
-    m.insert("name".into(), name.into());
-    m.insert("freq_hz".into(), Value::Float(round(freq_hz, 4)));
-    m.insert("lambda".into(), Value::Float(round(lambda, 5)));
-    m.insert("node".into(), Value::Table(grid_node(grid)));
-    m
+pub fn grid_mode(name: &str, freq_hz: f64, lambda: f64, grid: &Grid) -> ModeEntry {
+    ModeEntry {
+        name: Some(name.into()),
+        freq_hz: Some(round(freq_hz, 4)),
+        lambda: Some(round(lambda, 5)),
+        node: Some(grid_node(grid)),
+        ..ModeEntry::default()
+    }
 }
 
 /// A `[[mode]]` entry holding a grid node that is not a solver mode (no λ; the frequency only
 /// if known), e.g. the signed distance to the nodes seen in a photo.
-pub fn sampled_mode(name: &str, freq_hz: Option<f64>, grid: &Grid) -> Table {
-    let mut m = Table::new();
-    m.insert("name".into(), name.into());
-    if let Some(f) = freq_hz {
-        m.insert("freq_hz".into(), Value::Float(f));
+pub fn sampled_mode(name: &str, freq_hz: Option<f64>, grid: &Grid) -> ModeEntry {
+    ModeEntry {
+        name: Some(name.into()),
+        freq_hz,
+        node: Some(grid_node(grid)),
+        ..ModeEntry::default()
     }
-    m.insert("node".into(), Value::Table(grid_node(grid)));
-    m
 }
 
 /// `node = { kind = "grid", nx, ny, values }`.
-fn grid_node(grid: &Grid) -> Table {
-    let mut node = Table::new();
-    node.insert("kind".into(), "grid".into());
-    node.insert("nx".into(), Value::Integer(grid.nx as i64));
-    node.insert("ny".into(), Value::Integer(grid.ny as i64));
-    node.insert(
-        "values".into(),
-        Value::Array(grid.values.iter().map(|&v| Value::Float(round(v, 5))).collect()),
-    );
-    node
+fn grid_node(grid: &Grid) -> NodeEntry {
+    NodeEntry::Grid {
+        nx: Some(grid.nx as i64),
+        ny: Some(grid.ny as i64),
+        values: Some(grid.values.iter().map(|&v| round(v, 5)).collect()),
+    }
 }
 
 /// A `[[mode]]` entry holding a straight node line.
-pub fn line_mode(name: &str, freq_hz: Option<f64>, angle_deg: f64, offset_mm: f64) -> Table {
-    let mut node = Table::new();
-    node.insert("kind".into(), "line".into());
-    node.insert("angle_deg".into(), Value::Float(round(angle_deg, 3)));
-    node.insert("offset_mm".into(), Value::Float(round(offset_mm, 3)));
-    let mut m = Table::new();
-    m.insert("name".into(), name.into());
-    if let Some(f) = freq_hz {
-        m.insert("freq_hz".into(), Value::Float(f));
+pub fn line_mode(name: &str, freq_hz: Option<f64>, angle_deg: f64, offset_mm: f64) -> ModeEntry {
+    ModeEntry {
+        name: Some(name.into()),
+        freq_hz,
+        node: Some(NodeEntry::Line {
+            angle_deg: Some(round(angle_deg, 3)),
+            offset_mm: Some(round(offset_mm, 3)),
+        }),
+        ..ModeEntry::default()
     }
-    m.insert("node".into(), Value::Table(node));
-    m
 }
 
 /// Renders a plate file with the given `[plate]` table and `[[mode]]` entries.
-pub fn render(plate: &PlateTable, modes: Vec<Table>) -> Result<String, toml::ser::Error> {
+pub fn render(plate: &PlateTable, modes: Vec<ModeEntry>) -> Result<String, toml::ser::Error> {
     toml::to_string(&PlateFile { plate: plate.clone(), mode: modes })
 }
 
-/// Reads the grid of a `node = { kind = "grid", ... }` entry back (for checks and tools).
-pub fn grid_of(entry: &Table, size_mm: [f64; 2]) -> Option<Grid> {
-    let node = entry.get("node")?.as_table()?;
-    if node.get("kind")?.as_str()? != "grid" {
+/// The grid of a `node = { kind = "grid", ... }` entry, if it is one with nx·ny samples
+/// (for checks and tools; the planner's check is [`crate::model::plate::check_mode`]).
+pub fn grid_of(entry: &ModeEntry, size_mm: [f64; 2]) -> Option<Grid> {
+    let Some(NodeEntry::Grid { nx: Some(nx), ny: Some(ny), values: Some(values) }) = &entry.node
+    else {
         return None;
-    }
-    let nx = usize::try_from(node.get("nx")?.as_integer()?).ok()?;
-    let ny = usize::try_from(node.get("ny")?.as_integer()?).ok()?;
-    let values: Option<Vec<f64>> =
-        node.get("values")?.as_array()?.iter().map(Value::as_float).collect();
-    let values = values?;
-    (values.len() == nx * ny && nx >= 2 && ny >= 2).then_some(Grid { nx, ny, size_mm, values })
+    };
+    let (nx, ny) = (usize::try_from(*nx).ok()?, usize::try_from(*ny).ok()?);
+    (values.len() == nx * ny && nx >= 2 && ny >= 2).then(|| Grid {
+        nx,
+        ny,
+        size_mm,
+        values: values.clone(),
+    })
 }
 
 #[cfg(test)]
@@ -107,10 +101,10 @@ mod tests {
         assert_eq!((g.nx, g.ny), (31, 21));
         assert!(g.values.iter().zip(&grid.values).all(|(a, b)| (a - b).abs() <= 5e-6));
         let photo = sampled_mode("photo nodes", None, &grid);
-        assert!(photo.get("freq_hz").is_none() && photo.get("lambda").is_none());
+        assert!(photo.freq_hz.is_none() && photo.lambda.is_none());
         assert_eq!(grid_of(&photo, plate.size_mm).unwrap().values.len(), 31 * 21);
         let line = line_mode("l", Some(60.0), 90.0, -12.5);
-        assert_eq!(line["node"]["kind"].as_str(), Some("line"));
+        assert!(matches!(line.node, Some(NodeEntry::Line { .. })));
         assert!(grid_of(&line, plate.size_mm).is_none());
     }
 }

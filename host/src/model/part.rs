@@ -1,5 +1,5 @@
-//! Planar parts: import from JSON (DESIGN.md §2) or SVG, validation, conversion to the
-//! fixed-point rings of `chladni_shared::analysis::rest`.
+//! Planar parts: import from JSON (format in docs/physics.md) or SVG, validation, conversion to
+//! the fixed-point rings of `chladni_shared::analysis::rest`.
 //!
 //! JSON: `{"name": "...", "outline": [[x,y],...], "holes": [[[x,y],...],...]}`, mm, any
 //! winding, y up. SVG: every `<polygon>` and every sub-path of every `<path>` (straight
@@ -16,6 +16,9 @@ use std::path::Path;
 
 use chladni_shared::analysis::fx::Fx;
 use chladni_shared::analysis::geometry::Pt;
+
+use crate::model::geometry::{self, orient, segments_meet};
+pub use crate::model::geometry::{inside, signed_area};
 
 /// Coordinates beyond this (mm) are rejected as absurd.
 pub const MAX_COORD_MM: f64 = 1.0e5;
@@ -57,6 +60,45 @@ pub enum PartError {
     /// Not valid JSON for a part.
     #[error("invalid part JSON: {0}")]
     Json(#[from] serde_json::Error),
+    /// JSON with NaN or Infinity, which JSON does not have.
+    #[error(
+        "invalid part JSON: `{token}` at line {line} column {column} (in \"{key}\"): JSON has no \
+         NaN or Infinity; give finite numbers in mm"
+    )]
+    JsonNotFinite {
+        /// The token as written.
+        token: String,
+        /// 1-based line.
+        line: usize,
+        /// 1-based column.
+        column: usize,
+        /// The key whose value holds it (the nearest key before it).
+        key: String,
+    },
+    /// A non-finite number in an SVG coordinate list.
+    #[error(
+        "invalid SVG: <{element}> attribute {attribute}: coordinate `{token}` is not a finite \
+         number; give finite numbers"
+    )]
+    SvgNotFinite {
+        /// Element name.
+        element: String,
+        /// Attribute name.
+        attribute: &'static str,
+        /// The token as written.
+        token: String,
+    },
+    /// More than one outline in an SVG drawing.
+    #[error(
+        "SVG has {count} separate outlines ({names}): a part is one outline plus holes inside \
+         it; put each part in its own file"
+    )]
+    SvgSeparateOutlines {
+        /// How many rings lie outside each other.
+        count: usize,
+        /// The elements they come from, e.g. `<path> 0`, `<polygon> 1`.
+        names: String,
+    },
     /// Not well-formed XML.
     #[error("invalid SVG: {0}")]
     Xml(#[from] roxmltree::Error),
@@ -190,18 +232,6 @@ struct PartJson {
     holes: Vec<Vec<[f64; 2]>>,
 }
 
-/// Signed area (counter-clockwise positive).
-pub fn signed_area(ring: &[[f64; 2]]) -> f64 {
-    let n = ring.len();
-    (0..n)
-        .map(|i| {
-            let (a, b) = (ring[i], ring[(i + 1) % n]);
-            a[0] * b[1] - b[0] * a[1]
-        })
-        .sum::<f64>()
-        / 2.0
-}
-
 impl Part {
     /// Loads a `.json` or `.svg` part file.
     pub fn load(path: &Path) -> Result<Part, PartError> {
@@ -216,62 +246,14 @@ impl Part {
 
     /// Parses the JSON part format; `default_name` is used when the file has none.
     pub fn from_json(text: &str, default_name: &str) -> Result<Part, PartError> {
-        let j: PartJson = serde_json::from_str(text)?;
+        let j: PartJson = serde_json::from_str(text).map_err(|e| json_error(text, e))?;
         Part::new(j.name.unwrap_or_else(|| default_name.to_string()), j.outline, j.holes)
     }
 
     /// Parses an SVG drawing (see the module docs).
     pub fn from_svg(text: &str, name: &str) -> Result<Part, PartError> {
         let doc = roxmltree::Document::parse(text)?;
-        let mut rings: Vec<Vec<[f64; 2]>> = Vec::new();
-        let mut path_index = 0;
-        for node in doc.descendants().filter(|n| n.is_element()) {
-            let tag = node.tag_name().name();
-            let bad = |attribute: &'static str, message: String| PartError::SvgAttribute {
-                element: tag.to_string(),
-                attribute,
-                message,
-            };
-            let ts = transform_of(node).map_err(|m| bad("transform", m))?;
-            match tag {
-                "polygon" => {
-                    let pts =
-                        node.attribute("points").ok_or_else(|| bad("points", "missing".into()))?;
-                    let ring: Vec<[f64; 2]> =
-                        svgtypes::PointsParser::from(pts).map(|(x, y)| apply(&ts, x, y)).collect();
-                    rings.push(ring);
-                }
-                "path" => {
-                    let d = node.attribute("d").ok_or_else(|| bad("d", "missing".into()))?;
-                    let mut current: Vec<[f64; 2]> = Vec::new();
-                    for seg in svgtypes::SimplifyingPathParser::from(d) {
-                        let seg = seg.map_err(|e| bad("d", e.to_string()))?;
-                        match seg {
-                            svgtypes::SimplePathSegment::MoveTo { x, y } => {
-                                if current.len() > 1 {
-                                    rings.push(std::mem::take(&mut current));
-                                }
-                                current = vec![apply(&ts, x, y)];
-                            }
-                            svgtypes::SimplePathSegment::LineTo { x, y } => {
-                                current.push(apply(&ts, x, y))
-                            }
-                            svgtypes::SimplePathSegment::ClosePath => {
-                                if !current.is_empty() {
-                                    rings.push(std::mem::take(&mut current));
-                                }
-                            }
-                            _ => return Err(PartError::Curve { path: path_index }),
-                        }
-                    }
-                    if current.len() > 1 {
-                        rings.push(current);
-                    }
-                    path_index += 1;
-                }
-                _ => {}
-            }
-        }
+        let (mut rings, mut sources) = svg_rings(&doc)?;
         if rings.is_empty() {
             return Err(PartError::NoShape);
         }
@@ -280,6 +262,21 @@ impl Part {
             .max_by(|&a, &b| signed_area(&rings[a]).abs().total_cmp(&signed_area(&rings[b]).abs()))
             .unwrap_or(0);
         let outline = rings.remove(outer);
+        let outline_source = sources.remove(outer);
+        // Rings with no vertex inside the outline are further outlines, not holes.
+        let apart: Vec<&String> = rings
+            .iter()
+            .zip(&sources)
+            .filter(|(r, _)| r.len() >= 3 && !r.iter().any(|&p| inside(p, &outline)))
+            .map(|(_, s)| s)
+            .collect();
+        if !apart.is_empty() && outline.len() >= 3 {
+            let names = std::iter::once(&outline_source).chain(apart.iter().copied());
+            return Err(PartError::SvgSeparateOutlines {
+                count: apart.len() + 1,
+                names: names.map(String::as_str).collect::<Vec<_>>().join(", "),
+            });
+        }
         Part::new(name.to_string(), outline, rings)
     }
 
@@ -290,7 +287,6 @@ impl Part {
         holes: Vec<Vec<[f64; 2]>>,
     ) -> Result<Part, PartError> {
         let mut rings: Vec<Vec<[f64; 2]>> = Some(outline).into_iter().chain(holes).collect();
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         for (i, ring) in rings.iter_mut().enumerate() {
             let which = Ring::of(i);
             for (index, p) in ring.iter().enumerate() {
@@ -318,13 +314,8 @@ impl Part {
                     return Err(PartError::DuplicateVertex { ring: which, index });
                 }
             }
-            for p in ring.iter() {
-                for k in 0..2 {
-                    lo[k] = lo[k].min(p[k]);
-                    hi[k] = hi[k].max(p[k]);
-                }
-            }
         }
+        let (lo, hi) = geometry::bounds(rings.iter().flatten());
         let size = (hi[0] - lo[0]).max(hi[1] - lo[1]);
         if size < MIN_SIZE_MM {
             return Err(PartError::TooSmall { size });
@@ -380,17 +371,7 @@ impl Part {
 
     /// Centroid of the contact surface (outline minus holes), mm.
     pub fn centroid(&self) -> [f64; 2] {
-        let (mut a, mut sx, mut sy) = (0.0, 0.0, 0.0);
-        for r in self.rings() {
-            for (i, &p) in r.iter().enumerate() {
-                let q = r[(i + 1) % r.len()];
-                let c = p[0] * q[1] - q[0] * p[1];
-                a += c / 2.0;
-                sx += (p[0] + q[0]) * c / 6.0;
-                sy += (p[1] + q[1]) * c / 6.0;
-            }
-        }
-        [sx / a, sy / a]
+        geometry::centroid(self.rings().map(Vec::as_slice))
     }
 
     /// Number of vertices over all rings.
@@ -416,6 +397,138 @@ pub fn from_fx(v: Fx) -> f64 {
     v.raw() as f64 / 4_294_967_296.0
 }
 
+/// A JSON syntax error, or the named NaN/Infinity error when the offending token is one.
+fn json_error(text: &str, e: serde_json::Error) -> PartError {
+    let (line, column) = (e.line(), e.column());
+    let Some(row) = text.lines().nth(line.saturating_sub(1)) else {
+        return PartError::Json(e);
+    };
+    // serde_json points at or just after the start of the bad value.
+    let start =
+        row.char_indices().map(|(i, _)| i).nth(column.saturating_sub(1)).unwrap_or(row.len());
+    let before = &row[..start];
+    let from = before.rfind(|c: char| "[,:".contains(c)).map_or(0, |i| i + 1);
+    let rest = row[from..].trim_start();
+    let token: String =
+        rest.chars().take_while(|c| c.is_ascii_alphanumeric() || "+-.".contains(*c)).collect();
+    if !non_finite_token(&token) {
+        return PartError::Json(e);
+    }
+    let upto: String = text.lines().take(line - 1).chain([before]).collect::<Vec<_>>().join("\n");
+    PartError::JsonNotFinite { token, line, column, key: last_key(&upto) }
+}
+
+/// `NaN`, `Infinity`, `inf`, … (any case, any sign).
+fn non_finite_token(token: &str) -> bool {
+    let t = token.trim_start_matches(['+', '-']).to_ascii_lowercase();
+    t.starts_with("nan") || t.starts_with("inf")
+}
+
+/// The last `"key":` in `text` ("?" when there is none).
+fn last_key(text: &str) -> String {
+    let mut key = String::from("?");
+    let mut rest = text;
+    while let Some(colon) = rest.find(':') {
+        let head = rest[..colon].trim_end();
+        if let Some(h) = head.strip_suffix('"')
+            && let Some(open) = h.rfind('"')
+        {
+            key = h[open + 1..].to_string();
+        }
+        rest = &rest[colon + 1..];
+    }
+    key
+}
+
+/// The first NaN/Infinity token of an SVG coordinate list (`points` or `d`).
+fn svg_non_finite(list: &str) -> Option<String> {
+    list.split(|c: char| c.is_whitespace() || c == ',')
+        .flat_map(|t| t.split(|c: char| "MLHVZmlhvz".contains(c)))
+        .find(|t| non_finite_token(t))
+        .map(str::to_string)
+}
+
+/// Every ring of an SVG document with the element it comes from (`<path> 0`, …).
+type SvgRings = (Vec<Vec<[f64; 2]>>, Vec<String>);
+
+fn svg_rings(doc: &roxmltree::Document<'_>) -> Result<SvgRings, PartError> {
+    let (mut rings, mut sources) = (Vec::new(), Vec::new());
+    let (mut path_index, mut polygon_index) = (0, 0);
+    for node in doc.descendants().filter(|n| n.is_element()) {
+        let tag = node.tag_name().name();
+        let bad = |attribute: &'static str, message: String| PartError::SvgAttribute {
+            element: tag.to_string(),
+            attribute,
+            message,
+        };
+        let not_finite = |attribute: &'static str, list: &str| match svg_non_finite(list) {
+            Some(token) => {
+                Err(PartError::SvgNotFinite { element: tag.to_string(), attribute, token })
+            }
+            None => Ok(()),
+        };
+        let ts = transform_of(node).map_err(|m| bad("transform", m))?;
+        match tag {
+            "polygon" => {
+                let pts =
+                    node.attribute("points").ok_or_else(|| bad("points", "missing".into()))?;
+                not_finite("points", pts)?;
+                rings.push(
+                    svgtypes::PointsParser::from(pts).map(|(x, y)| apply(&ts, x, y)).collect(),
+                );
+                sources.push(format!("<polygon> {polygon_index}"));
+                polygon_index += 1;
+            }
+            "path" => {
+                let d = node.attribute("d").ok_or_else(|| bad("d", "missing".into()))?;
+                not_finite("d", d)?;
+                for ring in path_rings(d, &ts, path_index).map_err(|e| match e {
+                    Ok(message) => bad("d", message),
+                    Err(curve) => curve,
+                })? {
+                    rings.push(ring);
+                    sources.push(format!("<path> {path_index}"));
+                }
+                path_index += 1;
+            }
+            _ => {}
+        }
+    }
+    Ok((rings, sources))
+}
+
+/// The sub-paths of a `<path>`'s `d` as rings. `Err(Ok(message))` for a malformed `d`,
+/// `Err(Err(curve))` for a curved segment.
+fn path_rings(
+    d: &str,
+    ts: &svgtypes::Transform,
+    path_index: usize,
+) -> Result<Vec<Vec<[f64; 2]>>, Result<String, PartError>> {
+    let mut rings = Vec::new();
+    let mut current: Vec<[f64; 2]> = Vec::new();
+    for seg in svgtypes::SimplifyingPathParser::from(d) {
+        match seg.map_err(|e| Ok(e.to_string()))? {
+            svgtypes::SimplePathSegment::MoveTo { x, y } => {
+                if current.len() > 1 {
+                    rings.push(std::mem::take(&mut current));
+                }
+                current = vec![apply(ts, x, y)];
+            }
+            svgtypes::SimplePathSegment::LineTo { x, y } => current.push(apply(ts, x, y)),
+            svgtypes::SimplePathSegment::ClosePath => {
+                if !current.is_empty() {
+                    rings.push(std::mem::take(&mut current));
+                }
+            }
+            _ => return Err(Err(PartError::Curve { path: path_index })),
+        }
+    }
+    if current.len() > 1 {
+        rings.push(current);
+    }
+    Ok(rings)
+}
+
 fn apply(ts: &svgtypes::Transform, x: f64, y: f64) -> [f64; 2] {
     let (x, y) = (ts.a * x + ts.c * y + ts.e, ts.b * x + ts.d * y + ts.f);
     [x, -y] // SVG y points down; ours up.
@@ -439,48 +552,6 @@ fn transform_of(node: roxmltree::Node<'_, '_>) -> Result<svgtypes::Transform, St
         }
     }
     Ok(ts)
-}
-
-/// Point strictly inside a ring (even–odd rule).
-pub(crate) fn inside(p: [f64; 2], ring: &[[f64; 2]]) -> bool {
-    let n = ring.len();
-    let mut c = false;
-    for i in 0..n {
-        let (a, b) = (ring[i], ring[(i + 1) % n]);
-        if (a[1] > p[1]) != (b[1] > p[1]) {
-            let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
-            if p[0] < x {
-                c = !c;
-            }
-        }
-    }
-    c
-}
-
-fn orient(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
-    (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
-}
-
-fn on_segment(a: [f64; 2], b: [f64; 2], p: [f64; 2]) -> bool {
-    p[0] >= a[0].min(b[0])
-        && p[0] <= a[0].max(b[0])
-        && p[1] >= a[1].min(b[1])
-        && p[1] <= a[1].max(b[1])
-}
-
-/// Do closed segments ab and cd share a point?
-fn segments_meet(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
-    let (d1, d2) = (orient(c, d, a), orient(c, d, b));
-    let (d3, d4) = (orient(a, b, c), orient(a, b, d));
-    if ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0))
-        && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
-    {
-        return true;
-    }
-    (d1 == 0.0 && on_segment(c, d, a))
-        || (d2 == 0.0 && on_segment(c, d, b))
-        || (d3 == 0.0 && on_segment(a, b, c))
-        || (d4 == 0.0 && on_segment(a, b, d))
 }
 
 /// Adjacent edges of one ring meet only at their shared vertex (no fold-back).

@@ -11,7 +11,32 @@
 //! against [`DeviceLimits`].
 
 use chladni_shared::icd::plan::{DeviceLimits, MAX_NAME, MAX_STEPS, Plan, PlanError, Step};
+use chladni_shared::icd::units::{FrequencyError, MilliHz, round_half_away};
 use serde::{Deserialize, Serialize};
+
+/// Hz → mHz, rounded to nearest: `None` unless finite and within 1..=u32::MAX mHz once
+/// rounded (≥ 0.5 mHz). A plan file's steps are converted with it and then validated against
+/// the limits of the device that runs them ([`Plan::validate`]).
+pub fn freq_mhz(hz: f64) -> Option<u32> {
+    let mhz = hz * 1000.0;
+    (mhz.is_finite() && mhz >= 0.5 && mhz < u32::MAX as f64).then(|| round_half_away(mhz) as u32)
+}
+
+/// The one check of a drive frequency (Hz) against the controller's limits: the shared
+/// conversion, [`MilliHz::from_hz`], and its one message.
+pub fn check_drive_freq(hz: f64) -> Result<u32, FrequencyError> {
+    MilliHz::from_hz(hz).map(|f| f.0)
+}
+
+/// The drive's range, as the one frequency message names it, for `hz`.
+fn out_of_range(hz: f64) -> FrequencyError {
+    let l = DeviceLimits::DEFAULT;
+    FrequencyError {
+        hz,
+        min_hz: MilliHz(l.min_freq_mhz).to_hz(),
+        max_hz: MilliHz(l.max_freq_mhz).to_hz(),
+    }
+}
 
 /// One step as written.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -64,8 +89,8 @@ pub enum PlanFileError {
     /// Not JSON of the right shape.
     #[error("not a valid plan: {0}")]
     Json(String),
-    /// A frequency that is not a positive finite number of Hz.
-    #[error("step {step}: freq_hz {value} is not a valid frequency (give Hz, e.g. 60.0)")]
+    /// A frequency that is not a positive finite number of Hz the device can represent.
+    #[error("step {step}: {} (give Hz, e.g. 60.0)", out_of_range(*value))]
     Frequency {
         /// Step index.
         step: usize,
@@ -104,16 +129,15 @@ impl PlanFile {
         }
         let mut steps = heapless::Vec::new();
         for (i, s) in self.steps.iter().enumerate() {
-            let mhz = s.freq_hz * 1000.0;
-            if !(mhz.is_finite() && mhz >= 0.5 && mhz < u32::MAX as f64) {
+            let Some(freq_mhz) = freq_mhz(s.freq_hz) else {
                 return Err(PlanFileError::Frequency { step: i, value: s.freq_hz });
-            }
+            };
             if !(0.0..=1.0).contains(&s.amplitude) {
                 return Err(PlanFileError::Amplitude { step: i, value: s.amplitude });
             }
             let step = Step {
-                freq_mhz: mhz.round() as u32,
-                amplitude_q15: (s.amplitude * 32767.0).round() as u16,
+                freq_mhz,
+                amplitude_q15: round_half_away(s.amplitude * 32767.0) as u16,
                 duration_ms: s.duration_ms,
                 ramp_ms: s.ramp_ms,
             };
@@ -148,20 +172,12 @@ impl PlanFile {
         }
     }
 
-    /// The documented JSON object: steps, final_orientation_deg, period_deg,
-    /// final_position_mm (null when not fixed), name, repeat.
+    /// The documented JSON object (the derived serialisation): steps,
+    /// final_orientation_deg, period_deg, final_position_mm (null when not fixed), name,
+    /// repeat.
     pub fn to_json(&self) -> serde_json::Value {
-        serde_json::json!({
-            "name": self.name,
-            "repeat": self.repeat,
-            "steps": self.steps.iter().map(|s| serde_json::json!({
-                "freq_hz": s.freq_hz, "duration_ms": s.duration_ms,
-                "amplitude": s.amplitude, "ramp_ms": s.ramp_ms,
-            })).collect::<Vec<_>>(),
-            "final_orientation_deg": self.final_orientation_deg,
-            "period_deg": self.period_deg,
-            "final_position_mm": self.final_position_mm,
-        })
+        // Serialising plain numbers, strings and options into a Value cannot fail.
+        serde_json::to_value(self).unwrap_or_default()
     }
 }
 

@@ -17,57 +17,11 @@
 
 use std::path::Path;
 
-use toml::{Table, Value};
-
-use crate::model::plate_file::{PlateFile, PlateFileError};
+use crate::model::field::LawError;
+pub use crate::model::field::{LINEAR_SCALE_MM, Law};
+use crate::model::plan_file::check_drive_freq;
+use crate::model::plate_file::{ModeEntry, NodeEntry, PlateFile, PlateFileError};
 use crate::plate::solver::Grid;
-
-/// The linear field's length scale: its pull equals the gain this far from the node.
-pub const LINEAR_SCALE_MM: f64 = 10.0;
-
-/// Field law of a line or hyperbola node.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Law {
-    /// f = −k·sign(d).
-    Sign,
-    /// f = −k·d / [`LINEAR_SCALE_MM`].
-    Linear,
-    /// f = −k·sin(π d / w).
-    Sine {
-        /// Node-to-antinode distance (mm).
-        wavelength_mm: f64,
-    },
-}
-
-impl Law {
-    /// Name as written in files.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Law::Sign => "sign",
-            Law::Linear => "linear",
-            Law::Sine { .. } => "sine",
-        }
-    }
-    /// g(d), the field's shape (force per unit gain, towards the node for d > 0 along −∇d).
-    pub fn g(&self, d: f64) -> f64 {
-        match *self {
-            Law::Sign => d.signum(),
-            Law::Linear => d / LINEAR_SCALE_MM,
-            Law::Sine { wavelength_mm } => (std::f64::consts::PI * d / wavelength_mm).sin(),
-        }
-    }
-    /// G(d) = ∫₀ᵈ g (the potential per unit gain).
-    pub fn big_g(&self, d: f64) -> f64 {
-        match *self {
-            Law::Sign => d.abs(),
-            Law::Linear => 0.5 * d * d / LINEAR_SCALE_MM,
-            Law::Sine { wavelength_mm: w } => {
-                let k = std::f64::consts::PI / w;
-                (1.0 - (k * d).cos()) / k
-            }
-        }
-    }
-}
 
 /// The node a mode creates.
 #[derive(Debug, Clone, PartialEq)]
@@ -170,15 +124,21 @@ pub enum ModelError {
     /// No modes.
     #[error("the plate file has no [[mode]] entries: add at least one (docs/plan.md)")]
     NoModes,
+    /// The file is not a plate file (syntax, types, unknown `[plate]` keys).
+    #[error("{0}")]
+    File(String),
 }
 
-struct Ctx<'a> {
+/// Names the mode in every error.
+struct Ctx {
     index: usize,
     name: String,
-    t: &'a Table,
 }
 
-impl Ctx<'_> {
+/// Bounds of the keys that must be positive (gains, speed, semi-axes, wavelength).
+const MAX_POSITIVE: f64 = 1e7;
+
+impl Ctx {
     fn bad(&self, key: &str, value: impl std::fmt::Display, fix: &str) -> ModelError {
         ModelError::Bad {
             index: self.index,
@@ -188,24 +148,23 @@ impl Ctx<'_> {
             fix: fix.into(),
         }
     }
-    fn num(&self, t: &Table, key: &str, prefix: &str) -> Result<Option<f64>, ModelError> {
-        match t.get(key) {
-            None => Ok(None),
-            Some(Value::Float(f)) if f.is_finite() => Ok(Some(*f)),
-            Some(Value::Integer(i)) => Ok(Some(*i as f64)),
-            Some(v) => Err(self.bad(&format!("{prefix}{key}"), v, "must be a finite number")),
+    fn finite(&self, key: &str, v: Option<f64>) -> Result<Option<f64>, ModelError> {
+        match v {
+            Some(f) if !f.is_finite() => Err(self.bad(key, f, "must be a finite number")),
+            other => Ok(other),
         }
     }
-    fn positive(&self, t: &Table, key: &str, prefix: &str) -> Result<Option<f64>, ModelError> {
-        match self.num(t, key, prefix)? {
-            Some(v) if v <= 0.0 || v > 1e7 => {
-                Err(self.bad(&format!("{prefix}{key}"), v, "must be positive (and at most 1e7)"))
+    fn positive(&self, key: &str, v: Option<f64>) -> Result<Option<f64>, ModelError> {
+        match self.finite(key, v)? {
+            Some(v) if v <= 0.0 || v > MAX_POSITIVE => {
+                Err(self.bad(key, v, "must be positive (and at most 1e7)"))
             }
             other => Ok(other),
         }
     }
 }
 
+/// The keys of a `[[mode]]` entry, for the unknown-key message.
 const MODE_KEYS: &[&str] = &[
     "name",
     "freq_hz",
@@ -221,60 +180,31 @@ const MODE_KEYS: &[&str] = &[
     "lambda",
 ];
 
-/// Parses one `[[mode]]` table (`index` is 1-based, for messages).
-pub fn parse_mode(index: usize, t: &Table, size_mm: [f64; 2]) -> Result<Mode, ModelError> {
-    let name = match t.get("name") {
-        Some(Value::String(s)) => s.clone(),
-        _ => format!("mode {index}"),
-    };
-    let c = Ctx { index, name: name.clone(), t };
-    for k in c.t.keys() {
-        if !MODE_KEYS.contains(&k.as_str()) {
-            return Err(c.bad(
-                k,
-                &c.t[k],
-                &format!("unknown key; known keys: {}", MODE_KEYS.join(", ")),
-            ));
-        }
+/// Checks one `[[mode]]` entry and types it (`index` is 1-based, for messages).
+pub fn check_mode(index: usize, e: &ModeEntry, size_mm: [f64; 2]) -> Result<Mode, ModelError> {
+    let name = e.name.clone().unwrap_or_else(|| format!("mode {index}"));
+    let c = Ctx { index, name: name.clone() };
+    if let Some((k, v)) = e.unknown.iter().next() {
+        return Err(c.bad(k, v, &format!("unknown key; known keys: {}", MODE_KEYS.join(", "))));
     }
-    if let Some(v) = t.get("name")
-        && !v.is_str()
-    {
-        return Err(c.bad("name", v, "must be a string"));
-    }
+    // Drive.
     let freq_hz = c
-        .positive(t, "freq_hz", "")?
+        .finite("freq_hz", e.freq_hz)?
         .ok_or_else(|| c.bad("freq_hz", "missing", "add freq_hz = <drive frequency in Hz>"))?;
-    if !(1.0..=2000.0).contains(&freq_hz) {
-        return Err(c.bad("freq_hz", freq_hz, "the drive takes 1..=2000 Hz"));
-    }
-    let amplitude = c.num(t, "amplitude", "")?.unwrap_or(1.0);
+    check_drive_freq(freq_hz).map_err(|r| c.bad("freq_hz", freq_hz, &r.to_string()))?;
+    let amplitude = c.finite("amplitude", e.amplitude)?.unwrap_or(1.0);
     if !(amplitude > 0.0 && amplitude <= 1.0) {
         return Err(c.bad("amplitude", amplitude, "must be in (0, 1] (fraction of full scale)"));
     }
-    let speed_mm_s = c.positive(t, "speed_mm_s", "")?.unwrap_or(10.0);
-    let ramp_ms = match t.get("ramp_ms") {
+    let speed_mm_s = c.positive("speed_mm_s", e.speed_mm_s)?.unwrap_or(10.0);
+    let ramp_ms = match e.ramp_ms {
         None => 20,
-        Some(Value::Integer(i)) if (0..=60_000).contains(i) => *i as u32,
+        Some(i) if (0..=60_000).contains(&i) => i as u32,
         Some(v) => return Err(c.bad("ramp_ms", v, "must be an integer in 0..=60000")),
     };
-    // Gains.
-    let gain = c.positive(t, "gain", "")?;
-    let gl = c.positive(t, "gain_left", "")?;
-    let gr = c.positive(t, "gain_right", "")?;
-    let (gain_left, gain_right) = match (gain, gl, gr) {
-        (Some(g), None, None) => (g, g),
-        (None, l, r) => (l.unwrap_or(1.0), r.unwrap_or(1.0)),
-        (Some(g), _, _) => {
-            return Err(c.bad("gain", g, "give either gain or gain_left/gain_right, not both"));
-        }
-    };
-    // Node.
-    let node_t = match t.get("node") {
-        Some(Value::Table(n)) => n,
-        Some(v) => {
-            return Err(c.bad("node", v, "must be a table: node = { kind = \"line\", ... }"));
-        }
+    let (gain_left, gain_right) = gains(&c, e)?;
+    let node = match &e.node {
+        Some(n) => node_of(&c, n, size_mm)?,
         None => {
             return Err(c.bad(
                 "node",
@@ -283,52 +213,76 @@ pub fn parse_mode(index: usize, t: &Table, size_mm: [f64; 2]) -> Result<Mode, Mo
             ));
         }
     };
-    let kind = match node_t.get("kind") {
-        Some(Value::String(s)) => s.as_str(),
-        Some(v) => {
-            return Err(c.bad("node.kind", v, "must be \"line\", \"hyperbola\" or \"grid\""));
-        }
-        None => {
-            return Err(c.bad(
-                "node.kind",
-                "missing",
-                "add kind = \"line\" | \"hyperbola\" | \"grid\"",
-            ));
-        }
-    };
-    let allowed: &[&str] = match kind {
-        "line" => &["kind", "angle_deg", "offset_mm"],
-        "hyperbola" => &["kind", "center_mm", "angle_deg", "a_mm", "b_mm"],
-        "grid" => &["kind", "nx", "ny", "values"],
-        other => {
-            return Err(c.bad(
-                "node.kind",
-                format!("\"{other}\""),
-                "must be \"line\", \"hyperbola\" or \"grid\"",
-            ));
-        }
-    };
-    for k in node_t.keys() {
-        if !allowed.contains(&k.as_str()) {
-            return Err(c.bad(
-                &format!("node.{k}"),
-                &node_t[k],
-                &format!("unknown key for a {kind} node; known: {}", allowed.join(", ")),
-            ));
+    let law = law_of(&c, e, &node)?;
+    Ok(Mode { name, freq_hz, amplitude, law, gain_left, gain_right, speed_mm_s, ramp_ms, node })
+}
+
+/// Checks one `[[mode]]` table in hand (as [`check_mode`] after deserialising it).
+pub fn parse_mode(index: usize, t: &toml::Table, size_mm: [f64; 2]) -> Result<Mode, ModelError> {
+    use serde::Deserialize;
+    let e = ModeEntry::deserialize(toml::Value::Table(t.clone()))
+        .map_err(|e| ModelError::File(format!("[[mode]] {index}: {e}")))?;
+    check_mode(index, &e, size_mm)
+}
+
+/// `gain` or `gain_left`/`gain_right` (default 1 each).
+fn gains(c: &Ctx, e: &ModeEntry) -> Result<(f64, f64), ModelError> {
+    let gain = c.positive("gain", e.gain)?;
+    let gl = c.positive("gain_left", e.gain_left)?;
+    let gr = c.positive("gain_right", e.gain_right)?;
+    match (gain, gl, gr) {
+        (Some(g), None, None) => Ok((g, g)),
+        (None, l, r) => Ok((l.unwrap_or(1.0), r.unwrap_or(1.0))),
+        (Some(g), _, _) => {
+            Err(c.bad("gain", g, "give either gain or gain_left/gain_right, not both"))
         }
     }
+}
+
+/// The field law from `field` and `wavelength_mm` (grid nodes have none: always φ²).
+fn law_of(c: &Ctx, e: &ModeEntry, node: &Node) -> Result<Law, ModelError> {
+    let wavelength = c.positive("wavelength_mm", e.wavelength_mm)?;
+    let name = match (e.field.as_deref(), node) {
+        (Some(f), Node::Grid(_)) => {
+            return Err(c.bad(
+                "field",
+                format!("\"{f}\""),
+                "a grid node's field is always f = −∇(K·φ²): remove `field`",
+            ));
+        }
+        (None, _) => "linear",
+        (Some(f), _) => f,
+    };
+    Law::from_name(name, wavelength).map_err(|err| match err {
+        LawError::Unknown(f) => {
+            c.bad("field", format!("\"{f}\""), "must be \"sign\", \"linear\" or \"sine\"")
+        }
+        LawError::NeedsWavelength => c.bad(
+            "wavelength_mm",
+            "missing",
+            "field = \"sine\" needs wavelength_mm = <node-to-antinode distance, mm>",
+        ),
+        LawError::Wavelength(w) => c.bad("wavelength_mm", w, "must be positive (and at most 1e7)"),
+        LawError::WavelengthNotSine(w) => {
+            c.bad("wavelength_mm", w, "only applies to field = \"sine\": remove it")
+        }
+    })
+}
+
+/// Checks and types a node.
+fn node_of(c: &Ctx, n: &NodeEntry, size_mm: [f64; 2]) -> Result<Node, ModelError> {
     let [w, h] = size_mm;
     let diag = w.hypot(h);
-    let node = match kind {
-        "line" => {
-            let angle_deg = c.num(node_t, "angle_deg", "node.")?.ok_or_else(|| {
+    match *n {
+        NodeEntry::Line { angle_deg, offset_mm } => {
+            let angle_deg = c.finite("node.angle_deg", angle_deg)?.ok_or_else(|| {
                 c.bad(
                     "node.angle_deg",
                     "missing",
                     "add angle_deg = <direction of the node line, degrees CCW from plate x>",
                 )
             })?;
-            let offset_mm = c.num(node_t, "offset_mm", "node.")?.unwrap_or(0.0);
+            let offset_mm = c.finite("node.offset_mm", offset_mm)?.unwrap_or(0.0);
             if offset_mm.abs() > diag / 2.0 {
                 return Err(c.bad(
                     "node.offset_mm",
@@ -339,24 +293,14 @@ pub fn parse_mode(index: usize, t: &Table, size_mm: [f64; 2]) -> Result<Mode, Mo
                     ),
                 ));
             }
-            Node::Line { angle_deg, offset_mm }
+            Ok(Node::Line { angle_deg, offset_mm })
         }
-        "hyperbola" => {
-            let center_mm = match node_t.get("center_mm") {
-                Some(Value::Array(a)) if a.len() == 2 => {
-                    let f = |v: &Value| v.as_float().or(v.as_integer().map(|i| i as f64));
-                    match (f(&a[0]), f(&a[1])) {
-                        (Some(x), Some(y)) if x.is_finite() && y.is_finite() => [x, y],
-                        _ => {
-                            return Err(c.bad(
-                                "node.center_mm",
-                                &node_t["center_mm"],
-                                "must be [x, y] in mm",
-                            ));
-                        }
-                    }
+        NodeEntry::Hyperbola { center_mm, angle_deg, a_mm, b_mm } => {
+            let center_mm = match center_mm {
+                Some([x, y]) if x.is_finite() && y.is_finite() => [x, y],
+                Some(v) => {
+                    return Err(c.bad("node.center_mm", format!("{v:?}"), "must be [x, y] in mm"));
                 }
-                Some(v) => return Err(c.bad("node.center_mm", v, "must be [x, y] in mm")),
                 None => {
                     return Err(c.bad(
                         "node.center_mm",
@@ -365,104 +309,50 @@ pub fn parse_mode(index: usize, t: &Table, size_mm: [f64; 2]) -> Result<Mode, Mo
                     ));
                 }
             };
-            let angle_deg = c.num(node_t, "angle_deg", "node.")?.unwrap_or(0.0);
-            let a_mm = c.positive(node_t, "a_mm", "node.")?.ok_or_else(|| {
+            let angle_deg = c.finite("node.angle_deg", angle_deg)?.unwrap_or(0.0);
+            let a_mm = c.positive("node.a_mm", a_mm)?.ok_or_else(|| {
                 c.bad("node.a_mm", "missing", "add a_mm = <centre-to-vertex distance, mm>")
             })?;
             let b_mm = c
-                .positive(node_t, "b_mm", "node.")?
+                .positive("node.b_mm", b_mm)?
                 .ok_or_else(|| c.bad("node.b_mm", "missing", "add b_mm = <semi-axis b, mm>"))?;
-            Node::Hyperbola { center_mm, angle_deg, a_mm, b_mm }
+            Ok(Node::Hyperbola { center_mm, angle_deg, a_mm, b_mm })
         }
-        _ => {
-            let dim = |k: &str| match node_t.get(k) {
-                Some(Value::Integer(i)) if (2..=1000).contains(i) => Ok(*i as usize),
-                Some(v) => Err(c.bad(&format!("node.{k}"), v, "must be an integer in 2..=1000")),
-                None => Err(c.bad(&format!("node.{k}"), "missing", "add the sample count")),
-            };
-            let (nx, ny) = (dim("nx")?, dim("ny")?);
-            let values: Vec<f64> = match node_t.get("values") {
-                Some(Value::Array(a)) => {
-                    let mut out = Vec::with_capacity(a.len());
-                    for (i, v) in a.iter().enumerate() {
-                        match v.as_float().or(v.as_integer().map(|i| i as f64)) {
-                            Some(f) if f.is_finite() => out.push(f),
-                            _ => {
-                                return Err(c.bad(
-                                    &format!("node.values[{i}]"),
-                                    v,
-                                    "must be a finite number",
-                                ));
-                            }
-                        }
-                    }
-                    out
-                }
-                _ => {
-                    return Err(c.bad(
-                        "node.values",
-                        "missing",
-                        "add values = [nx·ny samples of φ]",
-                    ));
-                }
-            };
-            if values.len() != nx * ny {
-                return Err(c.bad(
-                    "node.values",
-                    format!("{} samples", values.len()),
-                    &format!("need nx·ny = {}", nx * ny),
-                ));
-            }
-            let max = values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            if max == 0.0 {
-                return Err(c.bad(
-                    "node.values",
-                    "all zero",
-                    "a mode shape must not vanish everywhere",
-                ));
-            }
-            Node::Grid(Grid { nx, ny, size_mm, values: values.iter().map(|v| v / max).collect() })
-        }
-    };
-    // Field law.
-    let field = match t.get("field") {
-        None => None,
-        Some(Value::String(s)) => Some(s.as_str()),
-        Some(v) => return Err(c.bad("field", v, "must be \"sign\", \"linear\" or \"sine\"")),
-    };
-    let wavelength = c.positive(t, "wavelength_mm", "")?;
-    let law = match (field, &node) {
-        (Some(f), Node::Grid(_)) => {
-            return Err(c.bad(
-                "field",
-                format!("\"{f}\""),
-                "a grid node's field is always f = −∇(K·φ²): remove `field`",
-            ));
-        }
-        (None, Node::Grid(_)) => Law::Linear,
-        (None | Some("linear"), _) => Law::Linear,
-        (Some("sign"), _) => Law::Sign,
-        (Some("sine"), _) => Law::Sine {
-            wavelength_mm: wavelength.ok_or_else(|| {
-                c.bad(
-                    "wavelength_mm",
-                    "missing",
-                    "field = \"sine\" needs wavelength_mm = <node-to-antinode distance, mm>",
-                )
-            })?,
-        },
-        (Some(other), _) => {
-            return Err(c.bad(
-                "field",
-                format!("\"{other}\""),
-                "must be \"sign\", \"linear\" or \"sine\"",
-            ));
-        }
-    };
-    if let (Some(wl), false) = (wavelength, matches!(law, Law::Sine { .. })) {
-        return Err(c.bad("wavelength_mm", wl, "only applies to field = \"sine\": remove it"));
+        NodeEntry::Grid { nx, ny, ref values } => grid_of(c, nx, ny, values.as_deref(), size_mm),
     }
-    Ok(Mode { name, freq_hz, amplitude, law, gain_left, gain_right, speed_mm_s, ramp_ms, node })
+}
+
+/// A grid node: sample counts, nx·ny finite samples, normalised to max |φ| = 1.
+fn grid_of(
+    c: &Ctx,
+    nx: Option<i64>,
+    ny: Option<i64>,
+    values: Option<&[f64]>,
+    size_mm: [f64; 2],
+) -> Result<Node, ModelError> {
+    let dim = |k: &str, v: Option<i64>| match v {
+        Some(i) if (2..=1000).contains(&i) => Ok(i as usize),
+        Some(v) => Err(c.bad(&format!("node.{k}"), v, "must be an integer in 2..=1000")),
+        None => Err(c.bad(&format!("node.{k}"), "missing", "add the sample count")),
+    };
+    let (nx, ny) = (dim("nx", nx)?, dim("ny", ny)?);
+    let values = values
+        .ok_or_else(|| c.bad("node.values", "missing", "add values = [nx·ny samples of φ]"))?;
+    if let Some((i, v)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(c.bad(&format!("node.values[{i}]"), v, "must be a finite number"));
+    }
+    if values.len() != nx * ny {
+        return Err(c.bad(
+            "node.values",
+            format!("{} samples", values.len()),
+            &format!("need nx·ny = {}", nx * ny),
+        ));
+    }
+    let max = values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if max == 0.0 {
+        return Err(c.bad("node.values", "all zero", "a mode shape must not vanish everywhere"));
+    }
+    Ok(Node::Grid(Grid { nx, ny, size_mm, values: values.iter().map(|v| v / max).collect() }))
 }
 
 impl PlateModel {
@@ -476,11 +366,17 @@ impl PlateModel {
             .mode
             .iter()
             .enumerate()
-            .map(|(i, t)| parse_mode(i + 1, t, size_mm))
+            .map(|(i, e)| check_mode(i + 1, e, size_mm))
             .collect::<Result<Vec<_>, _>>()?;
         let name =
             if file.plate.name.is_empty() { "plate".to_string() } else { file.plate.name.clone() };
         Ok(PlateModel { name, size_mm, modes })
+    }
+
+    /// Parses and types a plate file's text (`label` names it in messages).
+    pub fn parse(text: &str, label: &str) -> Result<PlateModel, ModelError> {
+        let file = PlateFile::parse(text, label).map_err(|e| ModelError::File(e.to_string()))?;
+        PlateModel::from_file(&file)
     }
 
     /// Reads, parses and types a plate file (every error is a message for exit code 2).
@@ -501,7 +397,7 @@ mod tests {
 
     fn model(modes: &str) -> Result<PlateModel, ModelError> {
         let text = format!("[plate]\nname = \"t\"\nsize_mm = [300.0, 200.0]\n{modes}");
-        PlateModel::from_file(&PlateFile::parse(&text, "t").unwrap())
+        PlateModel::parse(&text, "t")
     }
 
     #[test]

@@ -15,8 +15,9 @@
 //! ```
 //! Only `name` and `size_mm` are needed by every user of the file; the material and boundary
 //! keys are needed by the mode solver and checked when it asks for them
-//! ([`PlateTable::mechanics`]). `[[mode]]` entries are kept as raw tables here: their schema
-//! belongs to the planner.
+//! ([`PlateTable::mechanics`]). `[[mode]]` entries are [`ModeEntry`]s: the one schema that
+//! `chladni plate modes --write-modes` and `plate from-photo --out` write and the planner reads;
+//! their values are checked when the planner types them ([`crate::model::plate`]).
 
 use std::path::Path;
 
@@ -28,9 +29,140 @@ use serde::{Deserialize, Serialize};
 pub struct PlateFile {
     /// The `[plate]` table.
     pub plate: PlateTable,
-    /// The `[[mode]]` array, unparsed.
+    /// The `[[mode]]` array, as written (values checked by [`crate::model::plate`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub mode: Vec<toml::Table>,
+    pub mode: Vec<ModeEntry>,
+}
+
+/// One `[[mode]]` entry as written: every key optional here; which are needed, their ranges
+/// and their combinations are checked by [`crate::model::plate::PlateModel::from_file`],
+/// which names the mode, the key, the value and the fix. Keys not in this schema are kept in
+/// [`ModeEntry::unknown`] (never written) so that the check can name them with the mode.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
+#[serde(default)]
+pub struct ModeEntry {
+    /// Name (defaults to "mode N").
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// Drive frequency (Hz).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub freq_hz: Option<f64>,
+    /// Solver eigenvalue λ (informative, written by `plate modes`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lambda: Option<f64>,
+    /// Drive amplitude, fraction of full scale.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub amplitude: Option<f64>,
+    /// Field law name (`sign`, `linear`, `sine`; see [`crate::model::field::Law`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
+    /// Sine law only: node-to-antinode distance (mm).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wavelength_mm: Option<f64>,
+    /// Gain on both sides.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gain: Option<f64>,
+    /// Gain on the left of the node.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gain_left: Option<f64>,
+    /// Gain on the right of the node.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gain_right: Option<f64>,
+    /// Settle speed μ.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub speed_mm_s: Option<f64>,
+    /// Amplitude ramp (ms).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ramp_ms: Option<i64>,
+    /// The node.
+    #[serde(skip_serializing_if = "Option::is_none", deserialize_with = "node_entry")]
+    pub node: Option<NodeEntry>,
+    /// Keys outside this schema (refused by the check, with the mode's index).
+    #[serde(flatten, skip_serializing)]
+    pub unknown: toml::Table,
+}
+
+/// The `node = { kind = ..., ... }` table as written.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+pub enum NodeEntry {
+    /// A straight line (see [`crate::model::plate::Node::Line`]).
+    Line {
+        /// Direction (degrees CCW from plate x).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        angle_deg: Option<f64>,
+        /// Signed distance from the plate centre (mm, default 0).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        offset_mm: Option<f64>,
+    },
+    /// One hyperbola branch (see [`crate::model::plate::Node::Hyperbola`]).
+    Hyperbola {
+        /// Centre [x, y] (mm).
+        #[serde(default, skip_serializing_if = "Option::is_none", deserialize_with = "opt_pair")]
+        center_mm: Option<[f64; 2]>,
+        /// Axis direction (degrees, default 0).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        angle_deg: Option<f64>,
+        /// Semi-axis a (mm).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        a_mm: Option<f64>,
+        /// Semi-axis b (mm).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        b_mm: Option<f64>,
+    },
+    /// A sampled mode shape φ, row-major from the bottom-left corner.
+    Grid {
+        /// Samples along x.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        nx: Option<i64>,
+        /// Samples along y.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        ny: Option<i64>,
+        /// nx·ny samples.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        values: Option<Vec<f64>>,
+    },
+}
+
+/// The node kinds as written.
+pub const NODE_KINDS: [&str; 3] = ["line", "hyperbola", "grid"];
+
+/// `node`: the kind is checked first so that a wrong one is named as written.
+fn node_entry<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<NodeEntry>, D::Error> {
+    use serde::de::Error;
+    let value = toml::Value::deserialize(d)?;
+    let Some(table) = value.as_table() else {
+        return Err(D::Error::custom(format!(
+            "node = {value}: must be a table: node = {{ kind = \"line\", ... }}"
+        )));
+    };
+    match table.get("kind") {
+        None => Err(D::Error::custom(
+            "node.kind = missing: add kind = \"line\" | \"hyperbola\" | \"grid\"",
+        )),
+        Some(k) if !k.as_str().is_some_and(|k| NODE_KINDS.contains(&k)) => Err(D::Error::custom(
+            format!("node.kind = {k}: must be \"line\", \"hyperbola\" or \"grid\""),
+        )),
+        Some(_) => NodeEntry::deserialize(value).map(Some).map_err(D::Error::custom),
+    }
+}
+
+/// `[x, y]`: exactly two numbers (a longer array is refused, not cut).
+fn pair<'de, D: serde::Deserializer<'de>>(d: D) -> Result<[f64; 2], D::Error> {
+    use serde::de::Error;
+    let v = Vec::<f64>::deserialize(d)?;
+    match v[..] {
+        [x, y] => Ok([x, y]),
+        _ => Err(D::Error::custom(format!(
+            "{v:?} has {} numbers: give exactly two, [x, y] (or [W, H]) in mm",
+            v.len()
+        ))),
+    }
+}
+
+/// An optional [`pair`].
+fn opt_pair<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<[f64; 2]>, D::Error> {
+    pair(d).map(Some)
 }
 
 /// The `[plate]` table as written.
@@ -40,6 +172,7 @@ pub struct PlateTable {
     /// Free-form name.
     pub name: String,
     /// Plate size [W, H] (mm): x then y.
+    #[serde(deserialize_with = "opt_pair")]
     pub size_mm: Option<[f64; 2]>,
     /// Thickness (mm).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -60,7 +193,7 @@ pub struct PlateTable {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hinge_x_mm: Option<f64>,
     /// Rod attachment point [x, y] (mm), hinged-rod only; default [3W/4, H/2].
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none", deserialize_with = "opt_pair")]
     pub rod_mm: Option<[f64; 2]>,
 }
 
@@ -266,7 +399,42 @@ node = { kind = "line", angle_deg = 90.0, offset_mm = 0.0 }
         assert_eq!(p.hinge_x_mm, 150.0);
         assert_eq!(p.rod_mm, [225.0, 100.0]);
         assert_eq!(f.mode.len(), 1);
-        assert_eq!(f.mode[0]["freq_hz"].as_float(), Some(60.0));
+        assert_eq!(f.mode[0].freq_hz, Some(60.0));
+    }
+
+    #[test]
+    fn size_with_three_numbers_is_refused_not_cut() {
+        let e = PlateFile::parse("[plate]\nsize_mm = [300.0, 200.0, 5.0]\n", "t").unwrap_err();
+        let e = e.to_string();
+        assert!(
+            e.contains("size_mm") && e.contains("3 numbers") && e.contains("exactly two"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn written_modes_are_the_schema_read_back() {
+        let entry = ModeEntry {
+            name: Some("m".into()),
+            freq_hz: Some(60.0),
+            field: Some("sine".into()),
+            wavelength_mm: Some(80.0),
+            node: Some(NodeEntry::Hyperbola {
+                center_mm: Some([150.0, 100.0]),
+                angle_deg: Some(0.0),
+                a_mm: Some(40.0),
+                b_mm: Some(60.0),
+            }),
+            ..ModeEntry::default()
+        };
+        let file = PlateFile {
+            plate: PlateTable { size_mm: Some([300.0, 200.0]), ..PlateTable::default() },
+            mode: vec![entry.clone()],
+        };
+        let back = PlateFile::parse(&toml::to_string(&file).unwrap(), "t").unwrap();
+        assert_eq!(back.mode, vec![entry]);
+        let e = PlateFile::parse("[plate]\n[[mode]]\nnode = { kind = \"circle\" }\n", "t");
+        assert!(e.unwrap_err().to_string().contains("node.kind = \"circle\""));
     }
 
     #[test]

@@ -1,4 +1,4 @@
-//! Sensorless plan synthesis (DESIGN.md §2, paper §6): the shortest sequence of modes that
+//! Sensorless plan synthesis (docs/plan.md, paper §6): the shortest sequence of modes that
 //! brings every start orientation to one final orientation.
 //!
 //! 1. **Step maps.** Each mode gives a map θ ↦ θ' (plate frame) with its basin boundaries:
@@ -30,15 +30,16 @@
 
 use std::collections::{HashMap, VecDeque};
 
-use chladni_shared::analysis::field::{Field, FieldKind};
+use chladni_shared::analysis::field::Field;
 use chladni_shared::analysis::fx::Bam;
 use chladni_shared::analysis::geometry::Pt;
 use chladni_shared::analysis::rest::Analyzer;
+use chladni_shared::icd::plan::MAX_NAME;
 
-use crate::analysis::reference::{self, RefField, Reference};
+use crate::analysis::reference::{RefField, Reference};
 use crate::model::part::{Part, to_fx};
 use crate::model::plan_file::{PlanFile, StepJson};
-use crate::model::plate::{Law, Mode, Node, PlateModel};
+use crate::model::plate::{Mode, Node, PlateModel};
 use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
 
 pub mod feed;
@@ -218,11 +219,7 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, S
         Backend::Fixed => {
             let rings = part.to_fixed();
             let slices: Vec<&[Pt]> = rings.iter().map(Vec::as_slice).collect();
-            let kind = match mode.law {
-                Law::Sign => FieldKind::Sign,
-                Law::Linear => FieldKind::Linear,
-                Law::Sine { wavelength_mm } => FieldKind::Sine { wavelength: to_fx(wavelength_mm) },
-            };
+            let kind = mode.law.to_fixed();
             let field = Field {
                 kind,
                 gain_left: to_fx(mode.gain_left),
@@ -407,6 +404,124 @@ pub enum PlanFailure {
     Model(String),
 }
 
+/// The image of a set of orientation ids under mode `k` (sorted, deduplicated); `None` when
+/// some orientation has no allowed transition.
+fn set_image(set: &[usize], trans: &[Vec<Option<usize>>], k: usize) -> Option<Vec<usize>> {
+    let mut img = set.iter().map(|&u| trans[u][k]).collect::<Option<Vec<usize>>>()?;
+    img.sort_unstable();
+    img.dedup();
+    Some(img)
+}
+
+/// The steps from a start set to search node `g`: (mode, orientations after it).
+fn path_to(
+    nodes: &[(Vec<usize>, usize, usize)],
+    uni: &[f64],
+    mut g: usize,
+) -> Vec<(usize, Vec<f64>)> {
+    let mut path = Vec::new();
+    loop {
+        let (set, parent, k) = &nodes[g];
+        path.push((*k, set.iter().map(|&u| uni[u]).collect()));
+        if *parent == usize::MAX {
+            break;
+        }
+        g = *parent;
+    }
+    path.reverse();
+    path
+}
+
+/// Most vertices (all rings) a part may have for planning and simulation: the planner's cost
+/// grows with the vertex count (the step maps analyse the whole outline hundreds of times).
+/// Measured with `chladni plan` on the example triangle with N vertices along its edges (release
+/// build, four-lines plate: 1000 → 1.0 s, 3000 → 2.6 s, 6000 → 4.5 s, 12000 → 7.2 s); see
+/// docs/plan.md.
+pub const MAX_PLAN_VERTICES: usize = 6_000;
+
+/// A part and plate the planner refuses before any work (bad input, exit code 2).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanInputError {
+    /// Too many vertices for a plan in reasonable time.
+    #[error(
+        "part {name}: {count} vertices, more than the planner's limit of {MAX_PLAN_VERTICES} \
+         (planning time grows with the vertex count): simplify the outline"
+    )]
+    TooManyVertices {
+        /// Part name.
+        name: String,
+        /// Its vertex count.
+        count: usize,
+    },
+    /// The part cannot lie on the plate in any orientation.
+    #[error(
+        "part {name} is {width_mm:.1} mm wide at its narrowest, wider than the {w}×{h} mm plate \
+         ({side} mm side): it cannot lie on the plate in any orientation; check that the part is \
+         in mm and the plate's size_mm"
+    )]
+    TooLarge {
+        /// Part name.
+        name: String,
+        /// Its smallest width over all directions (mm).
+        width_mm: f64,
+        /// Plate width (mm).
+        w: f64,
+        /// Plate height (mm).
+        h: f64,
+        /// The plate's shorter side (mm).
+        side: f64,
+    },
+}
+
+/// Checks a part against the planner's limits and the plate's size, before any work.
+pub fn check_input(part: &Part, plate: &PlateModel) -> Result<(), PlanInputError> {
+    let count = part.vertex_count();
+    if count > MAX_PLAN_VERTICES {
+        return Err(PlanInputError::TooManyVertices { name: part.name.clone(), count });
+    }
+    let [w, h] = plate.size_mm;
+    let side = w.min(h);
+    let width_mm = min_width(&part.outline);
+    if width_mm > side {
+        return Err(PlanInputError::TooLarge { name: part.name.clone(), width_mm, w, h, side });
+    }
+    Ok(())
+}
+
+/// The smallest width of a ring over 360 directions (0.5° apart; at most 0.004 % above the
+/// true minimum, which only matters for a part that fits the plate within that margin).
+fn min_width(ring: &[[f64; 2]]) -> f64 {
+    (0..360)
+        .map(|k| {
+            let (s, c) = (k as f64 * 0.5).to_radians().sin_cos();
+            let (lo, hi) = ring.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                let d = c * p[0] + s * p[1];
+                (lo.min(d), hi.max(d))
+            });
+            hi - lo
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The plan name for a part name: at most [`MAX_NAME`] bytes (the controller stores no more),
+/// cut at a character boundary, and a warning naming the cut when there was one.
+pub fn plan_name(name: &str) -> (String, Option<String>) {
+    if name.len() <= MAX_NAME {
+        return (name.to_string(), None);
+    }
+    let mut end = MAX_NAME;
+    while !name.is_char_boundary(end) {
+        end -= 1;
+    }
+    let cut = name[..end].to_string();
+    let warning = format!(
+        "the part's name is {} bytes; a plan name holds at most {MAX_NAME} (the controller's \
+         limit), so the plan is named \"{cut}\" (rename the part to choose)",
+        name.len()
+    );
+    (cut, Some(warning))
+}
+
 /// The period P = 360°/m orientations are taken modulo: m = the part's rotational symmetry
 /// order, doubled (lcm with 2) when every mode is a straight node with equal gains.
 pub fn plan_period(part: &Part, plate: &PlateModel) -> f64 {
@@ -511,24 +626,10 @@ impl Problem {
             if nodes.len() > opt.max_states {
                 break;
             }
-            #[allow(clippy::needless_range_loop)]
             for k in 0..nm {
-                let mut img = Vec::with_capacity(nodes[i].0.len());
-                let mut ok = true;
-                for &u in &nodes[i].0 {
-                    match trans[u][k] {
-                        Some(v) => img.push(v),
-                        None => {
-                            ok = false;
-                            break;
-                        }
-                    }
-                }
-                if !ok {
+                let Some(img) = set_image(&nodes[i].0, &trans, k) else {
                     continue;
-                }
-                img.sort_unstable();
-                img.dedup();
+                };
                 if !seen.contains_key(&img) {
                     seen.insert(img.clone(), nodes.len());
                     queue.push_back(nodes.len());
@@ -537,20 +638,10 @@ impl Problem {
             }
             close(&mut uni, &mut trans);
         }
-        let Some(mut g) = goal else {
+        let Some(g) = goal else {
             return Err(PlanFailure::NoPlan(self.explain(&nodes, &uni, opt)));
         };
-        let mut path = Vec::new();
-        loop {
-            let (set, parent, k) = &nodes[g];
-            path.push((*k, set.iter().map(|&u| uni[u]).collect()));
-            if *parent == usize::MAX {
-                break;
-            }
-            g = *parent;
-        }
-        path.reverse();
-        Ok(path)
+        Ok(path_to(&nodes, &uni, g))
     }
 
     fn explain(
@@ -793,12 +884,10 @@ pub fn plan_with(
 
 /// The f64 reference analysis of `part` under a straight-node mode's field law and gains.
 fn reference_for(part: &Part, mode: &Mode) -> Reference {
-    let law = match mode.law {
-        Law::Sign => reference::Law::Sign,
-        Law::Linear => reference::Law::Linear,
-        Law::Sine { wavelength_mm } => reference::Law::Sine(wavelength_mm),
-    };
-    Reference::new(part, RefField { law, gain_left: mode.gain_left, gain_right: mode.gain_right })
+    Reference::new(
+        part,
+        RefField { law: mode.law, gain_left: mode.gain_left, gain_right: mode.gain_right },
+    )
 }
 
 /// Centroid offset across a straight node at a rest orientation (mm, along x̂ = −n̂ from the
@@ -851,10 +940,7 @@ impl Synthesis {
 
     /// The plan file (device steps plus predictions).
     pub fn to_file(&self, plate: &PlateModel, name: &str) -> PlanFile {
-        let mut name: String = name.chars().take(32).collect();
-        while name.len() > 32 {
-            name.pop();
-        }
+        let (name, _) = plan_name(name);
         PlanFile {
             name,
             repeat: 1,

@@ -20,9 +20,10 @@ pub const DEFAULT_TERMS: usize = 14;
 /// Modes with `λ` below this are rigid-body motions of an unsupported plate and are dropped.
 pub const RIGID_LAMBDA: f64 = 1e-3;
 
-/// One natural mode of a plate.
+/// One natural mode of a plate, as the solver finds it (the planner's typed mode is
+/// [`crate::model::plate::Mode`]).
 #[derive(Debug, Clone)]
-pub struct Mode {
+pub struct SolvedMode {
     /// Natural frequency (Hz).
     pub freq_hz: f64,
     /// Frequency parameter `λ = ω a² √(ρh/D)` with `a` = plate size along x.
@@ -39,7 +40,7 @@ pub struct ModalSolution {
     /// Terms per direction.
     pub terms: usize,
     /// Elastic modes in ascending frequency (rigid-body modes removed).
-    pub modes: Vec<Mode>,
+    pub modes: Vec<SolvedMode>,
 }
 
 /// Geometry of the problem in non-dimensional units (lengths divided by `W`).
@@ -298,7 +299,7 @@ pub fn solve(plate: &Plate, count: usize, terms: usize) -> ModalSolution {
     let modes = solve_nondim(&setup, terms)
         .into_iter()
         .take(count)
-        .map(|(lambda, coeffs)| Mode { freq_hz: lambda * scale, lambda, coeffs })
+        .map(|(lambda, coeffs)| SolvedMode { freq_hz: lambda * scale, lambda, coeffs })
         .collect();
     ModalSolution { size_mm: plate.size_mm, terms, modes }
 }

@@ -99,3 +99,37 @@ fn svg_polygon_and_path_with_hole_and_transform() {
     assert!(matches!(Part::from_svg(empty, "c").unwrap_err(), PartError::NoShape));
     assert!(matches!(Part::from_svg("<svg", "c").unwrap_err(), PartError::Xml(_)));
 }
+
+#[test]
+fn json_nan_names_the_token_place_and_key() {
+    let e = json("{\"name\": \"t\", \"outline\": [[0, 0], [NaN, 1], [1, 1]]}").unwrap_err();
+    let m = e.to_string();
+    assert!(
+        m.contains("`NaN`")
+            && m.contains("line 1 column")
+            && m.contains("\"outline\"")
+            && m.contains("no NaN or Infinity"),
+        "{m}"
+    );
+    let e = json("{\"outline\": [[0, 0],\n [1, -Infinity], [1, 1]]}").unwrap_err().to_string();
+    assert!(e.contains("`-Infinity`") && e.contains("line 2"), "{e}");
+    // Other syntax errors keep serde's message.
+    assert!(matches!(json("{\"outline\": [[0, 0], [x, 1]]}").unwrap_err(), PartError::Json(_)));
+}
+
+#[test]
+fn svg_nan_and_separate_outlines_are_named() {
+    let nan = r#"<svg xmlns="http://www.w3.org/2000/svg"><polygon points="0,0 NaN,0 5,8"/></svg>"#;
+    let e = Part::from_svg(nan, "t").unwrap_err().to_string();
+    assert!(
+        e.contains("`NaN`") && e.contains("points") && e.contains("not a finite number"),
+        "{e}"
+    );
+    let two = r#"<svg xmlns="http://www.w3.org/2000/svg"><path d="M0 0 L10 0 L10 10 Z"/>
+        <path d="M20 0 L40 0 L40 10 Z"/></svg>"#;
+    let e = Part::from_svg(two, "t").unwrap_err().to_string();
+    assert!(
+        e.contains("2 separate outlines") && e.contains("<path> 1") && e.contains("<path> 0"),
+        "{e}"
+    );
+}
