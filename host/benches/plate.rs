@@ -10,7 +10,7 @@ use chladni::model::plate_file::PlateFile;
 use chladni::motion::string::{self, StringParams};
 use chladni::plate::contour::node_lines;
 use chladni::plate::photo::synth::{Scene, render};
-use chladni::plate::photo::{self, DEFAULT_SNAP, Params};
+use chladni::plate::photo::{self, DEFAULT_SNAP, PhotoParams};
 use chladni::plate::{node_field, solver};
 use criterion::{Criterion, criterion_group, criterion_main};
 
@@ -36,7 +36,7 @@ fn bench(c: &mut Criterion) {
         ..Scene::standard(vec![(90.0, 40.0), (20.0, -30.0)], vec![], 7)
     });
     let size = [300.0, 200.0];
-    let p = Params::default();
+    let p = PhotoParams::default();
     c.bench_function("photo 360×240, two lines", |b| {
         b.iter(|| photo::find_lines(black_box(&straight), size, &p))
     });

@@ -9,7 +9,7 @@
 use chladni::model::plate_file::PlateFile;
 use chladni::plate::contour::node_lines;
 use chladni::plate::photo::synth::{Scene, render};
-use chladni::plate::photo::{self, DEFAULT_SNAP, Params};
+use chladni::plate::photo::{self, DEFAULT_SNAP, PhotoParams};
 use chladni::plate::solver;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -39,7 +39,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     img.save(&out)?;
     println!("{out}");
     if let Some(overlay) = args.get(2).filter(|_| curved) {
-        let found = photo::find_lines(&img, scene.size_mm, &Params::default());
+        let found = photo::find_lines(&img, scene.size_mm, &PhotoParams::default());
         // Side by side: the photo, and the recovered nodes drawn over it (dimmed).
         let drawn = photo::overlay(&img, &found.nodes(DEFAULT_SNAP), scene.size_mm);
         let (w, h) = img.dimensions();

@@ -77,8 +77,10 @@ fn two_photos_calibrate_a_plate_file_that_the_planner_reads() {
         "from-photo",
         straight.to_str().unwrap(),
         "--size-mm",
-        "200",
-        "200",
+        "330",
+        "220",
+        "--freq-hz",
+        "90",
         "--append",
         "--out",
         plate.to_str().unwrap(),
@@ -86,7 +88,7 @@ fn two_photos_calibrate_a_plate_file_that_the_planner_reads() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("is a Some([300.0, 200.0]) mm plate, the photo is [200.0, 200.0] mm"),
+        err.contains("is a 300 × 200 mm plate, the photo is 330 × 220 mm; give --size-mm 300 200"),
         "{err}"
     );
     for f in [plate, curved, straight] {
@@ -108,7 +110,7 @@ fn bad_arguments_exit_2_with_the_value() {
     // A photo with no sand on nodes: exit 1, and no empty plate file left behind.
     let blank = photo("blank.png", vec![], vec![]);
     let plate = tmp("blank.toml");
-    let out = from_photo(&blank, &["--out", plate.to_str().unwrap()]);
+    let out = from_photo(&blank, &["--freq-hz", "60", "--out", plate.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("no node found in"));
     assert!(!plate.exists());
@@ -180,4 +182,108 @@ fn lentil_photo_with_grain_size() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("--grain-mm must be in [0, 20.0)") && err.contains("got 25"), "{err}");
     let _ = std::fs::remove_file(path);
+}
+
+/// A PNG of `w`×`h` px whose pixels are random grey levels.
+fn noise_png(name: &str, w: u32, h: u32) -> PathBuf {
+    let mut rng = chladni::plate::photo::synth::Rng(42);
+    let img = image::GrayImage::from_fn(w, h, |_, _| image::Luma([(rng.next_u64() >> 56) as u8]));
+    let path = tmp(name);
+    img.save(&path).unwrap();
+    path
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+// A huge PNG (a few hundred kB, 20 000 × 20 000 px) is refused from its header, at once.
+#[test]
+fn huge_image_is_refused_before_decoding() {
+    let path = tmp("huge.png");
+    let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+    let mut enc = png::Encoder::new(file, 20_000, 20_000);
+    enc.set_color(png::ColorType::Grayscale);
+    let mut w = enc.write_header().unwrap().into_stream_writer().unwrap();
+    let row = vec![0u8; 20_000];
+    // Only the first rows: the header alone must stop it (the file is cut short).
+    for _ in 0..10 {
+        std::io::Write::write_all(&mut w, &row).unwrap();
+    }
+    drop(w);
+    let t = std::time::Instant::now();
+    let out = from_photo(&path, &[]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(t.elapsed().as_secs() < 5, "{:?}", t.elapsed());
+    let err = stderr(&out);
+    assert!(err.contains("is 20000×20000 px (400 MP), over the limit of 50 MP"), "{err}");
+    assert!(err.contains("scale it down"), "{err}");
+    let _ = std::fs::remove_file(path);
+}
+
+// Random noise has no nodes: whatever lines the Hough transform finds in it explain little of
+// the skeleton, so the photo is refused (exit 1) and nothing is written.
+#[test]
+fn random_noise_is_not_a_chladni_figure() {
+    let path = noise_png("noise.png", 360, 240);
+    let plate = tmp("noise.toml");
+    let out = from_photo(&path, &["--freq-hz", "60", "--out", plate.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stdout));
+    let err = stderr(&out);
+    assert!(err.contains("no confident node found"), "{err}");
+    assert!(err.contains("%"), "{err}");
+    assert!(!plate.exists());
+    let _ = std::fs::remove_file(path);
+}
+
+// --size-mm 200 300 for a 300 × 200 px photo: the aspect ratios contradict, the swap is named;
+// with --corners (a rectified view) the photo's own shape does not matter.
+#[test]
+fn size_contradicting_the_photo_is_refused() {
+    let img = photo("aspect.png", vec![(90.0, 40.0)], vec![]);
+    let out = chladni(&["plate", "from-photo", img.to_str().unwrap(), "--size-mm", "200", "300"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr(&out);
+    assert!(
+        err.contains("--size-mm 200 300 has aspect ratio W/H = 0.667, but the 360×240 px photo"),
+        "{err}"
+    );
+    assert!(err.contains("has 1.500; did you mean --size-mm 300 200?"), "{err}");
+    // Within the tolerance (a loosely cropped photo) it runs.
+    let out = chladni(&["plate", "from-photo", img.to_str().unwrap(), "--size-mm", "310", "200"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let _ = std::fs::remove_file(img);
+}
+
+// --freq-hz outside the drive's range is refused before any work; --out needs a frequency.
+#[test]
+fn frequency_is_checked_before_work_and_needed_for_a_plate_file() {
+    let img = photo("freq.png", vec![(90.0, 40.0)], vec![]);
+    let plate = tmp("freq.toml");
+    let out = from_photo(&img, &["--freq-hz", "1e9", "--out", plate.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr(&out);
+    assert!(
+        err.contains("--freq-hz: frequency 1000000000 Hz is outside the drive's range 1..=2000 Hz"),
+        "{err}"
+    );
+    assert!(!plate.exists());
+    let out = from_photo(&img, &["--out", plate.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("--out needs --freq-hz"), "{}", stderr(&out));
+    assert!(!plate.exists());
+    let _ = std::fs::remove_file(img);
+}
+
+// The format comes from the content: a PNG named .jpg is read as the PNG it is.
+#[test]
+fn png_named_jpg_is_read_by_its_content() {
+    let png = photo("named.png", vec![(90.0, 40.0)], vec![]);
+    let jpg = tmp("named.jpg");
+    std::fs::rename(&png, &jpg).unwrap();
+    let out = from_photo(&jpg, &["--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["lines"].as_array().unwrap().len(), 1, "{v}");
+    let _ = std::fs::remove_file(jpg);
 }

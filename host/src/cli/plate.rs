@@ -14,8 +14,8 @@ use chladni::model::modes_file;
 use chladni::model::plate_file::{Boundary, ModeEntry, Plate, PlateFile, PlateTable};
 use chladni::output::write_atomic;
 use chladni::plate::contour::{node_lines, total_length};
-use chladni::plate::photo::rectify::rectify;
-use chladni::plate::{node_field, photo, solver};
+use chladni::plate::photo::job::{PhotoGrid, PhotoRequest};
+use chladni::plate::{photo, solver};
 use chladni::plot::plate as plot;
 use serde::Serialize;
 
@@ -285,62 +285,56 @@ pub struct FromPhotoArgs {
     save_rectified: Option<PathBuf>,
 }
 
-/// The grid entry's φ, or why there is none.
-type PhotoGrid = Result<node_field::NodeField, node_field::FieldError>;
-
 impl FromPhotoArgs {
+    /// The request the library runs, or the bad argument (exit 2).
+    fn request(&self) -> Result<PhotoRequest, InputError> {
+        let c = self.corners.as_deref();
+        let req = PhotoRequest {
+            size_mm: [self.size_mm[0], self.size_mm[1]],
+            corners: c.map(|c| [[c[0], c[1]], [c[2], c[3]], [c[4], c[5]], [c[6], c[7]]]),
+            grain_mm: self.grain_mm,
+            freq_hz: self.freq_hz,
+            as_grid: self.as_grid,
+            grid: self.grid,
+        };
+        req.check().map_err(InputError)?;
+        if self.out.is_some() && self.freq_hz.is_none() {
+            return Err(InputError(
+                "--out needs --freq-hz: the planner drives each mode at its frequency; give the \
+                 drive frequency the photo was taken at"
+                    .into(),
+            ));
+        }
+        Ok(req)
+    }
+
     fn run(&self) -> anyhow::Result<ExitCode> {
-        let size = self.validate()?;
-        let img = image::open(&self.image)
-            .map_err(|e| InputError(format!("cannot read image {}: {e}", self.image.display())))?;
-        let mut img = img.to_luma8();
-        if let Some(c) = &self.corners {
-            let corners = [[c[0], c[1]], [c[2], c[3]], [c[4], c[5]], [c[6], c[7]]];
-            img = rectify(&img, corners).map_err(|e| InputError(format!("--corners: {e}")))?;
-            if let Some(path) = &self.save_rectified {
-                img.save(path).with_context(|| format!("writing {}", path.display()))?;
+        let req = self.request()?;
+        let inputs = [("photo", self.image.as_path())];
+        for (flag, out) in [("--out", &self.out), ("--save-rectified", &self.save_rectified)] {
+            if let Some(out) = out {
+                check_output(flag, out, &inputs)?;
             }
         }
-        // Grain size in pixels of the (rectified) photo.
-        let mm_per_px = 0.5 * (size[0] / img.width() as f64 + size[1] / img.height() as f64);
-        let params = photo::Params { grain_px: self.grain_mm / mm_per_px, ..Default::default() };
-        let found = photo::find_lines(&img, size, &params);
-        let grid = (self.as_grid || !found.curves.is_empty()).then(|| {
-            let (nx, ny) = grid_dims(self.grid, size);
-            node_field::node_field(&found.nodes(photo::DEFAULT_SNAP), size, nx, ny)
-        });
-        let entries = self.entries(&found, grid.as_ref());
-        let nothing_to_write = entries.is_empty();
-        if let Some(out) = self.out.as_ref().filter(|_| !nothing_to_write) {
-            let file = if self.append && out.exists() {
-                let mut file = PlateFile::load(out).map_err(|e| InputError(e.to_string()))?;
-                if file.plate.size_mm != Some(size) {
-                    return Err(InputError(format!(
-                        "--append: {} is a {:?} mm plate, the photo is {size:?} mm",
-                        out.display(),
-                        file.plate.size_mm
-                    ))
-                    .into());
-                }
-                file.mode.extend(entries);
-                file
-            } else {
-                let stem = self.image.file_stem().map_or("photo".into(), |s| s.to_string_lossy());
-                let plate = PlateTable {
-                    name: format!("from photo {stem}"),
-                    size_mm: Some(size),
-                    ..PlateTable::default()
-                };
-                PlateFile { plate, mode: entries }
-            };
-            write(out, &modes_file::render(&file.plate, file.mode)?)?;
+        let img = photo::input::read(&self.image).map_err(|e| InputError(e.to_string()))?;
+        let outcome = req.run(img).map_err(InputError)?;
+        if let (Some(path), Some(r)) = (&self.save_rectified, &outcome.rectified) {
+            write_output(path, |p| r.save(p).map_err(anyhow::Error::from))?;
+        }
+        let confident = outcome.found.check_confidence();
+        let entries = req.entries(&outcome);
+        let writable = confident.is_ok() && !entries.is_empty();
+        if let Some(out) = self.out.as_ref().filter(|_| writable) {
+            let text = self.plate_text(out, &req, entries)?;
+            write_output(out, |p| std::fs::write(p, &text).map_err(anyhow::Error::from))?;
         }
         if self.json {
-            println!("{}", photo_json(&found, grid.as_ref()));
+            println!("{}", photo_json(&outcome.found, outcome.grid.as_ref()));
         } else {
-            print_photo(&found, grid.as_ref());
+            print_photo(&outcome.found, outcome.grid.as_ref());
         }
-        if let Some(out) = self.out.as_ref().filter(|_| nothing_to_write) {
+        confident.map_err(|e| anyhow::anyhow!("{}: {e}", self.image.display()))?;
+        if let Some(out) = self.out.as_ref().filter(|_| !writable) {
             anyhow::bail!(
                 "no node found in {}: nothing written to {} (is the sand visible against the plate?)",
                 self.image.display(),
@@ -350,71 +344,49 @@ impl FromPhotoArgs {
         Ok(ExitCode::SUCCESS)
     }
 
-    fn validate(&self) -> anyhow::Result<[f64; 2]> {
-        let size = [self.size_mm[0], self.size_mm[1]];
-        if !size.iter().all(|v| v.is_finite() && *v > 0.0) {
-            return Err(InputError(format!(
-                "--size-mm must be two positive numbers, got {size:?}"
-            ))
-            .into());
-        }
-        if let Some(f) = self.freq_hz
-            && !(f.is_finite() && f > 0.0)
-        {
-            return Err(InputError(format!("--freq-hz must be positive, got {f}")).into());
-        }
-        if !(3..=401).contains(&self.grid) {
-            return Err(InputError(format!("--grid must be in 3..=401, got {}", self.grid)).into());
-        }
-        if !(self.grain_mm.is_finite()
-            && self.grain_mm >= 0.0
-            && self.grain_mm < 0.1 * size[0].min(size[1]))
-        {
-            return Err(InputError(format!(
-                "--grain-mm must be in [0, {:.1}) (a tenth of the plate's short side), got {}",
-                0.1 * size[0].min(size[1]),
-                self.grain_mm
-            ))
-            .into());
-        }
-        if let Some(c) = &self.corners
-            && !c.iter().all(|v| v.is_finite())
-        {
-            return Err(InputError(format!("--corners must be 8 finite numbers, got {c:?}")).into());
-        }
-        Ok(size)
-    }
-
-    /// A mode name that tells photos of different frequencies apart in one plate file.
-    fn entry_name(&self, what: &str) -> String {
-        match self.freq_hz {
-            Some(f) => format!("photo {f} Hz {what}"),
-            None => format!("photo {what}"),
-        }
-    }
-
-    /// The `[[mode]]` entries: one grid entry if there is a grid, else one line entry each.
-    fn entries(&self, found: &photo::Found, grid: Option<&PhotoGrid>) -> Vec<ModeEntry> {
-        match grid {
-            Some(Ok(field)) => {
-                vec![modes_file::sampled_mode(&self.entry_name("nodes"), self.freq_hz, &field.grid)]
+    /// The plate file to write: a new one, or `out` with the entries appended.
+    fn plate_text(
+        &self,
+        out: &Path,
+        req: &PhotoRequest,
+        entries: Vec<ModeEntry>,
+    ) -> anyhow::Result<String> {
+        let size = req.size_mm;
+        let file = if self.append && out.exists() {
+            let mut file = PlateFile::load(out).map_err(|e| InputError(e.to_string()))?;
+            if file.plate.size_mm != Some(size) {
+                let had =
+                    file.plate.size_mm.map_or("size-less".into(), |[w, h]| format!("{w} × {h} mm"));
+                return Err(InputError(format!(
+                    "--append: {} is a {had} plate, the photo is {} × {} mm; give --size-mm {had_args} \
+                     or write to another file",
+                    out.display(),
+                    size[0],
+                    size[1],
+                    had_args = file.plate.size_mm.map_or("W H".into(), |[w, h]| format!("{w} {h}")),
+                ))
+                .into());
             }
-            Some(Err(_)) => Vec::new(),
-            None => found
-                .lines
-                .iter()
-                .enumerate()
-                .map(|(k, l)| {
-                    modes_file::line_mode(
-                        &self.entry_name(&format!("line {}", k + 1)),
-                        self.freq_hz,
-                        l.angle_deg,
-                        l.offset_mm,
-                    )
-                })
-                .collect(),
-        }
+            file.mode.extend(entries);
+            file
+        } else {
+            let stem = self.image.file_stem().map_or("photo".into(), |s| s.to_string_lossy());
+            let plate = PlateTable {
+                name: format!("from photo {stem}"),
+                size_mm: Some(size),
+                ..PlateTable::default()
+            };
+            PlateFile { plate, mode: entries }
+        };
+        Ok(modes_file::render(&file.plate, file.mode)?)
     }
+}
+
+/// The one place from-photo writes files (--out, --save-rectified): atomically, so a crash
+/// never leaves half a file (the outputs were checked against the photo before any work).
+fn write_output(path: &Path, save: impl FnOnce(&Path) -> anyhow::Result<()>) -> anyhow::Result<()> {
+    chladni::output::write_with(path, |p| save(p).map_err(|e| format!("{e:#}")))
+        .map_err(output_error)
 }
 
 fn photo_json(found: &photo::Found, grid: Option<&PhotoGrid>) -> serde_json::Value {

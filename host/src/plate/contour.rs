@@ -14,7 +14,6 @@ type EdgeId = (u8, usize, usize);
 /// Contours φ = 0 of `grid`. Samples with φ ≥ 0 count as positive, so a contour that runs
 /// exactly through samples (a hinge line, say) is traced once, on the negative side's edge.
 pub fn node_lines(grid: &Grid) -> Vec<Polyline> {
-    let pos = |i: usize, j: usize| grid.at(i, j) >= 0.0;
     let crossing = |e: EdgeId| -> [f64; 2] {
         let (a, b) = match e.0 {
             0 => ((e.1, e.2), (e.1 + 1, e.2)),
@@ -25,46 +24,7 @@ pub fn node_lines(grid: &Grid) -> Vec<Polyline> {
         let (pa, pb) = (grid.point(a.0, a.1), grid.point(b.0, b.1));
         [pa[0] + t * (pb[0] - pa[0]), pa[1] + t * (pb[1] - pa[1])]
     };
-    let mut segments: Vec<[EdgeId; 2]> = Vec::new();
-    for j in 0..grid.ny - 1 {
-        for i in 0..grid.nx - 1 {
-            let (p00, p10, p11, p01) = (pos(i, j), pos(i + 1, j), pos(i + 1, j + 1), pos(i, j + 1));
-            let bottom = (0, i, j);
-            let right = (1, i + 1, j);
-            let top = (0, i, j + 1);
-            let left = (1, i, j);
-            let mut cut = Vec::with_capacity(4);
-            if p00 != p10 {
-                cut.push(bottom);
-            }
-            if p10 != p11 {
-                cut.push(right);
-            }
-            if p11 != p01 {
-                cut.push(top);
-            }
-            if p01 != p00 {
-                cut.push(left);
-            }
-            match cut.len() {
-                2 => segments.push([cut[0], cut[1]]),
-                4 => {
-                    let centre = grid.at(i, j)
-                        + grid.at(i + 1, j)
-                        + grid.at(i + 1, j + 1)
-                        + grid.at(i, j + 1);
-                    if (centre >= 0.0) == p00 {
-                        segments.push([bottom, right]);
-                        segments.push([left, top]);
-                    } else {
-                        segments.push([bottom, left]);
-                        segments.push([right, top]);
-                    }
-                }
-                _ => {}
-            }
-        }
-    }
+    let segments = cell_segments(grid);
     // Join segments that share an edge crossing.
     let mut at: HashMap<EdgeId, Vec<usize>> = HashMap::new();
     for (k, s) in segments.iter().enumerate() {
@@ -106,6 +66,53 @@ pub fn node_lines(grid: &Grid) -> Vec<Polyline> {
         lines.push(chain.into_iter().map(crossing).collect());
     }
     lines
+}
+
+/// Marching squares: the zero crossings of φ in each grid cell joined in pairs (a saddle cell,
+/// all four edges cut, is split by the sign at its centre).
+fn cell_segments(grid: &Grid) -> Vec<[EdgeId; 2]> {
+    let pos = |i: usize, j: usize| grid.at(i, j) >= 0.0;
+    let mut segments: Vec<[EdgeId; 2]> = Vec::new();
+    for j in 0..grid.ny - 1 {
+        for i in 0..grid.nx - 1 {
+            let (p00, p10, p11, p01) = (pos(i, j), pos(i + 1, j), pos(i + 1, j + 1), pos(i, j + 1));
+            let bottom = (0, i, j);
+            let right = (1, i + 1, j);
+            let top = (0, i, j + 1);
+            let left = (1, i, j);
+            let mut cut = Vec::with_capacity(4);
+            if p00 != p10 {
+                cut.push(bottom);
+            }
+            if p10 != p11 {
+                cut.push(right);
+            }
+            if p11 != p01 {
+                cut.push(top);
+            }
+            if p01 != p00 {
+                cut.push(left);
+            }
+            match cut.len() {
+                2 => segments.push([cut[0], cut[1]]),
+                4 => {
+                    let centre = grid.at(i, j)
+                        + grid.at(i + 1, j)
+                        + grid.at(i + 1, j + 1)
+                        + grid.at(i, j + 1);
+                    if (centre >= 0.0) == p00 {
+                        segments.push([bottom, right]);
+                        segments.push([left, top]);
+                    } else {
+                        segments.push([bottom, left]);
+                        segments.push([right, top]);
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    segments
 }
 
 /// Total length (mm) of a set of polylines.

@@ -22,14 +22,15 @@ use std::collections::{HashMap, HashSet, VecDeque};
 use image::GrayImage;
 
 use super::curves::{Curve, douglas_peucker};
-use super::{Found, Frame, Line, Params, clean, line_of, sand_mask, tls};
+use super::hough::{line_of, tls};
+use super::{Found, Frame, Line, PhotoParams, clean, sand_mask};
 use crate::plate::contour::distance_to;
 
 /// Radius (grains) over which a band's traced path is averaged into its centre line.
 const SMOOTH: f64 = 4.0;
 
 /// Finds lines and curves made of grains `grain_px` pixels across.
-pub fn find(img: &GrayImage, size_mm: [f64; 2], p: &Params, grain_px: f64) -> Found {
+pub fn find(img: &GrayImage, size_mm: [f64; 2], p: &PhotoParams, grain_px: f64) -> Found {
     let (mask, threshold, sand_is_dark) = sand_mask(img, p);
     let mask = clean(&mask, 1, 0);
     let frame = Frame::new(mask.w, mask.h, size_mm);
@@ -99,6 +100,8 @@ pub fn find(img: &GrayImage, size_mm: [f64; 2], p: &Params, grain_px: f64) -> Fo
         curves: curves.into_iter().map(|c| curve(c, &pts, grain)).collect(),
         size_mm,
         pixel_mm: frame.pix,
+        sand_fraction: mask.count() as f64 / mask.px.len().max(1) as f64,
+        coarse: true,
     }
 }
 
@@ -206,7 +209,7 @@ fn straight_fit(piece: &[[f64; 2]], pts: &[[f64; 2]], grain: f64) -> Option<Vec<
     let off = |q: &[f64; 2]| (-(q[0] - origin[0]) * dir[1] + (q[1] - origin[1]) * dir[0]).abs();
     // A band's centre line wiggles by a few millimetres between grains, randomly; a curve
     // bows systematically (the parabola fit of `sagitta` sees only that).
-    if super::sagitta(piece, origin, dir) > 1.25 * grain {
+    if super::hough::sagitta(piece, origin, dir) > 1.25 * grain {
         return None;
     }
     // Pixels along the piece's extent only, so a crossing band beyond it does not count.

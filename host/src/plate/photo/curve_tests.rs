@@ -49,7 +49,8 @@ fn spread(a: &[Polyline], b: &[Polyline]) -> (f64, f64) {
 /// Returns the found result for further checks.
 fn recover(name: &str, truth: &[Polyline], s: &Scene) -> Found {
     let img = render(s);
-    let found = find_lines(&img, s.size_mm, &Params::default());
+    let found = find_lines(&img, s.size_mm, &PhotoParams::default());
+    assert_eq!(found.check_confidence(), Ok(()), "{name}");
     let got = found.nodes(DEFAULT_SNAP);
     debug_image(name, &img, &got);
     let short = SIZE[0].min(SIZE[1]);
@@ -167,7 +168,7 @@ fn blank_plates_have_no_curves() {
         let mut s = scene(vec![], vec![], seed);
         s.density = 0.0;
         let img = render(&s);
-        let found = find_lines(&img, SIZE, &Params::default());
+        let found = find_lines(&img, SIZE, &PhotoParams::default());
         debug_image(&format!("blank {seed}"), &img, &found.nodes(DEFAULT_SNAP));
         let turn: Vec<f64> =
             found.curves.iter().map(|c| turning(&c.points) / c.length_mm).collect();
@@ -193,9 +194,13 @@ fn line_truth(angle_deg: f64, offset_mm: f64) -> Polyline {
 }
 
 /// A 720×480 photo of lentils (4 mm disks, 10 px) in bands (σ = 5 mm) on the given nodes.
-fn lentils(lines: Vec<(f64, f64)>, curves: Vec<Polyline>, seed: u64) -> (image::GrayImage, Params) {
+fn lentils(
+    lines: Vec<(f64, f64)>,
+    curves: Vec<Polyline>,
+    seed: u64,
+) -> (image::GrayImage, PhotoParams) {
     let s = Scene::lentils(lines, curves, seed);
-    (render(&s), Params { grain_px: 4.0 * 720.0 / 300.0, ..Params::default() })
+    (render(&s), PhotoParams { grain_px: 4.0 * 720.0 / 300.0, ..PhotoParams::default() })
 }
 
 /// The seeds a lentil test runs: `default`, or all of `LENTIL_SEEDS=first-last` (to re-measure

@@ -4,7 +4,7 @@
 
 use std::collections::{HashMap, HashSet};
 
-use super::{Frame, Mask, Params};
+use super::{Frame, Mask, PhotoParams};
 use crate::plate::contour::{Polyline, segment_foot, total_length};
 
 /// A curved node found in a photo.
@@ -25,7 +25,7 @@ const N8: [(isize, isize); 8] =
     [(0, -1), (1, -1), (1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1)];
 
 /// Curves among the skeleton pixels `rest` (the skeleton minus the straight lines' pixels).
-pub(super) fn trace(rest: &Mask, frame: &Frame, p: &Params) -> Vec<Curve> {
+pub(super) fn trace(rest: &Mask, frame: &Frame, p: &PhotoParams) -> Vec<Curve> {
     let mut m = rest.clone();
     thin_corners(&mut m);
     prune_spurs(&mut m, p.spur_px);

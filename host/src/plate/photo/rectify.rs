@@ -2,8 +2,9 @@
 //! becomes the cropped, square-on view the node finder expects.
 //!
 //! The plate is flat, so the photo is a projective image of it: a homography (8 unknowns)
-//! fixed by the four corners. Each pixel of the rectified image is mapped back into the
-//! photo and sampled bilinearly.
+//! fixed by the four corners, solved in f64 (imageproc's `Projection::from_control_points`
+//! solves in f32). Each pixel of the rectified image is mapped back into the photo and sampled
+//! bilinearly.
 
 use image::{GrayImage, Luma};
 use nalgebra::{SMatrix, SVector};
@@ -90,7 +91,9 @@ fn sample(img: &GrayImage, [x, y]: [f64; 2], fill: u8) -> u8 {
     (top * (1.0 - fy) + bottom * fy).round() as u8
 }
 
-/// Renders the `w`×`h` image whose pixel centre p shows `img` at `h_out_to_in.map(p)`.
+/// Renders the `w`×`h` image whose pixel centre p shows `img` at `h_out_to_in.map(p)`. Kept by
+/// hand: with imageproc's projective `warp_into` (f32 map, each bilinear row rounded to 8 bits)
+/// the oblique-photo test's worst angle error grew from 0.13° to 0.15° (offset 0.14 → 0.12 mm).
 pub fn warp(img: &GrayImage, h_out_to_in: &Homography, w: u32, h: u32, fill: u8) -> GrayImage {
     GrayImage::from_fn(w, h, |i, j| {
         Luma([sample(img, h_out_to_in.map([i as f64 + 0.5, j as f64 + 0.5]), fill)])
@@ -139,7 +142,7 @@ fn convex(c: &[[f64; 2]; 4]) -> bool {
 mod tests {
     use super::*;
     use crate::plate::photo::synth::{Scene, render};
-    use crate::plate::photo::{Params, find_lines};
+    use crate::plate::photo::{PhotoParams, find_lines};
 
     #[test]
     fn homography_maps_the_four_points_and_inverts() {
@@ -194,9 +197,9 @@ mod tests {
         let corners = [[38.0, 352.0], [452.0, 372.0], [405.0, 58.0], [88.0, 44.0]];
         let photo = oblique(&plate, corners, 500, 420);
         // Unrectified, the lines come out wrong (the keystone bends the plate's geometry).
-        let skewed = find_lines(&photo, [300.0, 200.0], &Params::default());
+        let skewed = find_lines(&photo, [300.0, 200.0], &PhotoParams::default());
         let rect = rectify(&photo, corners).unwrap();
-        let found = find_lines(&rect, [300.0, 200.0], &Params::default());
+        let found = find_lines(&rect, [300.0, 200.0], &PhotoParams::default());
         assert_eq!(found.lines.len(), 2, "{:?}", found.lines);
         let mut worst = (0.0f64, 0.0f64);
         for (a, o) in truth {
