@@ -18,7 +18,7 @@ fn blob(n: usize) -> Vec<Pt> {
             let a = i as f64 / n as f64 * std::f64::consts::TAU;
             let r = 1.0 + 0.15 * (3.0 * a).cos() + 0.05 * (2.0 * a + 0.4).sin();
             let (x, y) = (30.0 * r * a.cos() + 5.0, 18.0 * r * a.sin() - 3.0);
-            Pt::new(Fx((x * 4294967296.0) as i64), Fx((y * 4294967296.0) as i64))
+            Pt::new(Fx::from_f64(x), Fx::from_f64(y))
         })
         .collect()
 }

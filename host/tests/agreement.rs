@@ -4,10 +4,12 @@
 use std::path::Path;
 
 use chladni::analysis::reference::{Law, RefField, Reference};
-use chladni::model::part::{Part, to_fx};
+use chladni::model::part::Part;
 use chladni_shared::analysis::field::{Field, FieldKind};
+use chladni_shared::analysis::fx::Fx;
 use chladni_shared::analysis::geometry::Pt;
 use chladni_shared::analysis::rest::Analyzer;
+use chladni_shared::icd::units::deg_from_bam;
 
 const TOL_DEG: f64 = 0.05;
 
@@ -21,11 +23,11 @@ fn compare(part: &Part, law: Law, gl: f64, gr: f64) -> f64 {
     let kind = match law {
         Law::Sign => FieldKind::Sign,
         Law::Linear => FieldKind::Linear,
-        Law::Sine { wavelength_mm: w } => FieldKind::Sine { wavelength: to_fx(w) },
+        Law::Sine { wavelength_mm: w } => FieldKind::Sine { wavelength: Fx::from_f64(w) },
     };
     let rings = part.to_fixed();
     let slices: Vec<&[Pt]> = rings.iter().map(Vec::as_slice).collect();
-    let field = Field { kind, gain_left: to_fx(gl), gain_right: to_fx(gr) };
+    let field = Field { kind, gain_left: Fx::from_f64(gl), gain_right: Fx::from_f64(gr) };
     let fixed = Analyzer::new(&slices, field).unwrap().analyze().unwrap();
     let reference = Reference::new(part, RefField { law, gain_left: gl, gain_right: gr });
     let (rests, neutral) = reference.rests();
@@ -34,7 +36,7 @@ fn compare(part: &Part, law: Law, gl: f64, gr: f64) -> f64 {
     assert_eq!(fixed.rests.len(), rests.len(), "{ctx}: {:?} vs {rests:?}", fixed.rests);
     let mut worst: f64 = 0.0;
     for (f, r) in fixed.rests.iter().zip(&rests) {
-        let d = adist(f.angle as f64 * 360.0 / 4294967296.0, r.deg);
+        let d = adist(deg_from_bam(f.angle), r.deg);
         assert_eq!(f.stable, r.stable, "{ctx}");
         assert!(d < TOL_DEG, "{ctx}: {d}° apart");
         worst = worst.max(d);

@@ -4,11 +4,12 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use chladni::model::field::Law;
-use chladni::model::part::{Part, from_fx, to_fx};
+use chladni::model::part::Part;
 use chladni::plot::analysis::{self, PlotData};
 use chladni_shared::analysis::field::Field;
 use chladni_shared::analysis::fx::{Bam, Fx};
 use chladni_shared::analysis::rest::{Analysis, AnalysisError, Analyzer};
+use chladni_shared::icd::units::{bam_from_deg, deg_from_bam};
 use clap::Args;
 use serde::Serialize;
 
@@ -41,14 +42,10 @@ pub struct AnalyzeArgs {
     plot: Option<PathBuf>,
 }
 
-/// Binary angle → degrees in [0, 360), rounded to 1e-6°.
+/// Binary angle → degrees in [0, 360), rounded to 1e-6° for display.
 fn deg(a: Bam) -> f64 {
-    let d = (a as f64 * 360.0 / 4_294_967_296.0 * 1e6).round() / 1e6;
+    let d = (deg_from_bam(a) * 1e6).round() / 1e6;
     if d >= 360.0 { 0.0 } else { d }
-}
-
-fn bam(d: f64) -> Bam {
-    (d.rem_euclid(360.0) / 360.0 * 4_294_967_296.0).round() as u64 as u32
 }
 
 /// The `--json` object (keys in alphabetical order, as printed).
@@ -88,7 +85,11 @@ impl AnalyzeArgs {
             }
             (law, None) => law.to_fixed(),
         };
-        Ok(Field { kind, gain_left: to_fx(self.gain_left), gain_right: to_fx(self.gain_right) })
+        Ok(Field {
+            kind,
+            gain_left: Fx::from_f64(self.gain_left),
+            gain_right: Fx::from_f64(self.gain_right),
+        })
     }
 
     pub fn run(&self) -> anyhow::Result<ExitCode> {
@@ -176,7 +177,7 @@ impl AnalyzeArgs {
 }
 
 fn offset_mm(an: &Analyzer<'_>, s: Fx) -> f64 {
-    from_fx(s) * (-an.shift() as f64).exp2()
+    Fx::to_f64(s) * (-an.shift() as f64).exp2()
 }
 
 fn radius_mm(part: &Part) -> f64 {
@@ -192,10 +193,10 @@ fn plot_data(part: &Part, an: &Analyzer<'_>, a: &Analysis, field: &str, desc: &s
     let mut guess = Fx::ZERO;
     for i in 0..=n {
         let d = i as f64 * 360.0 / n as f64;
-        let b = an.balance(bam(d), guess);
+        let b = an.balance(bam_from_deg(d), guess);
         guess = b.offset;
-        turn.push((d, from_fx(b.turn)));
-        align.push((d, deg(a.align(bam(d), b.turn.signum()))));
+        turn.push((d, Fx::to_f64(b.turn)));
+        align.push((d, deg(a.align(bam_from_deg(d), b.turn.signum()))));
     }
     let max = turn.iter().fold(0.0f64, |m, p| m.max(p.1.abs()));
     if max > 0.0 && !a.neutral {
@@ -206,7 +207,7 @@ fn plot_data(part: &Part, an: &Analyzer<'_>, a: &Analysis, field: &str, desc: &s
     let pose = a.rests.iter().find(|r| r.stable).map_or(0, |r| r.angle);
     let s = offset_mm(an, an.balance(pose, Fx::ZERO).offset);
     let c = an.centroid_mm();
-    let (cx, cy) = (from_fx(c.x), from_fx(c.y));
+    let (cx, cy) = (Fx::to_f64(c.x), Fx::to_f64(c.y));
     let (sn, cs) = (deg(pose)).to_radians().sin_cos();
     let rest_pose = part
         .rings()

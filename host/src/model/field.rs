@@ -3,9 +3,8 @@
 //! file"; docs/analyze.md).
 
 use chladni_shared::analysis::field::FieldKind;
+use chladni_shared::analysis::fx::Fx;
 use clap::builder::PossibleValue;
-
-use crate::model::part::to_fx;
 
 /// The linear field's length scale: its pull equals the gain this far from the node.
 pub const LINEAR_SCALE_MM: f64 = 10.0;
@@ -88,7 +87,9 @@ impl Law {
         match *self {
             Law::Sign => FieldKind::Sign,
             Law::Linear => FieldKind::Linear,
-            Law::Sine { wavelength_mm } => FieldKind::Sine { wavelength: to_fx(wavelength_mm) },
+            Law::Sine { wavelength_mm } => {
+                FieldKind::Sine { wavelength: Fx::from_f64(wavelength_mm) }
+            }
         }
     }
 }

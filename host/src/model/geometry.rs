@@ -15,9 +15,9 @@ pub fn signed_area(ring: &[[f64; 2]]) -> f64 {
         / 2.0
 }
 
-/// Centroid of the area of `rings` with their signed areas (an outline counter-clockwise and
-/// holes clockwise give outline minus holes), mm.
-pub fn centroid<'a>(rings: impl IntoIterator<Item = &'a [[f64; 2]]>) -> [f64; 2] {
+/// Area and centroid of a region given by its rings (outline and holes in opposite windings,
+/// as a validated part has them): shoelace sums, one pass.
+pub fn area_centroid<'a>(rings: impl IntoIterator<Item = &'a [[f64; 2]]>) -> (f64, [f64; 2]) {
     let (mut a, mut sx, mut sy) = (0.0, 0.0, 0.0);
     for r in rings {
         for (i, &p) in r.iter().enumerate() {
@@ -28,7 +28,12 @@ pub fn centroid<'a>(rings: impl IntoIterator<Item = &'a [[f64; 2]]>) -> [f64; 2]
             sy += (p[1] + q[1]) * c / 6.0;
         }
     }
-    [sx / a, sy / a]
+    (a, [sx / a, sy / a])
+}
+
+/// Centroid of a region given by its rings (see [`area_centroid`]).
+pub fn centroid<'a>(rings: impl IntoIterator<Item = &'a [[f64; 2]]>) -> [f64; 2] {
+    area_centroid(rings).1
 }
 
 /// Point strictly inside a ring (even–odd rule).

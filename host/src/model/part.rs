@@ -382,19 +382,9 @@ impl Part {
     /// The rings in Q31.32 (mm), for `chladni_shared::analysis::rest::Analyzer`.
     pub fn to_fixed(&self) -> Vec<Vec<Pt>> {
         self.rings()
-            .map(|r| r.iter().map(|p| Pt::new(to_fx(p[0]), to_fx(p[1]))).collect())
+            .map(|r| r.iter().map(|p| Pt::new(Fx::from_f64(p[0]), Fx::from_f64(p[1]))).collect())
             .collect()
     }
-}
-
-/// An `f64` as Q31.32 (rounded to nearest).
-pub fn to_fx(v: f64) -> Fx {
-    Fx((v * 4_294_967_296.0).round() as i64)
-}
-
-/// A Q31.32 value as `f64` (exact for |v| < 2²¹).
-pub fn from_fx(v: Fx) -> f64 {
-    v.raw() as f64 / 4_294_967_296.0
 }
 
 /// A JSON syntax error, or the named NaN/Infinity error when the offending token is one.

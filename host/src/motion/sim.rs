@@ -11,7 +11,8 @@
 //! Units: mm, s, rad inside (degrees in [`Pose`] helpers only where named).
 
 use crate::analysis::reference::GL;
-use crate::model::part::{Part, inside};
+use crate::model::geometry::{self, inside};
+use crate::model::part::Part;
 use crate::model::plan_file::PlanFile;
 use crate::model::plate::{Law, Mode, Node, PlateModel};
 use crate::plate::solver::Grid;
@@ -55,17 +56,7 @@ impl Body {
 
     /// Prepares a validated part with about `target` interior samples.
     pub fn with_samples(part: &Part, target: usize) -> Body {
-        let (mut a, mut sx, mut sy) = (0.0, 0.0, 0.0);
-        for r in part.rings() {
-            for i in 0..r.len() {
-                let (p, q) = (r[i], r[(i + 1) % r.len()]);
-                let c = p[0] * q[1] - q[0] * p[1];
-                a += c / 2.0;
-                sx += (p[0] + q[0]) * c / 6.0;
-                sy += (p[1] + q[1]) * c / 6.0;
-            }
-        }
-        let centroid = [sx / a, sy / a];
+        let (a, centroid) = geometry::area_centroid(part.rings().map(|r| r.as_slice()));
         let rings: Vec<Vec<[f64; 2]>> = part
             .rings()
             .map(|r| r.iter().map(|p| [p[0] - centroid[0], p[1] - centroid[1]]).collect())

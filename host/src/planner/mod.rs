@@ -31,13 +31,14 @@
 use std::collections::{HashMap, VecDeque};
 
 use chladni_shared::analysis::field::Field;
-use chladni_shared::analysis::fx::Bam;
+use chladni_shared::analysis::fx::Fx;
 use chladni_shared::analysis::geometry::Pt;
 use chladni_shared::analysis::rest::Analyzer;
 use chladni_shared::icd::plan::MAX_NAME;
+use chladni_shared::icd::units::deg_from_bam;
 
 use crate::analysis::reference::{RefField, Reference};
-use crate::model::part::{Part, to_fx};
+use crate::model::part::Part;
 use crate::model::plan_file::{PlanFile, StepJson};
 use crate::model::plate::{Mode, Node, PlateModel};
 use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
@@ -126,10 +127,6 @@ impl StepMap {
 pub fn cdist(a: f64, b: f64, p: f64) -> f64 {
     let d = (a - b).rem_euclid(p);
     d.min(p - d)
-}
-
-fn deg(a: Bam) -> f64 {
-    a as f64 * 360.0 / 4_294_967_296.0
 }
 
 impl StepMap {
@@ -222,8 +219,8 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, S
             let kind = mode.law.to_fixed();
             let field = Field {
                 kind,
-                gain_left: to_fx(mode.gain_left),
-                gain_right: to_fx(mode.gain_right),
+                gain_left: Fx::from_f64(mode.gain_left),
+                gain_right: Fx::from_f64(mode.gain_right),
             };
             let an = Analyzer::new(&slices, field)
                 .map_err(|e| format!("{}: cannot analyse: {e:?}", mode.name))?;
@@ -232,7 +229,7 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, S
                 return Ok(StepMap::neutral());
             }
             for r in &a.rests {
-                let d = to_plate(deg(r.angle));
+                let d = to_plate(deg_from_bam(r.angle));
                 if r.stable { stable.push(d) } else { boundaries.push(d) }
             }
         }

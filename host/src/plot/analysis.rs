@@ -6,6 +6,7 @@
 use std::path::Path;
 
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use super::{PlotError, check_extension, text, write_figure};
@@ -112,6 +113,37 @@ where
     Ok(())
 }
 
+/// A chart over θ in [0°, 360°) with its caption, the y range and the axis names
+/// ([x, y]); the turn and alignment panels share it.
+fn angle_chart<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    caption: &str,
+    y: std::ops::Range<f64>,
+    [x_desc, y_desc]: [&str; 2],
+) -> Result<ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>, String>
+where
+    DB::ErrorType: 'static,
+{
+    let y_labels = if y.end > 100.0 { 9 } else { 10 };
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 16))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(45)
+        .build_cartesian_2d(0.0..360.0, y)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .x_labels(9)
+        .y_labels(y_labels)
+        .light_line_style(WHITE)
+        .draw()
+        .map_err(err)?;
+    Ok(chart)
+}
+
 /// (b) The turn function.
 fn draw_turn<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
@@ -120,28 +152,13 @@ fn draw_turn<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let (stable_col, unstable_col) = (STABLE, UNSTABLE);
-    // (b) Turn function.
-    let mut turn = ChartBuilder::on(area)
-        .caption("turn function t(θ)", ("sans-serif", 16))
-        .margin(10)
-        .x_label_area_size(30)
-        .y_label_area_size(45)
-        .build_cartesian_2d(0.0..360.0, -1.1..1.1)
-        .map_err(err)?;
-    turn.configure_mesh()
-        .x_desc("θ (deg)")
-        .y_desc("t / max|t|")
-        .x_labels(9)
-        .light_line_style(WHITE)
-        .draw()
-        .map_err(err)?;
+    let mut turn = angle_chart(area, "turn function t(θ)", -1.1..1.1, ["θ (deg)", "t / max|t|"])?;
     turn.draw_series(LineSeries::new(vec![(0.0, 0.0), (360.0, 0.0)], RGBColor(150, 150, 150)))
         .map_err(err)?;
     turn.draw_series(LineSeries::new(data.turn.iter().copied(), BLUE.stroke_width(2)))
         .map_err(err)?;
     turn.draw_series(data.rests.iter().map(|&(d, stable)| {
-        let c = if stable { stable_col } else { unstable_col };
+        let c = if stable { STABLE } else { UNSTABLE };
         Circle::new((d, 0.0), 5, if stable { c.filled() } else { c.stroke_width(2) })
     }))
     .map_err(err)?;
@@ -165,24 +182,12 @@ fn draw_align<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let (stable_col, unstable_col) = (STABLE, UNSTABLE);
-    // (c) Alignment function.
-    let mut align = ChartBuilder::on(area)
-        .caption("alignment function a(θ)", ("sans-serif", 16))
-        .margin(10)
-        .x_label_area_size(30)
-        .y_label_area_size(45)
-        .build_cartesian_2d(0.0..360.0, 0.0..360.0)
-        .map_err(err)?;
-    align
-        .configure_mesh()
-        .x_desc("start θ (deg)")
-        .y_desc("final θ (deg)")
-        .x_labels(9)
-        .y_labels(9)
-        .light_line_style(WHITE)
-        .draw()
-        .map_err(err)?;
+    let mut align = angle_chart(
+        area,
+        "alignment function a(θ)",
+        0.0..360.0,
+        ["start θ (deg)", "final θ (deg)"],
+    )?;
     align
         .draw_series(LineSeries::new(vec![(0.0, 0.0), (360.0, 360.0)], RGBColor(190, 190, 190)))
         .map_err(err)?;
@@ -199,11 +204,11 @@ where
     }
     pieces.push(piece);
     for p in pieces {
-        align.draw_series(LineSeries::new(p, stable_col.stroke_width(3))).map_err(err)?;
+        align.draw_series(LineSeries::new(p, STABLE.stroke_width(3))).map_err(err)?;
     }
     align
         .draw_series(data.rests.iter().map(|&(d, stable)| {
-            let c = if stable { stable_col } else { unstable_col };
+            let c = if stable { STABLE } else { UNSTABLE };
             Circle::new((d, d), 5, if stable { c.filled() } else { c.stroke_width(2) })
         }))
         .map_err(err)?;
