@@ -30,7 +30,7 @@ if ! command -v rustup >/dev/null; then
   echo "package), make sure \$CARGO_HOME/bin is on PATH, and run this again." >&2
   exit 1
 fi
-rustup toolchain install
+rustup toolchain install --no-self-update  # the project never changes the user's rustup
 if ! rustup target list --installed | grep -qx thumbv7em-none-eabihf; then
   echo "install-deps: thumbv7em-none-eabihf still missing after 'rustup toolchain install'" >&2
   exit 1
