@@ -4,6 +4,7 @@ use clap::Parser;
 mod cli;
 
 fn main() -> std::process::ExitCode {
+    quiet_on_closed_stdout();
     let cli = cli::Cli::parse();
     match cli.run() {
         Ok(code) => code,
@@ -12,4 +13,23 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::from(cli::exit_code_of(&err))
         }
     }
+}
+
+/// `chladni … | head` closes stdout early; `println!` then panics with "failed printing to
+/// stdout: Broken pipe". That is the reader's choice, not a failure: end quietly with 0, as
+/// Unix tools do, and leave every other panic to the default hook.
+fn quiet_on_closed_stdout() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let message = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
+            std::process::exit(0);
+        }
+        default(info);
+    }));
 }

@@ -1,0 +1,30 @@
+//! `chladni emulator` through the built binary, with the real QEMU controller: the exit codes
+//! a user sees when the time limit ends the run, and when `--flash-file` cannot be a flash.
+
+use std::process::{Command, Output};
+
+fn chladni(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
+}
+
+#[test]
+fn the_time_limit_ends_the_emulator_with_success_and_says_so() {
+    let log = std::env::temp_dir().join(format!("chladni-emulator-{}.log", std::process::id()));
+    let out = chladni(&["emulator", "--time-limit-s", "3", "--log", log.to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert!(stdout.contains("controller ready on tcp://127.0.0.1:"), "{stdout}");
+    assert!(stderr.contains("time limit of 3 s reached: the emulator stopped"), "{stderr}");
+    let _ = std::fs::remove_file(log);
+}
+
+#[test]
+fn a_directory_as_flash_file_is_bad_input_named_as_a_directory() {
+    let dir = std::env::temp_dir();
+    let out = chladni(&["emulator", "--time-limit-s", "3", "--flash-file", dir.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("is a directory"), "{stderr}");
+    assert!(!stderr.contains("bytes"), "the old size message came back: {stderr}");
+}
