@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use chladni::model::field::Law;
+use chladni::model::field::{Law, LawError, MAX_WAVELENGTH_MM};
 use chladni::model::part::Part;
 use chladni::plot::analysis::{self, PlotData};
 use chladni_shared::analysis::field::Field;
@@ -26,7 +26,7 @@ pub struct AnalyzeArgs {
     field: Law,
     /// Sine field: distance from the node to the next antinode (mm).
     #[arg(long, value_name = "MM",
-          value_parser = f64_where("wavelength", "in (0, 1e7] mm", |w| w > 0.0 && w <= 1e7))]
+          value_parser = f64_where("wavelength", "in (0, 1e7] mm", |w| w > 0.0 && w <= MAX_WAVELENGTH_MM))]
     wavelength: Option<f64>,
     /// Gain on the left side of the node (x < 0).
     #[arg(long, value_name = "G", default_value_t = 1.0, value_parser = gain("gain-left"))]
@@ -72,19 +72,17 @@ fn bad(msg: String) -> anyhow::Error {
 
 impl AnalyzeArgs {
     fn field(&self) -> anyhow::Result<Field> {
-        let kind = match (self.field, self.wavelength) {
-            (Law::Sine { .. }, None) => {
-                return Err(bad("--field sine needs --wavelength MM".into()));
-            }
-            (Law::Sine { .. }, Some(w)) => Law::Sine { wavelength_mm: w }.to_fixed(),
-            (f, Some(_)) => {
-                return Err(bad(format!(
-                    "--wavelength only applies to --field sine, not {}",
-                    f.name()
-                )));
-            }
-            (law, None) => law.to_fixed(),
-        };
+        // The law's own check, worded for the command line.
+        let law = self.field.with_wavelength(self.wavelength).map_err(|e| {
+            bad(match e {
+                LawError::NeedsWavelength => "--field sine needs --wavelength MM".into(),
+                LawError::WavelengthNotSine(_) => {
+                    format!("--wavelength only applies to --field sine, not {}", self.field.name())
+                }
+                e => format!("--wavelength: {e}"),
+            })
+        })?;
+        let kind = law.to_fixed();
         Ok(Field {
             kind,
             gain_left: Fx::from_f64(self.gain_left),

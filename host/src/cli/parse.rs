@@ -34,7 +34,7 @@ pub fn positive(
 pub fn non_negative(
     name: &'static str,
 ) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
-    f64_where(name, "positive", |v| v.is_finite() && v >= 0.0)
+    f64_where(name, "finite and at least 0", |v| v.is_finite() && v >= 0.0)
 }
 
 /// `--NAME`: a whole number in LO..=HI.

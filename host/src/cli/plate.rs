@@ -55,7 +55,7 @@ pub struct ModesArgs {
     #[arg(long, value_name = "FILE")]
     write_modes: Option<PathBuf>,
     /// Grid points along x for `--write-modes` (y follows the aspect ratio).
-    #[arg(long, default_value_t = 41, value_parser = usize_in("grid", 3, 401))]
+    #[arg(long, default_value_t = 41, value_parser = usize_in("grid", *solver::GRID_X_POINTS.start(), *solver::GRID_X_POINTS.end()))]
     grid: usize,
     /// Legendre polynomials per direction in the Ritz basis (terms² unknowns).
     #[arg(long, default_value_t = solver::DEFAULT_TERMS, value_parser = usize_in("terms", 4, 30))]
@@ -65,11 +65,6 @@ pub struct ModesArgs {
     /// by `--write-modes` as a straight `line` node on the hinge, ahead of the elastic modes.
     #[arg(long, value_name = "HZ", default_value_t = 10.0)]
     rocking_hz: f64,
-}
-
-fn grid_dims(nx: usize, size: [f64; 2]) -> (usize, usize) {
-    let ny = (((nx - 1) as f64) * size[1] / size[0]).round() as usize + 1;
-    (nx, ny.max(2))
 }
 
 impl ModesArgs {
@@ -95,7 +90,7 @@ impl ModesArgs {
         }
         let rocking = self.rocking_mode(&plate, &sol)?;
         if let Some(out) = &self.write_modes {
-            let (nx, ny) = grid_dims(self.grid, plate.size_mm);
+            let (nx, ny) = solver::grid_dims(self.grid, plate.size_mm);
             let entries = rocking
                 .iter()
                 .cloned()
@@ -143,7 +138,7 @@ impl ModesArgs {
             "{:>4} {:>12} {:>10} {:>8} {:>16}",
             "mode", "freq (Hz)", "lambda", "lines", "node length (mm)"
         );
-        let (nx, ny) = grid_dims(121, plate.size_mm);
+        let (nx, ny) = solver::grid_dims(121, plate.size_mm);
         for (k, m) in sol.modes.iter().enumerate() {
             let lines = node_lines(&sol.sample(k, nx, ny));
             println!(
@@ -210,7 +205,7 @@ fn plot_modes(dir: &Path, plate: &Plate, sol: &solver::ModalSolution) -> anyhow:
         ProgressStyle::with_template("plotting {bar:30} {pos}/{len}")
             .unwrap_or(ProgressStyle::default_bar()),
     );
-    let (nx, ny) = grid_dims(121, plate.size_mm);
+    let (nx, ny) = solver::grid_dims(121, plate.size_mm);
     for (k, m) in sol.modes.iter().enumerate() {
         let grid = sol.sample(k, nx, ny);
         let lines = node_lines(&grid);

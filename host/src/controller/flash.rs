@@ -16,6 +16,7 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::time::{Duration, Instant};
 
+use chladni_shared::icd::link::Board;
 use object::read::elf::{ElfFile32, ProgramHeader};
 use object::{Object, ObjectSection, ObjectSymbol};
 use probe_rs::Permissions;
@@ -30,8 +31,10 @@ pub const DEFAULT_CHIP: &str = "STM32L475VGTx";
 /// Name of the symbol in which the firmware records the board it was built for.
 pub const BOARD_SYMBOL: &str = "CHLADNI_BOARD";
 
-/// The board name an image must carry to be flashed.
-pub const FLASHABLE_BOARD: &str = "stm32l475";
+/// The board name an image must carry to be flashed (the link's own name for the board).
+pub const FLASHABLE_BOARD: &str = Board::Stm32l475.name();
+/// The QEMU board's name, refused with a pointer to the emulator.
+const QEMU_BOARD: &str = Board::Qemu.name();
 
 /// The linker memory map of the firmware, as built into this binary.
 pub const MEMORY_X: &str = include_str!("../../../memory.x");
@@ -363,7 +366,7 @@ pub fn check_image(path: &Path, flash: &MemoryRegion) -> Result<CheckedImage, Fl
         board_tag(&elf).ok_or_else(|| FlashError::NoBoardTag { path: path.to_path_buf() })?;
     match board.as_str() {
         FLASHABLE_BOARD => {}
-        "qemu" => return Err(FlashError::QemuImage { path: path.to_path_buf() }),
+        QEMU_BOARD => return Err(FlashError::QemuImage { path: path.to_path_buf() }),
         _ => return Err(FlashError::WrongBoard { path: path.to_path_buf(), board }),
     }
     let segments = load_segments(&elf);

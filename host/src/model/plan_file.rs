@@ -28,16 +28,6 @@ pub fn check_drive_freq(hz: f64) -> Result<u32, FrequencyError> {
     MilliHz::from_hz(hz).map(|f| f.0)
 }
 
-/// The drive's range, as the one frequency message names it, for `hz`.
-fn out_of_range(hz: f64) -> FrequencyError {
-    let l = DeviceLimits::DEFAULT;
-    FrequencyError {
-        hz,
-        min_hz: MilliHz(l.min_freq_mhz).to_hz(),
-        max_hz: MilliHz(l.max_freq_mhz).to_hz(),
-    }
-}
-
 /// One step as written.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -90,7 +80,10 @@ pub enum PlanFileError {
     #[error("not a valid plan: {0}")]
     Json(String),
     /// A frequency that is not a positive finite number of Hz the device can represent.
-    #[error("step {step}: {} (give Hz, e.g. 60.0)", out_of_range(*value))]
+    #[error(
+        "step {step}: {} (give Hz, e.g. 60.0)",
+        FrequencyError::outside(*value, &DeviceLimits::DEFAULT)
+    )]
     Frequency {
         /// Step index.
         step: usize,

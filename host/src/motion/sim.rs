@@ -78,13 +78,7 @@ impl Body {
         }
         let radius = rings.iter().flatten().map(|p| p[0].hypot(p[1])).fold(0.0, f64::max);
         // Interior samples: cell centres of a square grid inside the outline and outside holes.
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for p in rings.iter().flatten() {
-            for k in 0..2 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
+        let (lo, hi) = geometry::bounds(rings.iter().flatten());
         let target = target.max(16);
         let mut h = (a / target as f64).sqrt();
         let mut samples = Vec::new();

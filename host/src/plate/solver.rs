@@ -304,6 +304,16 @@ pub fn solve(plate: &Plate, count: usize, terms: usize) -> ModalSolution {
     ModalSolution { size_mm: plate.size_mm, terms, modes }
 }
 
+/// Grid points along x a sampled mode may have: at least 3 for a node to show, at most 401 to
+/// keep a plate file readable (`--grid` of `plate modes` and `plate from-photo`).
+pub const GRID_X_POINTS: std::ops::RangeInclusive<usize> = 3..=401;
+
+/// Grid points (nx, ny) for `nx` along x, ny following the plate's aspect ratio.
+pub fn grid_dims(nx: usize, size: [f64; 2]) -> (usize, usize) {
+    let ny = (((nx - 1) as f64) * size[1] / size[0]).round() as usize + 1;
+    (nx, ny.max(2))
+}
+
 /// A mode shape sampled on a regular grid covering the plate.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Grid {

@@ -69,6 +69,17 @@ impl core::fmt::Display for FrequencyError {
 
 impl core::error::Error for FrequencyError {}
 
+impl FrequencyError {
+    /// `hz`, refused as outside the frequency range of `limits`.
+    pub fn outside(hz: f64, limits: &DeviceLimits) -> FrequencyError {
+        FrequencyError {
+            hz,
+            min_hz: MilliHz(limits.min_freq_mhz).to_hz(),
+            max_hz: MilliHz(limits.max_freq_mhz).to_hz(),
+        }
+    }
+}
+
 impl MilliHz {
     /// `hz` rounded to the nearest millihertz, within the controller's range
     /// ([`DeviceLimits::DEFAULT`]).
@@ -81,11 +92,7 @@ impl MilliHz {
         let (min, max) = (limits.min_freq_mhz, limits.max_freq_mhz);
         let mhz = round_half_away(hz * 1000.0);
         if !hz.is_finite() || mhz < min as i64 || mhz > max as i64 {
-            return Err(FrequencyError {
-                hz,
-                min_hz: MilliHz(min).to_hz(),
-                max_hz: MilliHz(max).to_hz(),
-            });
+            return Err(FrequencyError::outside(hz, limits));
         }
         Ok(MilliHz(mhz as u32))
     }

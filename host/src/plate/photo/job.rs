@@ -9,6 +9,7 @@ use super::{Found, PhotoParams, find_lines, input, rectify};
 use crate::model::modes_file;
 use crate::model::plate_file::ModeEntry;
 use crate::plate::node_field::{self, FieldError, NodeField};
+use crate::plate::solver::{GRID_X_POINTS, grid_dims};
 
 /// What to find in a photo and how to describe it.
 #[derive(Debug, Clone)]
@@ -52,8 +53,8 @@ impl PhotoRequest {
         if let Some(f) = self.freq_hz {
             MilliHz::from_hz(f).map_err(|e| format!("--freq-hz: {e}"))?;
         }
-        if !(3..=401).contains(&self.grid) {
-            return Err(format!("--grid must be in 3..=401, got {}", self.grid));
+        if !GRID_X_POINTS.contains(&self.grid) {
+            return Err(format!("--grid must be in {GRID_X_POINTS:?}, got {}", self.grid));
         }
         let short = size[0].min(size[1]);
         if !(self.grain_mm.is_finite() && self.grain_mm >= 0.0 && self.grain_mm < 0.1 * short) {
@@ -120,10 +121,4 @@ impl PhotoRequest {
                 .collect(),
         }
     }
-}
-
-/// Grid points (nx, ny) for `nx` along x, ny following the plate's aspect ratio.
-pub fn grid_dims(nx: usize, size: [f64; 2]) -> (usize, usize) {
-    let ny = (((nx - 1) as f64) * size[1] / size[0]).round() as usize + 1;
-    (nx, ny.max(2))
 }
