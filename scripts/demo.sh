@@ -35,18 +35,10 @@ say chladni plan examples/parts/rectangle.json --plate $out/hinged-rod.toml --ou
 $chladni plan examples/parts/rectangle.json --plate $out/hinged-rod.toml --out $out/rectangle-plan.json
 
 # The controller: the firmware in QEMU, its link on a TCP port, its flash in a file.
-$chladni emulator --flash-file $out/flash.bin --log $out/firmware.log --time-limit-s 900 \
-  >"$out/emulator.out" 2>"$out/emulator.err" &
-emu=$!
+source scripts/lib/emulator.sh
+emu=""
 trap 'kill $emu 2>/dev/null; wait $emu 2>/dev/null || true' EXIT
-port=""
-for _ in $(seq 1 1500); do
-  port=$(grep -o 'tcp://[0-9.:]*' "$out/emulator.out" | head -n 1 || true)
-  [ -n "$port" ] && break
-  kill -0 $emu 2>/dev/null || { cat "$out/emulator.err"; exit 1; }
-  sleep 0.2
-done
-[ -n "$port" ] || { echo "the emulator did not come up"; cat "$out/emulator.err"; exit 1; }
+start_emulator $chladni $out --flash-file $out/flash.bin --log $out/firmware.log --time-limit-s 900
 
 say chladni device info --port $port
 $chladni device info --port "$port"

@@ -45,9 +45,8 @@ case "$cmd" in
     scripts/install-deps.sh --board
     exec probe-rs run --chip "${CHLADNI_CHIP:-STM32L475VGTx}" ${CHLADNI_PROBE:+--probe "$CHLADNI_PROBE"} "$elf" ;;
   bench) [ "$board" = qemu ] || { echo "bench runs on the qemu board only" >&2; exit 2; }
-         cargo build "${args[@]}" --bin bench_drive >&2 &&
-         QEMU_EXTRA="-icount shift=0" scripts/qemu-run.sh \
-           target/firmware/thumbv7em-none-eabihf/firmware/bench_drive ;;
+         elf=$("$0" build-bin qemu bench_drive) &&
+         QEMU_EXTRA="-icount shift=0" scripts/qemu-run.sh "$elf" ;;
   build-bin) name=${3:?usage: firmware.sh build-bin BOARD NAME}
     cargo build "${args[@]}" --bin "$name" >&2
     echo "target/firmware/thumbv7em-none-eabihf/firmware/$name" ;;

@@ -35,15 +35,10 @@ cargo test -p chladni-firmware --lib
 step "hardware-in-the-loop path (scripts/hitl.sh against a standalone emulator)"
 cargo build --bin chladni
 hitl_dir=$(mktemp -d)
-target/debug/chladni emulator --time-limit-s 600 --log "$hitl_dir/firmware.log" >"$hitl_dir/out" &
-emu=$!
+source scripts/lib/emulator.sh
+emu=""
 trap 'kill $emu 2>/dev/null || true; rm -rf "$hitl_dir"' EXIT
-for _ in $(seq 1 600); do
-  grep -q 'tcp://' "$hitl_dir/out" && break
-  kill -0 $emu || { echo "the emulator did not start"; exit 1; }
-  sleep 0.1
-done
-port=$(grep -o 'tcp://[0-9.:]*' "$hitl_dir/out" | head -n 1)
+start_emulator target/debug/chladni "$hitl_dir" --time-limit-s 600 --log "$hitl_dir/firmware.log"
 CHLADNI_EXPECT_BOARD=qemu scripts/hitl.sh "$port" --no-flash
 kill $emu
 
