@@ -11,7 +11,7 @@
 //! against [`DeviceLimits`].
 
 use chladni_shared::icd::plan::{DeviceLimits, MAX_NAME, MAX_STEPS, Plan, PlanError, Step};
-use chladni_shared::icd::units::{FrequencyError, MilliHz, round_half_away};
+use chladni_shared::icd::units::{FrequencyError, MilliHz, Q15, round_half_away};
 use serde::{Deserialize, Serialize};
 
 /// Hz → mHz, rounded to nearest: `None` unless finite and within 1..=u32::MAX mHz once
@@ -125,12 +125,11 @@ impl PlanFile {
             let Some(freq_mhz) = freq_mhz(s.freq_hz) else {
                 return Err(PlanFileError::Frequency { step: i, value: s.freq_hz });
             };
-            if !(0.0..=1.0).contains(&s.amplitude) {
-                return Err(PlanFileError::Amplitude { step: i, value: s.amplitude });
-            }
+            let amplitude = Q15::from_fraction(s.amplitude)
+                .map_err(|_| PlanFileError::Amplitude { step: i, value: s.amplitude })?;
             let step = Step {
                 freq_mhz,
-                amplitude_q15: round_half_away(s.amplitude * 32767.0) as u16,
+                amplitude_q15: amplitude.0,
                 duration_ms: s.duration_ms,
                 ramp_ms: s.ramp_ms,
             };
@@ -153,9 +152,9 @@ impl PlanFile {
                 .steps
                 .iter()
                 .map(|s| StepJson {
-                    freq_hz: s.freq_mhz as f64 / 1000.0,
+                    freq_hz: MilliHz(s.freq_mhz).to_hz(),
                     duration_ms: s.duration_ms,
-                    amplitude: (s.amplitude_q15 as f64 / 32767.0 * 1e6).round() / 1e6,
+                    amplitude: (Q15(s.amplitude_q15).to_fraction() * 1e6).round() / 1e6,
                     ramp_ms: s.ramp_ms,
                 })
                 .collect(),
