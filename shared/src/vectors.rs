@@ -73,10 +73,18 @@ pub const ALL: &[(&str, Vector)] = &[
 fn link_frames() -> Result<u64, &'static str> {
     let mut d = Digest::new();
     let mut buf = [0u8; 64];
-    let requests =
-        [Request::Ping { nonce: 0 }, Request::Ping { nonce: u32::MAX }, Request::GetInfo];
+    let requests = [
+        Request::Ping(link::Ping { nonce: 0 }),
+        Request::Ping(link::Ping { nonce: u32::MAX }),
+        Request::GetInfo(link::GetInfo),
+    ];
     for (i, body) in requests.into_iter().enumerate() {
-        let env = Envelope { version: link::PROTOCOL_VERSION, id: i as u32 * 1000, body };
+        let env = Envelope {
+            version: link::PROTOCOL_VERSION,
+            session: 0x5eed_0000 + i as u32,
+            id: i as u32 * 1000,
+            body,
+        };
         let wire = link::encode(&env, &mut buf).map_err(|_| "encode failed")?;
         d.bytes(wire);
         let mut frame = [0u8; 64];
@@ -91,10 +99,12 @@ fn link_frames() -> Result<u64, &'static str> {
         link::LinkError::BadCobs,
         link::LinkError::FrameTooLong { max: link::MAX_FRAME as u16 },
         link::LinkError::UnsupportedVersion { got: 7, supported: 1 },
+        link::LinkError::BadCrc,
         link::LinkError::Malformed,
     ];
     for e in errors {
-        let env = Envelope { version: link::PROTOCOL_VERSION, id: 1, body: Response::Error(e) };
+        let body = Response::Error(e);
+        let env = Envelope { version: link::PROTOCOL_VERSION, session: 3, id: 1, body };
         d.bytes(link::encode(&env, &mut buf).map_err(|_| "encode failed")?);
     }
     Ok(d.value())
@@ -131,27 +141,44 @@ fn drive_plan_stream() -> Result<u64, &'static str> {
 /// The drive requests and responses on the wire.
 fn drive_link_frames() -> Result<u64, &'static str> {
     let mut d = Digest::new();
-    let mut buf = [0u8; link::MAX_FRAME + 2];
+    let mut buf = [0u8; link::ENCODE_BUF];
+    let plan = vector_plan();
+    let chunk = crate::icd::store::UploadChunk {
+        index: 0,
+        steps: heapless::Vec::from_slice(&plan.steps).map_err(|_| "chunk too small")?,
+    };
+    let begin = crate::icd::store::UploadBegin {
+        slot: Some(3),
+        name: plan.name.clone(),
+        repeat: plan.repeat,
+        steps: plan.steps.len() as u16,
+        crc: crate::icd::store::plan_crc(&plan),
+    };
     let requests = [
-        Request::Drive { freq_mhz: 123_456, amplitude_q15: 20_000 },
-        Request::RunPlan(vector_plan()),
-        Request::Stop,
-        Request::Status,
+        Request::Drive(link::Drive { freq_mhz: 123_456, amplitude_q15: 20_000 }),
+        Request::UploadBegin(begin),
+        Request::UploadChunk(chunk),
+        Request::UploadCommit(link::UploadCommit),
+        Request::RunPlan(link::RunPlan { plan: crate::icd::store::PlanRef::Slot(3), repeat: None }),
+        Request::Stop(link::Stop),
+        Request::Status(link::GetStatus),
     ];
     for (i, body) in requests.into_iter().enumerate() {
-        let env = Envelope { version: link::PROTOCOL_VERSION, id: i as u32 + 1, body };
+        let env = Envelope { version: link::PROTOCOL_VERSION, session: 77, id: i as u32 + 1, body };
         d.bytes(link::encode(&env, &mut buf).map_err(|_| "encode failed")?);
     }
     let mut runner = Runner::new(DeviceLimits::DEFAULT);
     runner.drive(55_000, 1000).map_err(|_| "drive refused")?;
     let responses = [
         Response::Status(runner.status()),
-        Response::Ack,
-        Response::Rejected(crate::icd::link::DriveError::Plan(crate::icd::plan::PlanError::Empty)),
-        Response::Rejected(crate::icd::link::DriveError::Busy),
+        Response::Drive(link::RunNumber(4)),
+        Response::Refused(link::Refusal::Drive(link::DriveError::Plan(
+            crate::icd::plan::PlanError::Empty,
+        ))),
+        Response::Refused(link::Refusal::Drive(link::DriveError::QueueFull)),
     ];
     for body in responses {
-        let env = Envelope { version: link::PROTOCOL_VERSION, id: 9, body };
+        let env = Envelope { version: link::PROTOCOL_VERSION, session: 77, id: 9, body };
         d.bytes(link::encode(&env, &mut buf).map_err(|_| "encode failed")?);
     }
     Ok(d.value())

@@ -11,7 +11,7 @@
 
 use crate::drive::dds::{self, DAC_MID, Dds, SAMPLE_RATE, SAMPLES_PER_MS};
 use crate::icd::link::{DriveError, DriveState, StatusReport};
-use crate::icd::plan::{DeviceLimits, Plan};
+use crate::icd::plan::{DeviceLimits, Plan, Step};
 
 /// Samples per block: one DMA half-buffer on the board, one tick of the QEMU pacer (5 ms).
 pub const BLOCK_LEN: usize = 250;
@@ -164,15 +164,23 @@ impl Runner {
 
     /// A snapshot for [`crate::icd::link::Request::Status`].
     pub fn status(&self) -> StatusReport {
-        let (step, run) = match self.mode {
-            Mode::Plan { step, run, .. } => (Some(step), run),
-            _ => (None, 0),
+        let (step, repetition, remaining_samples) = match self.mode {
+            Mode::Plan { step, run, step_left } => {
+                (Some(step), run, self.remaining_samples(step, run, step_left))
+            }
+            _ => (None, 0, 0),
         };
         let silent = matches!(self.mode, Mode::Idle | Mode::Faulted);
+        let in_plan = step.is_some();
         StatusReport {
             state: self.state(),
             step,
-            run,
+            repetition,
+            // Commands are numbered by whoever queues them (the firmware's drive task).
+            run: crate::icd::link::RunNumber(0),
+            plan: if in_plan { Some(self.plan.name.clone()) } else { None },
+            remaining_samples,
+            fault: (self.mode == Mode::Faulted).then_some(crate::icd::link::Fault::Latched),
             elapsed_samples: self.elapsed,
             sample_rate: SAMPLE_RATE,
             freq_mhz: if silent { 0 } else { self.freq_mhz },
@@ -180,6 +188,16 @@ impl Runner {
             underruns: self.underruns,
             commands: self.commands,
         }
+    }
+
+    /// Samples until the plan's last step ends, from `step_left` samples before the end of
+    /// step `step` in repetition `run`.
+    fn remaining_samples(&self, step: u16, run: u16, step_left: u32) -> u64 {
+        let samples = |s: &Step| s.duration_samples() as u64;
+        let rest_of_run: u64 = self.plan.steps[step as usize + 1..].iter().map(samples).sum();
+        let per_run: u64 = self.plan.steps.iter().map(samples).sum();
+        let runs_after = self.plan.repeat.saturating_sub(run + 1) as u64;
+        step_left as u64 + rest_of_run + runs_after * per_run
     }
 
     fn set_freq(&mut self, freq_mhz: u32) {

@@ -1,84 +1,332 @@
-//! The host ↔ controller wire protocol.
+//! The messages of the host ↔ controller link: requests, their responses, and the typed
+//! refusals. Framing (COBS, CRC, envelope) is in [`crate::icd::frame`].
 //!
-//! A frame on the wire is `0x00 · COBS(postcard(Envelope)) · 0x00`: the COBS encoding leaves no
-//! zero byte inside a frame, so `0x00` delimits frames and a receiver resynchronises after
-//! garbage at the next zero. Senders put a zero *before* each frame too, which flushes whatever
-//! partial garbage the receiver may hold; empty frames are ignored.
+//! One table ([`endpoints!`](crate::endpoints)) pairs every request with the response it gets:
+//! the answer to `Request::X` is `Response::X`, or `Response::Error` (the frame could not be
+//! read) or `Response::Refused` (the request was read and refused, with the reason). Both sides
+//! build from the same table: the controller answers a request through its [`Endpoint`] type,
+//! and a client asks through it, so a client never meets a response of another kind.
 //!
-//! Every [`Envelope`] carries the protocol version and a request id; the controller answers
-//! each request with a response of the same id, or an [`Response::Error`] naming what was wrong
-//! (id 0 when the frame was too broken to read an id from).
+//! Sessions: a client picks a random session number when it connects and sends it in every
+//! envelope; answers carry it back, so clients sharing one byte stream (two programs on one
+//! serial port, a new client reading what an old one left) each take only their own.
+//! Ownership: requests that change the controller ([`Request::needs_owner`]) are taken from one
+//! session at a time, the owner; another session gets [`Refusal::Busy`] naming the owner, at
+//! once. `Stop` is taken from anyone (the shaker can always be stopped), and reads (`Status`,
+//! `ListPlans`, `GetConfig`, `GetInfo`, `Ping`) never need ownership.
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::icd::frame::{
+    CRC_LEN, ENCODE_BUF, Envelope, FrameError, FrameReader, LinkError, MAX_FRAME, PROTOCOL_VERSION,
+    decode, encode,
+};
 pub use crate::icd::plan::{Plan, PlanError, SetpointError};
+use crate::icd::store::{
+    ConfigError, DeviceConfig, PlanName, PlanPage, PlanRef, PlanSummary, StoreError, UploadBegin,
+    UploadChunk, UploadError,
+};
 
-/// Version of this protocol; bumped on any incompatible change of [`Request`] or [`Response`].
-pub const PROTOCOL_VERSION: u16 = 2;
+/// Longest client name a session may give in [`Request::Hello`].
+pub const MAX_CLIENT_NAME: usize = 40;
+/// A session loses ownership after this long without a request from it (a client that was
+/// killed cannot hold the controller for ever), milliseconds.
+pub const OWNER_LEASE_MS: u32 = 3_000;
+/// Fastest telemetry stream, samples per second.
+pub const MAX_TELEMETRY_HZ: u16 = 100;
 
-/// Largest COBS-encoded frame (without delimiters) either side accepts, in bytes.
-pub const MAX_FRAME: usize = 1024;
-
-/// What every frame carries: protocol version, request id, and the message.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Envelope<T> {
-    /// [`PROTOCOL_VERSION`] of the sender.
-    pub version: u16,
-    /// Chosen by the host; echoed in the response. 0 is reserved for "unknown".
-    pub id: u32,
-    /// The request or response.
-    pub body: T,
+/// A request type and the type of its answer: one line of the [`endpoints!`](crate::endpoints)
+/// table.
+pub trait Endpoint: Sized {
+    /// What the controller answers when it carries the request out.
+    type Reply;
+    /// Name of the request, for messages.
+    const NAME: &'static str;
+    /// The request as sent.
+    fn into_request(self) -> Request;
+    /// The response carrying `reply`.
+    fn respond(reply: Self::Reply) -> Response;
+    /// The reply, if `response` is this request's answer; else the response back.
+    fn reply(response: Response) -> Result<Self::Reply, Response>;
 }
 
-/// Requests from the host to the controller.
-// No allocator on the controller: a plan travels inline (≈ 570 bytes); requests are decoded
-// once per frame, so the size costs stack, not copies.
-#[allow(clippy::large_enum_variant)]
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Request {
-    /// Liveness check; answered by [`Response::Pong`] with the same nonce.
-    Ping {
-        /// Any value; echoed back.
-        nonce: u32,
-    },
-    /// Asks for [`DeviceInfo`].
-    GetInfo,
-    /// Manual drive: a steady sine at `freq_mhz`, amplitude ramped to `amplitude_q15`.
-    /// Answered by [`Response::Ack`] or [`Response::Rejected`].
-    Drive {
-        /// Frequency, millihertz.
-        freq_mhz: u32,
-        /// Amplitude, Q15 fraction of the DAC's full scale.
-        amplitude_q15: u16,
-    },
-    /// Runs a plan sent inline. Answered by [`Response::Ack`] or [`Response::Rejected`].
-    RunPlan(Plan),
-    /// Ramps the drive to zero and idles (clears a fault). Answered by [`Response::Ack`].
-    Stop,
-    /// Asks for the drive's [`StatusReport`] ([`Response::Status`]).
-    Status,
+/// Declares the request and response enums and one [`Endpoint`] per line:
+/// `Variant(RequestType) => ReplyType`.
+#[macro_export]
+#[doc(hidden)]
+macro_rules! endpoints {
+    ($( $(#[$doc:meta])* $name:ident ( $req:ty ) => $reply:ty; )*) => {
+        /// Requests from the host to the controller. Each is answered by the [`Response`]
+        /// variant of the same name (see [`Endpoint`]).
+        #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+        #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+        pub enum Request {
+            $( $(#[$doc])* $name($req), )*
+        }
+
+        /// Responses from the controller: one variant per request (its answer), then the
+        /// two ways any request can fail, then the telemetry stream.
+        #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+        #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+        pub enum Response {
+            $(
+                #[doc = concat!("Answer to [`Request::", stringify!($name), "`].")]
+                $name($reply),
+            )*
+            /// The frame could not be read (bad CRC, unknown message, another version).
+            Error(LinkError),
+            /// The request was read and refused; nothing was changed.
+            Refused(Refusal),
+            /// One telemetry sample, sent with the session and id of the [`Request::Subscribe`]
+            /// that asked for it.
+            Telemetry(Telemetry),
+        }
+
+        impl Request {
+            /// The request's name, for logs and messages.
+            pub const fn name(&self) -> &'static str {
+                match self { $( Request::$name(_) => stringify!($name), )* }
+            }
+        }
+
+        $(
+            impl Endpoint for $req {
+                type Reply = $reply;
+                const NAME: &'static str = stringify!($name);
+                fn into_request(self) -> Request {
+                    Request::$name(self)
+                }
+                fn respond(reply: $reply) -> Response {
+                    Response::$name(reply)
+                }
+                fn reply(response: Response) -> Result<$reply, Response> {
+                    match response {
+                        Response::$name(reply) => Ok(reply),
+                        other => Err(other),
+                    }
+                }
+            }
+        )*
+    };
 }
 
-/// Responses from the controller to the host.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+// Request types: one struct per request, so each names its reply type.
+
+/// Starts a session: names the client (shown to others while it owns the controller) and
+/// checks the protocol version. Answered with the device's identity.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Response {
-    /// Answer to [`Request::Ping`].
-    Pong {
-        /// The request's nonce.
-        nonce: u32,
+pub struct Hello {
+    /// Who is asking, e.g. `chladni device run (pid 4242)`.
+    pub client: heapless::String<MAX_CLIENT_NAME>,
+}
+
+/// Liveness check; the nonce comes back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Ping {
+    /// Any value; echoed back.
+    pub nonce: u32,
+}
+
+/// Asks for the device's identity.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct GetInfo;
+
+/// Gives up ownership (a client does so when it ends).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Release;
+
+/// Manual drive: a steady sine at `freq_mhz`, amplitude ramped to `amplitude_q15`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Drive {
+    /// Frequency, millihertz.
+    pub freq_mhz: u32,
+    /// Amplitude, Q15 fraction of the DAC's full scale.
+    pub amplitude_q15: u16,
+}
+
+/// Runs a stored plan.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RunPlan {
+    /// Which plan.
+    pub plan: PlanRef,
+    /// Repeat count instead of the stored one.
+    pub repeat: Option<u16>,
+}
+
+/// Ramps the drive to zero and idles (clears a fault). Taken from any session.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Stop;
+
+/// Asks for the drive's [`StatusReport`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct GetStatus;
+
+/// Ends an upload: checks it whole and stores it (old plan or new, never a mix).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct UploadCommit;
+
+/// Lists stored plans from slot `from_slot` on (one page; follow [`PlanPage::next`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ListPlans {
+    /// First slot to list.
+    pub from_slot: u8,
+}
+
+/// Deletes a stored plan (answered with what was deleted).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DeletePlan {
+    /// Which plan.
+    pub plan: PlanRef,
+}
+
+/// Asks for `count` telemetry samples at `rate_hz` (replacing any stream; `count` 0 stops it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Subscribe {
+    /// Samples per second, 1..=[`MAX_TELEMETRY_HZ`].
+    pub rate_hz: u16,
+    /// Samples to send, then the stream ends.
+    pub count: u32,
+}
+
+/// Asks for the stored configuration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct GetConfig;
+
+/// Replaces the configuration (checked, stored, then applied); answered with it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SetConfig(pub DeviceConfig);
+
+/// The number the controller gives a drive command (`Drive`, `RunPlan`, `Stop`) when it
+/// accepts it; [`StatusReport::run`] says which one is in effect.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RunNumber(pub u32);
+
+endpoints! {
+    /// Opens a session → the device's identity.
+    Hello(Hello) => DeviceInfo;
+    /// Liveness → the nonce.
+    Ping(Ping) => u32;
+    /// Identity.
+    GetInfo(GetInfo) => DeviceInfo;
+    /// Ends ownership.
+    Release(Release) => ();
+    /// Manual drive → its run number.
+    Drive(Drive) => RunNumber;
+    /// Runs a stored plan → its run number.
+    RunPlan(RunPlan) => RunNumber;
+    /// Stop → its run number.
+    Stop(Stop) => RunNumber;
+    /// The drive's status.
+    Status(GetStatus) => StatusReport;
+    /// Begins an upload → the slot it will go to.
+    UploadBegin(UploadBegin) => u8;
+    /// One chunk of steps → how many steps are in so far.
+    UploadChunk(UploadChunk) => u16;
+    /// Commits the upload → the stored plan.
+    UploadCommit(UploadCommit) => PlanSummary;
+    /// One page of the plan list.
+    ListPlans(ListPlans) => PlanPage;
+    /// Deletes a plan → what was deleted.
+    DeletePlan(DeletePlan) => PlanSummary;
+    /// Starts (or ends) the telemetry stream.
+    Subscribe(Subscribe) => ();
+    /// The configuration.
+    GetConfig(GetConfig) => DeviceConfig;
+    /// Sets the configuration → the configuration now in effect.
+    SetConfig(SetConfig) => DeviceConfig;
+}
+
+impl Request {
+    /// Whether only the owning session may send this request (it changes the controller).
+    /// `Stop` is not among them: anyone may stop the shaker.
+    pub const fn needs_owner(&self) -> bool {
+        matches!(
+            self,
+            Request::Drive(_)
+                | Request::RunPlan(_)
+                | Request::UploadBegin(_)
+                | Request::UploadChunk(_)
+                | Request::UploadCommit(_)
+                | Request::DeletePlan(_)
+                | Request::Subscribe(_)
+                | Request::SetConfig(_)
+        )
+    }
+}
+
+/// Why a request that was read was not carried out.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Refusal {
+    /// Another session owns the controller.
+    Busy {
+        /// The owner's name from its `Hello` (empty if it sent none).
+        owner: heapless::String<MAX_CLIENT_NAME>,
+        /// How long ago the owner's last request arrived, ms; ownership lapses at
+        /// [`OWNER_LEASE_MS`].
+        idle_ms: u32,
     },
-    /// Answer to [`Request::GetInfo`].
-    Info(DeviceInfo),
-    /// The request could not be carried out.
-    Error(LinkError),
-    /// The drive's state (answer to [`Request::Status`]).
-    Status(StatusReport),
-    /// The command was accepted and queued for the drive.
-    Ack,
-    /// The drive refused the command (invalid plan or setpoint, faulted, busy).
-    Rejected(DriveError),
+    /// The drive refused the command.
+    Drive(DriveError),
+    /// An upload request was refused.
+    Upload(UploadError),
+    /// The store could not do it.
+    Store(StoreError),
+    /// The configuration was refused.
+    Config(ConfigError),
+    /// The telemetry rate is outside 1..=[`MAX_TELEMETRY_HZ`].
+    TelemetryRate {
+        /// The rate asked for.
+        rate_hz: u16,
+    },
+}
+
+impl core::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Refusal::Busy { owner, idle_ms } => {
+                let owner = if owner.is_empty() { "another client" } else { owner.as_str() };
+                write!(
+                    f,
+                    "the controller is busy: {owner} holds it (last request {idle_ms} ms ago)"
+                )
+            }
+            Refusal::Drive(e) => write!(f, "{e}"),
+            Refusal::Upload(e) => write!(f, "upload refused: {e}"),
+            Refusal::Store(e) => write!(f, "{e}"),
+            Refusal::Config(e) => write!(f, "configuration refused: {e}"),
+            Refusal::TelemetryRate { rate_hz } => {
+                write!(f, "telemetry rate {rate_hz} Hz is outside 1..={MAX_TELEMETRY_HZ} Hz")
+            }
+        }
+    }
+}
+
+/// One telemetry sample.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Telemetry {
+    /// Sample number in this stream, from 0 (a gap means samples were lost).
+    pub seq: u32,
+    /// Samples still to come after this one.
+    pub left: u32,
+    /// The drive's status at the sample.
+    pub status: StatusReport,
 }
 
 // ---- The drive's status and refusals ----
@@ -114,8 +362,8 @@ impl DriveState {
     }
 }
 
-/// A snapshot of the drive, as answered to [`crate::icd::link::Request::Status`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+/// A snapshot of the drive, as answered to [`Request::Status`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct StatusReport {
     /// What the drive is doing.
@@ -123,7 +371,15 @@ pub struct StatusReport {
     /// Index of the plan step being run; `None` outside a plan (idle, manual, final ramp).
     pub step: Option<u16>,
     /// Which repetition of the plan is running (0-based).
-    pub run: u16,
+    pub repetition: u16,
+    /// The run number of the drive command in effect (0: none since reset).
+    pub run: RunNumber,
+    /// Name of the plan being run; `None` outside a plan.
+    pub plan: Option<PlanName>,
+    /// Samples left until the plan's last step ends (0 outside a plan).
+    pub remaining_samples: u64,
+    /// The latched fault, while [`DriveState::Faulted`].
+    pub fault: Option<Fault>,
     /// Samples output since the current plan or manual drive started (kept when idle).
     pub elapsed_samples: u64,
     /// Samples per second, to turn `elapsed_samples` into time.
@@ -143,6 +399,11 @@ impl StatusReport {
     pub fn elapsed_ms(&self) -> f64 {
         self.elapsed_samples as f64 * 1000.0 / self.sample_rate as f64
     }
+
+    /// `remaining_samples` in milliseconds.
+    pub fn remaining_ms(&self) -> f64 {
+        self.remaining_samples as f64 * 1000.0 / self.sample_rate as f64
+    }
 }
 
 /// Why a command was not applied.
@@ -156,7 +417,24 @@ pub enum DriveError {
     /// The drive is faulted; send a stop to clear it first.
     Faulted,
     /// The drive's command queue is full; try again.
-    Busy,
+    QueueFull,
+}
+
+/// Why the drive latched a fault.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Fault {
+    /// The fault latch was set by the firmware (the sensing work names its causes).
+    Latched,
+}
+
+impl Fault {
+    /// Lowercase name as printed by the CLI.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Fault::Latched => "latched",
+        }
+    }
 }
 
 impl core::fmt::Display for DriveError {
@@ -165,7 +443,7 @@ impl core::fmt::Display for DriveError {
             DriveError::Plan(e) => write!(f, "invalid plan: {e}"),
             DriveError::Setpoint(e) => write!(f, "invalid setpoint: {e}"),
             DriveError::Faulted => write!(f, "drive is faulted (send stop to clear)"),
-            DriveError::Busy => write!(f, "drive command queue full"),
+            DriveError::QueueFull => write!(f, "drive command queue full (try again)"),
         }
     }
 }
@@ -206,259 +484,41 @@ pub struct DeviceInfo {
     pub build_id: u32,
 }
 
-/// Why a frame or request was refused. Sent back as [`Response::Error`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum LinkError {
-    /// The bytes between two delimiters are not valid COBS.
-    BadCobs,
-    /// A frame grew past [`MAX_FRAME`] bytes before its delimiter; it was dropped.
-    FrameTooLong {
-        /// The limit, [`MAX_FRAME`].
-        max: u16,
-    },
-    /// The sender speaks another protocol version.
-    UnsupportedVersion {
-        /// Version in the frame.
-        got: u16,
-        /// Version this side speaks.
-        supported: u16,
-    },
-    /// The frame decoded, but not as a known message (unknown variant, truncated, trailing bytes).
-    Malformed,
-}
-
-impl core::fmt::Display for LinkError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            LinkError::BadCobs => write!(f, "frame is not valid COBS"),
-            LinkError::FrameTooLong { max } => write!(f, "frame longer than {max} bytes"),
-            LinkError::UnsupportedVersion { got, supported } => {
-                write!(f, "protocol version {got} not supported (this side speaks {supported})")
-            }
-            LinkError::Malformed => write!(f, "frame does not decode as a known message"),
-        }
-    }
-}
-
-/// A frame that could not be decoded, with the request id when it was readable (else 0).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct FrameError {
-    /// Id to answer with: the frame's own if it got that far, else 0.
-    pub id: u32,
-    /// What was wrong.
-    pub error: LinkError,
-}
-
-/// Encodes `0x00 · COBS(postcard(envelope)) · 0x00` into `buf`; returns the bytes to send.
-///
-/// Fails only if `buf` is too small (it needs `MAX_FRAME + 2` bytes for any frame).
-pub fn encode<'a, T: Serialize>(
-    envelope: &Envelope<T>,
-    buf: &'a mut [u8],
-) -> Result<&'a [u8], postcard::Error> {
-    let (lead, rest) = buf.split_first_mut().ok_or(postcard::Error::SerializeBufferFull)?;
-    *lead = 0;
-    let used = postcard::to_slice_cobs(envelope, rest)?.len();
-    Ok(&buf[..1 + used])
-}
-
-/// Decodes one frame as returned by [`FrameReader::push`] (COBS bytes, no delimiters).
-///
-/// The frame is decoded in place, so `frame` is scratch afterwards.
-pub fn decode<T: for<'de> Deserialize<'de>>(frame: &mut [u8]) -> Result<Envelope<T>, FrameError> {
-    let unknown = |error| FrameError { id: 0, error };
-    let len = cobs::decode_in_place(frame).map_err(|_| unknown(LinkError::BadCobs))?;
-    let data = &frame[..len];
-    let (version, rest) =
-        postcard::take_from_bytes::<u16>(data).map_err(|_| unknown(LinkError::Malformed))?;
-    let (id, rest) =
-        postcard::take_from_bytes::<u32>(rest).map_err(|_| unknown(LinkError::Malformed))?;
-    if version != PROTOCOL_VERSION {
-        return Err(FrameError {
-            id,
-            error: LinkError::UnsupportedVersion { got: version, supported: PROTOCOL_VERSION },
-        });
-    }
-    match postcard::take_from_bytes::<T>(rest) {
-        Ok((body, [])) => Ok(Envelope { version, id, body }),
-        _ => Err(FrameError { id, error: LinkError::Malformed }),
-    }
-}
-
-/// Splits a byte stream into frames at `0x00` delimiters.
-///
-/// Holds at most `N` bytes of one frame; a longer frame is dropped and reported as
-/// [`LinkError::FrameTooLong`] when its delimiter finally arrives, so a flood of garbage never
-/// stalls the reader.
-#[derive(Debug)]
-pub struct FrameReader<const N: usize = MAX_FRAME> {
-    buf: heapless::Vec<u8, N>,
-    overflowed: bool,
-    frame_ready: bool,
-}
-
-impl<const N: usize> Default for FrameReader<N> {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl<const N: usize> FrameReader<N> {
-    /// An empty reader.
-    pub const fn new() -> Self {
-        Self { buf: heapless::Vec::new(), overflowed: false, frame_ready: false }
-    }
-
-    /// Feeds one byte. Returns a complete frame (COBS bytes without delimiters, to pass to
-    /// [`decode`]) when `byte` is a delimiter ending a non-empty frame, or the error of an
-    /// over-long one. Empty frames (consecutive delimiters) return `None`.
-    pub fn push(&mut self, byte: u8) -> Option<Result<&mut [u8], LinkError>> {
-        if self.frame_ready {
-            self.buf.clear();
-            self.frame_ready = false;
-        }
-        if byte != 0 {
-            if self.buf.push(byte).is_err() {
-                self.overflowed = true;
-            }
-            return None;
-        }
-        if self.overflowed {
-            self.overflowed = false;
-            self.buf.clear();
-            return Some(Err(LinkError::FrameTooLong { max: N as u16 }));
-        }
-        if self.buf.is_empty() {
-            return None;
-        }
-        self.frame_ready = true;
-        Some(Ok(&mut self.buf[..]))
-    }
-}
-
 #[cfg(test)]
 mod tests {
     extern crate std;
     use super::*;
-    use std::vec::Vec;
 
-    fn frames_of(bytes: &[u8]) -> Vec<Result<Envelope<Request>, FrameError>> {
-        let mut reader = FrameReader::<MAX_FRAME>::new();
-        let mut out = Vec::new();
-        for &b in bytes {
-            match reader.push(b) {
-                Some(Ok(frame)) => out.push(decode::<Request>(frame)),
-                Some(Err(error)) => out.push(Err(FrameError { id: 0, error })),
-                None => {}
-            }
-        }
-        out
-    }
-
-    fn wire(id: u32, body: Request) -> Vec<u8> {
-        let mut buf = [0u8; MAX_FRAME + 2];
-        encode(&Envelope { version: PROTOCOL_VERSION, id, body }, &mut buf).unwrap().to_vec()
-    }
-
-    #[test]
-    fn request_round_trips() {
-        let bytes = wire(7, Request::Ping { nonce: 0xdead_beef });
-        assert_eq!(bytes[0], 0);
-        assert_eq!(*bytes.last().unwrap(), 0);
-        assert!(!bytes[1..bytes.len() - 1].contains(&0));
-        let got = frames_of(&bytes);
-        assert_eq!(
-            got,
-            [Ok(Envelope {
-                version: PROTOCOL_VERSION,
-                id: 7,
-                body: Request::Ping { nonce: 0xdead_beef }
-            })]
-        );
-    }
-
-    #[test]
-    fn response_round_trips() {
-        let info = DeviceInfo {
-            firmware_version: heapless::String::try_from("0.1.0").unwrap(),
-            board: Board::Qemu,
-            protocol_version: PROTOCOL_VERSION,
-            build_id: 0x1234_5678,
-        };
-        let env = Envelope { version: PROTOCOL_VERSION, id: 99, body: Response::Info(info) };
-        let mut buf = [0u8; MAX_FRAME + 2];
+    fn round_trip(body: Response) {
+        let env = Envelope { version: PROTOCOL_VERSION, session: 5, id: 99, body };
+        let mut buf = [0u8; ENCODE_BUF];
         let bytes = encode(&env, &mut buf).unwrap().to_vec();
         let mut frame = bytes[1..bytes.len() - 1].to_vec();
         assert_eq!(decode::<Response>(&mut frame), Ok(env));
     }
 
     #[test]
-    fn other_version_is_refused_with_its_id() {
-        let mut buf = [0u8; 64];
-        let env = Envelope { version: 9, id: 42, body: Request::GetInfo };
-        let bytes = encode(&env, &mut buf).unwrap().to_vec();
-        assert_eq!(
-            frames_of(&bytes),
-            [Err(FrameError {
-                id: 42,
-                error: LinkError::UnsupportedVersion { got: 9, supported: PROTOCOL_VERSION }
-            })]
-        );
+    fn responses_round_trip() {
+        round_trip(Response::GetInfo(DeviceInfo {
+            firmware_version: "0.1.0".try_into().unwrap(),
+            board: Board::Qemu,
+            protocol_version: PROTOCOL_VERSION,
+            build_id: 0x1234_5678,
+        }));
+        round_trip(Response::Refused(Refusal::Busy { owner: "x".try_into().unwrap(), idle_ms: 7 }));
+        round_trip(Response::Stop(RunNumber(3)));
     }
 
     #[test]
-    fn unknown_variant_and_trailing_bytes_are_malformed() {
-        // this version, id 5, variant 200 (no such request)
-        let mut raw = postcard::to_stdvec(&(PROTOCOL_VERSION, 5u32)).unwrap();
-        raw.push(200);
-        let mut frame = cobs::encode_vec(&raw);
-        assert_eq!(
-            decode::<Request>(&mut frame),
-            Err(FrameError { id: 5, error: LinkError::Malformed })
-        );
-        let mut raw = postcard::to_stdvec(&Envelope {
-            version: PROTOCOL_VERSION,
-            id: 6,
-            body: Request::GetInfo,
-        })
-        .unwrap();
-        raw.push(0x55);
-        let mut frame = cobs::encode_vec(&raw);
-        assert_eq!(
-            decode::<Request>(&mut frame),
-            Err(FrameError { id: 6, error: LinkError::Malformed })
-        );
-    }
-
-    #[test]
-    fn overlong_frame_is_dropped_and_reader_recovers() {
-        let mut bytes = std::vec![0x11u8; MAX_FRAME + 10];
-        bytes.push(0);
-        bytes.extend(wire(3, Request::GetInfo));
-        let got = frames_of(&bytes);
-        assert_eq!(got.len(), 2);
-        assert_eq!(
-            got[0],
-            Err(FrameError { id: 0, error: LinkError::FrameTooLong { max: MAX_FRAME as u16 } })
-        );
-        assert_eq!(
-            got[1],
-            Ok(Envelope { version: PROTOCOL_VERSION, id: 3, body: Request::GetInfo })
-        );
-    }
-
-    proptest::proptest! {
-        /// Whatever garbage came before, a frame sent with its leading delimiter is read intact.
-        #[test]
-        fn garbage_never_hides_the_next_frame(garbage in proptest::collection::vec(proptest::num::u8::ANY, 0..3000), nonce: u32) {
-            let mut bytes = garbage.clone();
-            bytes.extend(wire(0xabcd, Request::Ping { nonce }));
-            let got = frames_of(&bytes);
-            proptest::prop_assert_eq!(
-                got.last().cloned(),
-                Some(Ok(Envelope { version: PROTOCOL_VERSION, id: 0xabcd, body: Request::Ping { nonce } }))
-            );
-        }
+    fn each_request_names_its_response() {
+        let pong = <Ping as Endpoint>::respond(0xfeed);
+        assert_eq!(pong, Response::Ping(0xfeed));
+        assert_eq!(Ping::reply(pong), Ok(0xfeed));
+        // Another request's answer is handed back, not misread.
+        assert_eq!(GetStatus::reply(Response::Ping(1)), Err(Response::Ping(1)));
+        assert_eq!(Ping { nonce: 1 }.into_request().name(), "Ping");
+        assert!(Drive { freq_mhz: 1, amplitude_q15: 1 }.into_request().needs_owner());
+        assert!(!Stop.into_request().needs_owner());
+        assert!(!GetStatus.into_request().needs_owner());
     }
 }
