@@ -13,7 +13,8 @@
 //! Ownership: requests that change the controller ([`Request::needs_owner`]) are taken from one
 //! session at a time, the owner; another session gets [`Refusal::Busy`] naming the owner, at
 //! once. `Stop` is taken from anyone (the shaker can always be stopped), and reads (`Status`,
-//! `ListPlans`, `GetConfig`, `GetInfo`, `Ping`) never need ownership.
+//! `ListPlans`, `GetConfig`, `GetInfo`, `Ping`, and the one telemetry stream, `Subscribe`)
+//! never need ownership.
 
 use serde::{Deserialize, Serialize};
 
@@ -32,6 +33,13 @@ pub const MAX_CLIENT_NAME: usize = 40;
 /// A session loses ownership after this long without a request from it (a client that was
 /// killed cannot hold the controller for ever), milliseconds.
 pub const OWNER_LEASE_MS: u32 = 3_000;
+/// USB vendor id of the controller's CDC-ACM interface (pid.codes, the open-source vendor id).
+pub const USB_VID: u16 = 0x1209;
+/// USB product id of the controller (a pid.codes test id until the product registers its own).
+pub const USB_PID: u16 = 0x0001;
+/// USB product string of the controller.
+pub const USB_PRODUCT: &str = "Chladni feeder controller";
+
 /// Fastest telemetry stream, samples per second.
 pub const MAX_TELEMETRY_HZ: u16 = 100;
 
@@ -263,7 +271,6 @@ impl Request {
                 | Request::UploadChunk(_)
                 | Request::UploadCommit(_)
                 | Request::DeletePlan(_)
-                | Request::Subscribe(_)
                 | Request::SetConfig(_)
         )
     }

@@ -45,8 +45,9 @@ pub struct UploadBegin {
     /// Slot to store into; `None`: the slot of the plan with this name if there is one, else
     /// the lowest free slot below [`SCRATCH_SLOT`].
     pub slot: Option<u8>,
-    /// The plan's name (unique in the store: an upload under another plan's name into another
-    /// slot is refused).
+    /// The plan's name: unique among slots below [`SCRATCH_SLOT`] (an upload under another
+    /// plan's name into another such slot is refused); the scratch slot may repeat a name, and a
+    /// lookup by name tries the other slots first.
     pub name: PlanName,
     /// How many times the steps run.
     pub repeat: u16,
