@@ -194,8 +194,9 @@ pub fn new(
     let mut config = embassy_usb::Config::new(USB_VID, USB_PID);
     config.product = Some(USB_PRODUCT);
     config.serial_number = Some(embassy_stm32::uid::uid_hex());
-    // Defaults kept: USB 2.1, composite with interface association descriptors (what Windows
-    // needs to bind its own CDC driver, usbser.sys, without an .inf), bus-powered, 100 mA.
+    // Defaults kept: USB 2.1; composite with an interface association descriptor grouping the
+    // two CDC interfaces (Windows then binds its built-in usbser.sys, no .inf); bus-powered,
+    // 100 mA.
 
     let mut builder = embassy_usb::Builder::new(
         driver,
