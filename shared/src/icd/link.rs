@@ -55,6 +55,8 @@ pub trait Endpoint: Sized {
     /// The response carrying `reply`.
     fn respond(reply: Self::Reply) -> Response;
     /// The reply, if `response` is this request's answer; else the response back.
+    // The response comes back whole so the caller can name it; no allocator to box it.
+    #[allow(clippy::result_large_err)]
     fn reply(response: Response) -> Result<Self::Reply, Response>;
 }
 
@@ -66,6 +68,8 @@ macro_rules! endpoints {
     ($( $(#[$doc:meta])* $name:ident ( $req:ty ) => $reply:ty; )*) => {
         /// Requests from the host to the controller. Each is answered by the [`Response`]
         /// variant of the same name (see [`Endpoint`]).
+        // An upload chunk rides inline (no allocator on the controller to box it).
+        #[allow(clippy::large_enum_variant)]
         #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
         #[cfg_attr(feature = "defmt", derive(defmt::Format))]
         pub enum Request {
@@ -74,6 +78,8 @@ macro_rules! endpoints {
 
         /// Responses from the controller: one variant per request (its answer), then the
         /// two ways any request can fail, then the telemetry stream.
+        // A plan page rides inline (no allocator on the controller to box it).
+        #[allow(clippy::large_enum_variant)]
         #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
         #[cfg_attr(feature = "defmt", derive(defmt::Format))]
         pub enum Response {
@@ -107,6 +113,7 @@ macro_rules! endpoints {
                 fn respond(reply: $reply) -> Response {
                     Response::$name(reply)
                 }
+                #[allow(clippy::result_large_err)]
                 fn reply(response: Response) -> Result<$reply, Response> {
                     match response {
                         Response::$name(reply) => Ok(reply),
