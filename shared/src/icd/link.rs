@@ -523,6 +523,48 @@ mod tests {
         round_trip(Response::Stop(RunNumber(3)));
     }
 
+    /// The worked example of docs/protocol.md, byte for byte.
+    #[test]
+    fn documented_ping_frame() {
+        let env = Envelope {
+            version: PROTOCOL_VERSION,
+            session: 0x1234_5678,
+            id: 1,
+            body: Request::Ping(Ping { nonce: 0x0102_0304 }),
+        };
+        let mut buf = [0u8; ENCODE_BUF];
+        let wire = encode(&env, &mut buf).unwrap();
+        assert_eq!(
+            wire,
+            [
+                0x00, 0x11, 0x02, 0xf8, 0xac, 0xd1, 0x91, 0x01, 0x01, 0x01, 0x84, 0x86, 0x88, 0x08,
+                0x1d, 0xf8, 0x95, 0xdd, 0x00
+            ]
+        );
+        // Variant numbers are the table's order: a client in another language relies on them.
+        let requests = [
+            Request::Hello(Hello { client: heapless::String::new() }),
+            Request::Ping(Ping { nonce: 0 }),
+            Request::GetInfo(GetInfo),
+            Request::Release(Release),
+            Request::Drive(Drive { freq_mhz: 0, amplitude_q15: 0 }),
+            Request::RunPlan(RunPlan { plan: crate::icd::store::PlanRef::Slot(0), repeat: None }),
+            Request::Stop(Stop),
+            Request::Status(GetStatus),
+            Request::UploadCommit(UploadCommit),
+            Request::ListPlans(ListPlans { from_slot: 0 }),
+            Request::Subscribe(Subscribe { rate_hz: 1, count: 1 }),
+            Request::GetConfig(GetConfig),
+        ];
+        let numbers: std::vec::Vec<u8> =
+            requests.iter().map(|r| postcard::to_stdvec(r).unwrap()[0]).collect();
+        assert_eq!(numbers, [0, 1, 2, 3, 4, 5, 6, 7, 10, 11, 13, 14]);
+        let error = postcard::to_stdvec(&Response::Error(LinkError::BadCrc)).unwrap();
+        let refused =
+            postcard::to_stdvec(&Response::Refused(Refusal::TelemetryRate { rate_hz: 0 }));
+        assert_eq!((error[0], refused.unwrap()[0]), (16, 17));
+    }
+
     #[test]
     fn each_request_names_its_response() {
         let pong = <Ping as Endpoint>::respond(0xfeed);
