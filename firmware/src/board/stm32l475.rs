@@ -26,6 +26,7 @@
 //! embassy sources but not yet run on a board (QEMU models neither); docs/firmware.md has the
 //! bring-up checklist.
 
+pub mod bank2;
 pub mod clocks;
 pub mod console;
 pub mod dac;
@@ -46,10 +47,11 @@ pub const BOARD: chladni_shared::icd::link::Board = chladni_shared::icd::link::B
 pub type Link = usb::UsbLink;
 
 /// Flash bank 2, for the plan store: embassy-stm32's async region (native async on the L4:
-/// program and erase complete through the FLASH interrupt). Offsets are relative to the start
-/// of the bank (0x0808_0000); 2 KiB pages, 8-byte (double-word) writes, erased state 0xFF, and
-/// a double word can be written only once between erases.
-pub type Flash = flash::Bank2Region<'static, flash::Async>;
+/// program and erase complete through the FLASH interrupt) with the L4's data cache erratum and
+/// ECC errors handled ([`bank2`]). Offsets are relative to the start of the bank (0x0808_0000);
+/// 2 KiB pages, 8-byte (double-word) writes, erased state 0xFF, and a double word can be
+/// written only once between erases.
+pub type Flash = bank2::Bank2;
 
 /// Offsets within [`Flash`] given to the plan store: all of bank 2 (256 pages of 2 KiB).
 pub const STORE_RANGE: Range<u32> = 0..flash::BANK2_REGION.size;
@@ -99,7 +101,7 @@ pub fn init() -> Board {
     pac::DBGMCU.apb1fzr1().modify(|w| w.set_tim6(true));
     console::start(p.USART1, p.PB6);
     let (link, usb) = usb::new(p.USB_OTG_FS, p.PA12, p.PA11);
-    let flash = flash::Flash::new(p.FLASH, Irqs).into_regions().bank2_region;
+    let flash = bank2::Bank2::new(flash::Flash::new(p.FLASH, Irqs).into_regions().bank2_region);
     let drive = dac::DacOutput::new(p.DAC1, p.PA4, p.DMA1_CH3, p.TIM6);
     Board { link, flash: Some(flash), drive, tasks: BoardTasks { usb } }
 }

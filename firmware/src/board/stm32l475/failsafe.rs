@@ -106,12 +106,35 @@ fn hard_fault() -> ! {
     cortex_m::asm::udf()
 }
 
+// SAFETY (of defining the handler, which cortex-m-rt marks unsafe): it only parks through raw
+// register writes, logs and halts; it never returns into the faulting code.
 #[cortex_m_rt::exception]
 unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
     park_output();
     detach_usb();
     if !PANICKED.load(Ordering::Relaxed) {
         defmt::error!("hard fault at pc {=u32:#010x}", frame.pc());
+        report_output();
+    }
+    halt()
+}
+
+/// NMI: an uncorrectable ECC error in flash bank 2 (the plan store) is data, absorbed and
+/// returned from ([`super::bank2`]); anything else (an ECC error in the program itself, an SRAM2
+/// parity error) is a fault: park, detach, log, halt, as for a HardFault. (cortex-m-rt's
+/// default NMI handler would spin with the DMA still replaying the ring.)
+// SAFETY (of defining the handler, which cortex-m-rt marks unsafe because an NMI preempts even
+// critical sections): it touches only FLASH_ECCR, an atomic counter and the parking registers,
+// all of which are safe to access from any context.
+#[cortex_m_rt::exception]
+unsafe fn NonMaskableInt() {
+    if super::bank2::absorb_ecc_error() {
+        return;
+    }
+    park_output();
+    detach_usb();
+    if !PANICKED.load(Ordering::Relaxed) {
+        defmt::error!("NMI (not an ECC error in flash bank 2)");
         report_output();
     }
     halt()
