@@ -7,11 +7,13 @@
 //!   ([`console`]); defmt logs go over RTT.
 //! - Drive ([`DriveOutput`]): DAC1 ch1 on PA4, TIM6-paced, fed by circular DMA ([`dac`]).
 //! - Plan store ([`Flash`]): flash bank 2 (0x0808_0000, 512 KiB), async through the FLASH
-//!   interrupt. The program is linked into bank 1 only (memory.x: FLASH = 512 KiB at
+//!   interrupt ([`bank2`]: with the L47x data cache erratum worked around and ECC errors read
+//!   as data). The program is linked into bank 1 only (memory.x: FLASH = 512 KiB at
 //!   0x0800_0000), and the L475's two banks are read-while-write, so erasing a plan page
 //!   (about 22 ms) never stalls the code running from bank 1.
 //! - Clocks ([`clocks`]): 80 MHz SYSCLK and 48 MHz USB from MSI locked to the 32.768 kHz crystal.
-//! - A panic or HardFault parks the output at mid-scale first ([`failsafe`]).
+//! - A panic, HardFault or unexpected NMI parks the output at mid-scale first, then detaches
+//!   from USB ([`failsafe`]).
 //!
 //! Scheduling: every task (link, drive, USB device, ...) runs on one thread-mode executor, so
 //! none preempts another; the drive must refill half its ring within one block (5 ms). The USB
