@@ -338,7 +338,16 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         let Backend::Map(map) = &mut self.backend else {
             return Err(StoreError::Flash);
         };
-        if let Err(e) = scan(map, &mut self.buf.0, &mut self.index, &self.geometry).await {
+        let mut scanned = scan(map, &mut self.buf.0, &mut self.index, &self.geometry).await;
+        if matches!(scanned, Err(sequential_storage::Error::Corrupted { .. })) {
+            // A page whose erase was cut. sequential-storage 8.0.2's `fetch_all_items` returns
+            // that without repairing it (its `?` escapes its own auto-repair); `fetch_item`
+            // meets the same page first and does repair it. Then read again.
+            let _ = map.fetch_item::<&[u8]>(&mut self.buf.0, &ItemKey::Config.raw()).await;
+            self.index.clear();
+            scanned = scan(map, &mut self.buf.0, &mut self.index, &self.geometry).await;
+        }
+        if let Err(e) = scanned {
             defmt::warn!("plan store: reading the flash failed: {}", describe(&e));
             return Err(StoreError::Flash);
         }

@@ -34,15 +34,15 @@ fn reopen(store: PlanStore<MockFlash>, pages: usize) -> PlanStore<MockFlash> {
     PlanStore::new(store.into_flash().revive(), range(pages))
 }
 
-/// Step `i` of a plan made from `seed`: valid under the default limits, and different for
-/// every seed.
+/// Step `i` of a plan made from `seed`: valid under the default limits (also in a plan of 256
+/// steps repeated 3 times), and different for every seed.
 fn step(i: usize, seed: u32) -> Step {
     let x = (i as u32).wrapping_mul(2_654_435_761) ^ seed.wrapping_mul(40_503);
     Step {
         freq_mhz: 1_000 + x % 1_999_000,
         amplitude_q15: (x >> 7) as u16 % 32_768,
-        duration_ms: 1 + x % 5_000,
-        ramp_ms: x % 7,
+        duration_ms: 1 + x % 4_000,
+        ramp_ms: (x % 7).min(1 + x % 4_000),
     }
 }
 
