@@ -99,7 +99,8 @@ impl<F: NorFlash> PlanStore<F> {
     /// A store in `range` of `flash` (page-aligned, at least two pages; more than
     /// [`MAX_PAGES`] pages are cut to that). Nothing is read until the first request.
     pub fn new(flash: F, range: Range<u32>) -> Self {
-        let cache = Cache::new(ArrayPageStates::new(), ArrayPagePointers::new(), ArrayKeyPointers::new());
+        let cache =
+            Cache::new(ArrayPageStates::new(), ArrayPagePointers::new(), ArrayKeyPointers::new());
         Self::with_cache(flash, range, cache)
     }
 }
@@ -177,7 +178,11 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
     }
 
     /// Begins an upload (replacing any in progress); the slot it will store into.
-    pub async fn begin(&mut self, begin: UploadBegin, limits: &DeviceLimits) -> Result<u8, Refusal> {
+    pub async fn begin(
+        &mut self,
+        begin: UploadBegin,
+        limits: &DeviceLimits,
+    ) -> Result<u8, Refusal> {
         self.ensure_open().await.map_err(Refusal::Store)?;
         if let Some(slot) = begin.slot.filter(|&s| s >= PLAN_SLOTS) {
             return Err(Refusal::Upload(UploadError::BadSlot { slot }));
@@ -210,7 +215,11 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
     }
 
     /// Stores the next chunk of the upload; steps received so far.
-    pub async fn chunk(&mut self, chunk: UploadChunk, limits: &DeviceLimits) -> Result<u16, Refusal> {
+    pub async fn chunk(
+        &mut self,
+        chunk: UploadChunk,
+        limits: &DeviceLimits,
+    ) -> Result<u16, Refusal> {
         self.ensure_open().await.map_err(Refusal::Store)?;
         let upload = self.upload.as_ref().ok_or(Refusal::Upload(UploadError::NotStarted))?;
         let index = upload.check(&chunk, limits).map_err(Refusal::Upload)?;

@@ -146,9 +146,12 @@ impl Index {
         if upload_bank == Some(bank) {
             return 0;
         }
-        let keep = self.plans.iter().flatten().find(|p| p.bank == bank).map_or(0, |p| {
-            (((1u16 << p.chunks()) - 1) & 0xff) as u8
-        });
+        let keep = self
+            .plans
+            .iter()
+            .flatten()
+            .find(|p| p.bank == bank)
+            .map_or(0, |p| (((1u16 << p.chunks()) - 1) & 0xff) as u8);
         self.banks[bank as usize].live & !keep
     }
 
@@ -156,8 +159,8 @@ impl Index {
     pub fn summary(&self, slot: u8) -> Option<PlanSummary> {
         let p = self.plan(slot)?;
         let sizes = &self.banks[p.bank as usize].sizes[..p.chunks() as usize];
-        let bytes = self.header_sizes[slot as usize] as u32
-            + sizes.iter().map(|&s| s as u32).sum::<u32>();
+        let bytes =
+            self.header_sizes[slot as usize] as u32 + sizes.iter().map(|&s| s as u32).sum::<u32>();
         Some(PlanSummary {
             slot,
             name: p.name.clone(),
@@ -173,8 +176,7 @@ impl Index {
     /// chunks of an upload in progress), bytes.
     pub fn live_bytes(&self) -> u32 {
         let headers: u32 = self.header_sizes.iter().map(|&s| s as u32).sum();
-        let chunks: u32 =
-            self.banks.iter().flat_map(|b| b.sizes.iter()).map(|&s| s as u32).sum();
+        let chunks: u32 = self.banks.iter().flat_map(|b| b.sizes.iter()).map(|&s| s as u32).sum();
         headers + chunks + self.config_size as u32
     }
 

@@ -98,9 +98,7 @@ impl NorFlashError for MockFlashError {
         match self {
             MockFlashError::OutOfBounds => NorFlashErrorKind::OutOfBounds,
             MockFlashError::NotAligned => NorFlashErrorKind::NotAligned,
-            MockFlashError::NotErased { .. } | MockFlashError::PowerCut => {
-                NorFlashErrorKind::Other
-            }
+            MockFlashError::NotErased { .. } | MockFlashError::PowerCut => NorFlashErrorKind::Other,
         }
     }
 }

@@ -42,11 +42,6 @@ impl Upload {
         }
     }
 
-    /// Steps received so far.
-    pub fn received(&self) -> u16 {
-        self.received
-    }
-
     /// The number of the next chunk expected.
     fn next_index(&self) -> u16 {
         (self.received as usize).div_ceil(CHUNK_STEPS) as u16
@@ -65,11 +60,7 @@ impl Upload {
         let expected = (self.steps - self.received).min(CHUNK_STEPS as u16);
         let got = chunk.steps.len() as u16;
         if got != expected || expected == 0 {
-            return Err(UploadError::BadChunkLength {
-                index: chunk.index,
-                steps: got,
-                expected,
-            });
+            return Err(UploadError::BadChunkLength { index: chunk.index, steps: got, expected });
         }
         for (i, step) in chunk.steps.iter().enumerate() {
             limits.check_step(self.received + i as u16, step).map_err(UploadError::Plan)?;

@@ -257,4 +257,3 @@ proptest! {
         case.check(flash);
     }
 }
-

@@ -204,7 +204,10 @@ fn commit_checks_the_whole_plan() {
     }
     assert_eq!(
         block_on(s.commit(&LIMITS)),
-        upload_err(UploadError::CrcMismatch { expected: plan_crc(&p) ^ 0x55, got: plan_crc(&other) })
+        upload_err(UploadError::CrcMismatch {
+            expected: plan_crc(&p) ^ 0x55,
+            got: plan_crc(&other)
+        })
     );
     assert_eq!(block_on(s.commit(&LIMITS)), upload_err(UploadError::NotStarted));
     assert_eq!(load(&mut s, slot_of(&p)).unwrap(), p, "the old plan is kept");
@@ -215,7 +218,10 @@ fn commit_checks_the_whole_plan() {
     long.repeat = 2;
     assert_eq!(
         upload(&mut s, &long, None),
-        upload_err(UploadError::Plan(PlanError::TooLong { total_ms: 4_000_000, max_ms: 3_600_000 }))
+        upload_err(UploadError::Plan(PlanError::TooLong {
+            total_ms: 4_000_000,
+            max_ms: 3_600_000
+        }))
     );
     let (listed, free) = list_all(&mut s).unwrap();
     assert_eq!(listed.len(), 1);
@@ -342,7 +348,10 @@ fn a_damaged_chunk_reads_as_corrupt() {
     flash.bytes_mut()[at + encoded.len() - 1] ^= 0x01;
     let mut s = PlanStore::new(flash.revive(), range(8));
     assert_eq!(list_all(&mut s).unwrap().0.len(), 1, "the header is intact");
-    assert_eq!(load(&mut s, PlanRef::Slot(0)), Err(Refusal::Store(StoreError::Corrupt { slot: 0 })));
+    assert_eq!(
+        load(&mut s, PlanRef::Slot(0)),
+        Err(Refusal::Store(StoreError::Corrupt { slot: 0 }))
+    );
 }
 
 #[test]
