@@ -14,8 +14,9 @@
 //! first, then clears the bank the same way. Every plan carries its CRC, checked on `load`.
 //!
 //! The store reads the whole map once when first used ([`index`]: slots, names, item sizes
-//! in RAM), so listing and slot choice cost no flash reads. After a flash error it reads it
-//! again before the next request, and an upload in progress is then dropped.
+//! in RAM), so listing and slot choice cost no flash reads. When writing a header or the
+//! configuration fails (it may have landed all the same) it reads the map again before the
+//! next request, and an upload in progress is then dropped.
 //!
 //! Never run a store call under a timeout or `select`: sequential-storage repairs a cancelled
 //! operation later, but the store's index would no longer match the flash.
@@ -172,7 +173,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         config.validate().map_err(Refusal::Config)?;
         self.ensure_open().await.map_err(Refusal::Store)?;
         let size = self.geometry.size_of(&config);
-        self.put(ItemKey::Config, &Encoded(&config)).await.map_err(Refusal::Store)?;
+        self.put_switch(ItemKey::Config, &Encoded(&config)).await.map_err(Refusal::Store)?;
         self.index.set_config(config, size as u16);
         Ok(config)
     }
@@ -226,8 +227,13 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         let bank = upload.bank;
         let item: ChunkItem = Some(chunk.steps);
         let size = self.geometry.size_of(&item);
-        self.put(ItemKey::Chunk { bank, index }, &Encoded(&item)).await.map_err(Refusal::Store)?;
-        self.index.set_chunk(bank, index, true, size as u16);
+        let stored = self.put(ItemKey::Chunk { bank, index }, &Encoded(&item)).await;
+        if stored != Err(StoreError::Full) {
+            // Written, or maybe written: counted, and cleared by a sweep if the upload is
+            // abandoned. On an error the upload stays where it was; the chunk may be sent again.
+            self.index.set_chunk(bank, index, true, size as u16);
+        }
+        stored.map_err(Refusal::Store)?;
         let steps = item.as_deref().unwrap_or_default();
         // The upload is still there: only `ensure_open` and `commit` drop it.
         Ok(self.upload.as_mut().map_or(0, |u| u.accept(steps)))
@@ -252,7 +258,10 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         };
         let item: PlanItem = Some(record);
         let size = self.geometry.size_of(&item);
-        self.put(ItemKey::Plan(slot), &Encoded(&item)).await.map_err(Refusal::Store)?;
+        if let Err(e) = self.put_switch(ItemKey::Plan(slot), &Encoded(&item)).await {
+            self.tidy().await;
+            return Err(Refusal::Store(e));
+        }
         self.index.set_plan(slot, item, size as u16);
         let summary = self.index.summary(slot);
         self.tidy().await;
@@ -279,7 +288,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         let slot = self.resolve(plan)?;
         let summary = self.index.summary(slot).ok_or(not_found(plan))?;
         let item: PlanItem = None;
-        self.put(ItemKey::Plan(slot), &Encoded(&item)).await.map_err(Refusal::Store)?;
+        self.put_switch(ItemKey::Plan(slot), &Encoded(&item)).await.map_err(Refusal::Store)?;
         self.index.set_plan(slot, None, self.geometry.tombstone_size() as u16);
         self.tidy().await;
         Ok(summary)
@@ -361,11 +370,12 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
             return Err(StoreError::Flash);
         }
         self.stale = false;
-        self.sweep().await
+        self.tidy().await;
+        Ok(())
     }
 
     /// Clears strays after a change, logging (not returning) a failure: the change itself
-    /// happened, and the next request reads the map again and retries.
+    /// happened, and the strays are tried again at the next change or boot.
     async fn tidy(&mut self) {
         if self.sweep().await.is_err() {
             defmt::warn!("plan store: clearing unused chunks failed; retried on the next request");
@@ -388,21 +398,35 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         Ok(())
     }
 
-    /// Stores one item. A failed write leaves the item written or not, so the index is read
-    /// again before the next request (unless the flash was merely full: then nothing changed).
+    /// Stores one item.
     async fn put<'v, V: Value<'v>>(&mut self, key: ItemKey, value: &V) -> Result<(), StoreError> {
         let Backend::Map(map) = &mut self.backend else {
             return Err(StoreError::Flash);
         };
         match map.store_item(&mut self.buf.0, &key.raw(), value).await {
             Ok(()) => Ok(()),
+            // Nothing was written: the map had no room.
             Err(sequential_storage::Error::FullStorage) => Err(StoreError::Full),
             Err(e) => {
                 defmt::warn!("plan store: writing failed: {}", describe(&e));
-                self.stale = true;
                 Err(StoreError::Flash)
             }
         }
+    }
+
+    /// Stores an item that changes what the store holds (a plan header, the configuration).
+    /// A write that failed may still have landed, so then the index is read again before the
+    /// next request (dropping an upload in progress).
+    async fn put_switch<'v, V: Value<'v>>(
+        &mut self,
+        key: ItemKey,
+        value: &V,
+    ) -> Result<(), StoreError> {
+        let stored = self.put(key, value).await;
+        if stored == Err(StoreError::Flash) {
+            self.stale = true;
+        }
+        stored
     }
 
     /// Reads the newest item of `key`, raw.
@@ -414,6 +438,17 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
             defmt::warn!("plan store: reading failed: {}", describe(&e));
             StoreError::Flash
         })
+    }
+}
+
+#[cfg(test)]
+impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
+    /// Whether the index is what reading the map now would give.
+    async fn index_matches_flash(&mut self) -> bool {
+        let Backend::Map(map) = &mut self.backend else { return false };
+        let mut fresh = Index::new();
+        let scanned = scan(map, &mut self.buf.0, &mut fresh, &self.geometry).await;
+        scanned.is_ok() && fresh == self.index
     }
 }
 

@@ -23,7 +23,7 @@ pub enum StoredConfig {
 }
 
 /// The newest items of one bank.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 struct Bank {
     /// Chunks whose newest item holds steps (bit per chunk).
     live: u8,
@@ -32,6 +32,7 @@ struct Bank {
 }
 
 /// The index. About 5 KiB on the controller.
+#[derive(Debug, PartialEq, Eq)]
 pub struct Index {
     plans: [Option<PlanRecord>; PLAN_SLOTS as usize],
     /// Flash taken by each slot's newest header item (a plan or a tombstone), bytes; 0: none.

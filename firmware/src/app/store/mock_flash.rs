@@ -18,6 +18,9 @@
 //! cut. A real interrupted erase may leave any bits anywhere in the page; that is not modelled
 //! (see docs/store.md).
 //!
+//! A glitch ([`MockFlash::glitch_after`]) is a write or erase that fails and changes nothing,
+//! with the power staying on, like a transient programming error.
+//!
 //! Every operation is counted ([`FlashStats`]) so tests can report what an upload costs.
 
 use std::vec;
@@ -91,6 +94,8 @@ pub enum MockFlashError {
     },
     /// The power is off (this operation was cut, or came after the cut).
     PowerCut,
+    /// A glitch: this write or erase failed and changed nothing.
+    Glitch,
 }
 
 impl NorFlashError for MockFlashError {
@@ -98,7 +103,9 @@ impl NorFlashError for MockFlashError {
         match self {
             MockFlashError::OutOfBounds => NorFlashErrorKind::OutOfBounds,
             MockFlashError::NotAligned => NorFlashErrorKind::NotAligned,
-            MockFlashError::NotErased { .. } | MockFlashError::PowerCut => NorFlashErrorKind::Other,
+            MockFlashError::NotErased { .. }
+            | MockFlashError::PowerCut
+            | MockFlashError::Glitch => NorFlashErrorKind::Other,
         }
     }
 }
@@ -120,6 +127,8 @@ pub struct MockFlash {
     programmed: Vec<bool>,
     stats: FlashStats,
     cut: Option<Cut>,
+    /// Writes or erases until the glitch.
+    glitch: Option<u64>,
     off: bool,
 }
 
@@ -132,6 +141,7 @@ impl MockFlash {
             programmed: vec![false; bytes / WORD_SIZE],
             stats: FlashStats::default(),
             cut: None,
+            glitch: None,
             off: false,
         }
     }
@@ -160,8 +170,15 @@ impl MockFlash {
             programmed: self.programmed.clone(),
             stats: FlashStats::default(),
             cut: None,
+            glitch: None,
             off: false,
         }
+    }
+
+    /// Arms a glitch: `ops` more writes or erases complete, the next one fails and changes
+    /// nothing, and the flash goes on working.
+    pub fn glitch_after(&mut self, ops: u64) {
+        self.glitch = Some(ops);
     }
 
     /// The raw contents.
@@ -178,6 +195,14 @@ impl MockFlash {
     fn next_mutation(&mut self) -> Result<Option<u32>, MockFlashError> {
         if self.off {
             return Err(MockFlashError::PowerCut);
+        }
+        match &mut self.glitch {
+            Some(0) => {
+                self.glitch = None;
+                return Err(MockFlashError::Glitch);
+            }
+            Some(n) => *n -= 1,
+            None => {}
         }
         match &mut self.cut {
             Some(cut) if cut.remaining == 0 => {
