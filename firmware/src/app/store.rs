@@ -40,9 +40,8 @@ use chladni_shared::icd::store::{
 };
 use embedded_storage_async::nor_flash::NorFlash;
 use sequential_storage::cache::key_pointers::ArrayKeyPointers;
-use sequential_storage::cache::page_pointers::ArrayPagePointers;
 use sequential_storage::cache::page_states::ArrayPageStates;
-use sequential_storage::cache::{Cache, CacheImpl};
+use sequential_storage::cache::{Cache, CacheImpl, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage, Value};
 
 use index::{Index, StoredConfig};
@@ -60,17 +59,12 @@ pub const ITEM_BUFFER: usize = 1024;
 /// Every key the layout uses: the configuration, a header per slot, the chunks of every bank.
 const KEYS: usize = 1 + PLAN_SLOTS as usize + BANKS as usize * MAX_CHUNKS;
 
-/// The sequential-storage cache the store uses by default: page states (so finding the open
-/// page reads no flash), the free spot of each page (so appending an item does not walk the
-/// page's items) and the address of every key (so reading a chunk, and moving an item during
-/// garbage collection, does not scan the map). About 7 KiB; see docs/store.md for what each
-/// saves.
-pub type StoreCache = Cache<
-    ArrayPageStates<MAX_PAGES>,
-    ArrayPagePointers<MAX_PAGES>,
-    ArrayKeyPointers<u16, KEYS>,
-    u16,
->;
+/// The sequential-storage cache the store uses by default: the state of every page (so
+/// finding the open page reads no flash) and the address of every key (so reading a chunk, and
+/// moving an item during garbage collection, does not scan the map once the key was met since
+/// boot). About 5 KiB. A cache of each page's free spot would save some 120 reads per upload
+/// for 2 KiB more; docs/store.md has the numbers.
+pub type StoreCache = Cache<ArrayPageStates<MAX_PAGES>, Uncached, ArrayKeyPointers<u16, KEYS>, u16>;
 
 /// The flash a store is built on, when its range is usable.
 enum Backend<F: NorFlash, C: CacheImpl<u16>> {
@@ -100,8 +94,7 @@ impl<F: NorFlash> PlanStore<F> {
     /// A store in `range` of `flash` (page-aligned, at least two pages; more than
     /// [`MAX_PAGES`] pages are cut to that). Nothing is read until the first request.
     pub fn new(flash: F, range: Range<u32>) -> Self {
-        let cache =
-            Cache::new(ArrayPageStates::new(), ArrayPagePointers::new(), ArrayKeyPointers::new());
+        let cache = Cache::new(ArrayPageStates::new(), Uncached, ArrayKeyPointers::new());
         Self::with_cache(flash, range, cache)
     }
 }
