@@ -188,8 +188,8 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         let bank = self.index.free_bank();
         let abandoned = self.upload.replace(Upload::new(slot, bank, &begin));
         if abandoned.is_some_and(|a| a.bank != bank) {
-            // The abandoned upload's chunks are in a bank nothing will overwrite soon.
-            self.sweep().await.map_err(Refusal::Store)?;
+            // The abandoned upload's chunks are in a bank this upload will not overwrite.
+            self.tidy().await;
         }
         Ok(slot)
     }
@@ -270,7 +270,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
     /// Flash left for plans: the range, less the newest item of every key, less one page that
     /// sequential-storage keeps erased for garbage collection. (Items do not span pages, so
     /// the tail of each page may go unused: the last plans may not fit all of it.)
-    pub fn free_bytes(&self) -> u32 {
+    fn free_bytes(&self) -> u32 {
         let reserve = F::ERASE_SIZE as u32 + self.index.live_bytes();
         self.range_len.saturating_sub(reserve)
     }
