@@ -26,6 +26,7 @@ pub mod layout;
 #[cfg(any(test, feature = "mock-flash"))]
 pub mod mock_flash;
 mod upload;
+pub mod yielding;
 
 #[cfg(test)]
 mod tests;
