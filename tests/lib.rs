@@ -25,8 +25,8 @@ static REAL_BOARD: Mutex<()> = Mutex::new(());
 
 /// The controller a test talks to.
 pub enum Controller {
-    /// The firmware in QEMU, owned by the test.
-    Emulated(Emulator),
+    /// The firmware in QEMU, owned by the test (boxed: it is far larger than the other).
+    Emulated(Box<Emulator>),
     /// A real board on a port; the guard keeps other tests of this process off it.
     Real {
         /// Serial path or `tcp://HOST:PORT`.
@@ -44,7 +44,7 @@ impl Controller {
                 port,
                 _turn: REAL_BOARD.lock().unwrap_or_else(|poisoned| poisoned.into_inner()),
             },
-            None => Controller::Emulated(start_emulator(name)),
+            None => Controller::Emulated(Box::new(start_emulator(name))),
         }
     }
 

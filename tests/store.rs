@@ -166,7 +166,7 @@ fn a_power_cut_in_the_middle_of_an_upload_keeps_the_old_plan_whole() {
     emulator.restart().expect("power back on");
     let mut client = emulator.connect("e2e after the power cut").expect("connect");
     let plans = summaries(&mut client);
-    assert_eq!(plans, [stored.clone()], "after a cut at {chunks_sent} steps: {plans:?}");
+    assert_eq!(plans, [stored], "after a cut at {chunks_sent} steps: {plans:?}");
     let run = client.run(PlanRef::Slot(0), None).expect("the old plan runs");
     poll_until(&mut client, Duration::from_secs(30), |s| s.run == run && s.step.is_some());
     client.stop().unwrap();

@@ -17,7 +17,7 @@ use anyhow::Context;
 use chladni::controller::client::DeviceClient;
 use chladni::model::plan_file::PlanFile;
 use chladni_shared::icd::plan::{DeviceLimits, Plan};
-use chladni_shared::icd::store::{PlanName, PlanRef, SCRATCH_SLOT};
+use chladni_shared::icd::store::{DeviceConfig, PlanName, PlanRef, SCRATCH_SLOT};
 use clap::{Args, Subcommand};
 
 use super::InputError;
@@ -324,6 +324,8 @@ impl ConfigCommand {
                 render::config(&config, *key, *json)
             }
             ConfigCommand::Set { port, key, value, json } => {
+                // The value alone is checked before connecting (bad input exits 2 at once).
+                key.set(&mut DeviceConfig::default(), value)?;
                 let mut client = port.open("config set")?;
                 let mut config = client.config()?;
                 key.set(&mut config, value)?;
@@ -334,5 +336,28 @@ impl ConfigCommand {
                 render::config(&now, None, *json)
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bad_plan_file_is_bad_input_naming_the_step() {
+        let dir = std::env::temp_dir().join(format!("chladni-plan-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("p.json");
+        let step = r#"{"freq_hz":0.5,"amplitude":0.1,"duration_ms":5,"ramp_ms":0}"#;
+        std::fs::write(&path, format!(r#"{{"name":"x","repeat":1,"steps":[{step}]}}"#)).unwrap();
+        assert!(read_plan(&path).unwrap_err().0.contains("step 0: frequency 0.500 Hz"));
+        std::fs::write(&path, "{").unwrap();
+        assert!(read_plan(&path).unwrap_err().0.contains("not a valid plan"));
+        let many: Vec<&str> =
+            vec![r#"{"freq_hz":50,"amplitude":0.1,"duration_ms":5,"ramp_ms":0}"#; 257];
+        std::fs::write(&path, format!(r#"{{"name":"x","repeat":1,"steps":[{}]}}"#, many.join(",")))
+            .unwrap();
+        assert!(read_plan(&path).unwrap_err().0.contains("257 steps: a plan holds at most 256"));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
