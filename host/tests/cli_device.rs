@@ -198,7 +198,7 @@ fn ctrl_c_during_run_file_wait_stops_the_plan_and_exits_130() {
     let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(130), "{stderr}");
-    assert!(stderr.contains("interrupted: stopped plan slot 64"), "{stderr}");
+    assert!(stderr.contains("interrupted: stopped plan 'long' (slot 64)"), "{stderr}");
     let mut client = emu.connect("after ctrl-c").unwrap();
     let deadline = Instant::now() + Duration::from_secs(10);
     while client.status().unwrap().state.name() != "idle" {

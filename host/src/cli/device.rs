@@ -257,7 +257,8 @@ impl DeviceCommand {
             }
             DeviceCommand::Run { port, plan, repeat, wait } => {
                 let mut client = port.open("run")?;
-                watch::start_plan(&mut client, plan.clone(), *repeat, wait.wait, wait.json)
+                let target = watch::Target::of(plan.clone());
+                watch::start_plan(&mut client, &target, *repeat, wait.wait, wait.json)
             }
             DeviceCommand::RunFile { port, plan, wait } => run_file(port, plan, wait),
             DeviceCommand::Drive { port, freq, amplitude, json } => {
@@ -313,7 +314,9 @@ fn run_file(port: &PortArg, path: &Path, wait: &WaitArgs) -> anyhow::Result<Exit
             summary.name, summary.slot, summary.steps, summary.total_ms
         );
     }
-    watch::start_plan(&mut client, PlanRef::Slot(SCRATCH_SLOT), None, wait.wait, wait.json)
+    let target =
+        watch::Target { plan: PlanRef::Slot(SCRATCH_SLOT), name: Some(plan.name.to_string()) };
+    watch::start_plan(&mut client, &target, None, wait.wait, wait.json)
 }
 
 impl ConfigCommand {

@@ -12,7 +12,7 @@ use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use chladni::controller::client::{DeviceClient, RunOutcome};
+use chladni::controller::client::{DeviceClient, NEVER_STARTED_AFTER, RunOutcome};
 use chladni_shared::icd::link::{Plan, RunNumber, StatusReport};
 use chladni_shared::icd::store::{PlanRef, PlanSummary};
 use chladni_shared::icd::units::{MilliHz, Q15};
@@ -64,34 +64,76 @@ pub fn upload(
 struct RunJson {
     /// `started` without `--wait`; else how the run ended ([`RunOutcome::name`]).
     outcome: &'static str,
-    plan: String,
+    /// The plan's name, when known (run by name, `run-file`).
+    plan: Option<String>,
     run: u32,
+    /// The plan's slot, when known (run by slot, `run-file`).
+    slot: Option<u8>,
     /// The last status seen (with `--wait`).
     status: Option<StatusJson>,
 }
 
-/// How the plan is named in messages.
-fn label(plan: &PlanRef) -> String {
-    match plan {
-        PlanRef::Slot(slot) => format!("slot {slot}"),
-        PlanRef::Name(name) => format!("'{name}'"),
+/// The stored plan a command runs, and its name when the command knows it.
+#[derive(Debug, Clone)]
+pub struct Target {
+    /// How the request names it.
+    pub plan: PlanRef,
+    /// Its name.
+    pub name: Option<String>,
+}
+
+impl Target {
+    /// The plan `plan` names.
+    pub fn of(plan: PlanRef) -> Self {
+        let name = match &plan {
+            PlanRef::Name(name) => Some(name.to_string()),
+            PlanRef::Slot(_) => None,
+        };
+        Target { plan, name }
+    }
+
+    fn slot(&self) -> Option<u8> {
+        match self.plan {
+            PlanRef::Slot(slot) => Some(slot),
+            PlanRef::Name(_) => None,
+        }
+    }
+
+    /// How messages name it: `'NAME'`, `slot N`, or `'NAME' (slot N)`.
+    fn label(&self) -> String {
+        match (&self.name, self.slot()) {
+            (Some(name), Some(slot)) => format!("'{name}' (slot {slot})"),
+            (Some(name), None) => format!("'{name}'"),
+            (None, Some(slot)) => format!("slot {slot}"),
+            (None, None) => "?".to_string(),
+        }
+    }
+
+    fn json(
+        &self,
+        outcome: &'static str,
+        run: RunNumber,
+        status: Option<&StatusReport>,
+    ) -> RunJson {
+        let status = status.map(StatusJson::from);
+        RunJson { outcome, plan: self.name.clone(), run: run.0, slot: self.slot(), status }
     }
 }
 
 /// Runs a stored plan; with `wait`, watches it to its end (see [`wait_run`]).
 pub fn start_plan(
     client: &mut DeviceClient,
-    plan: PlanRef,
+    target: &Target,
     repeat: Option<u16>,
     wait: bool,
     json: bool,
 ) -> anyhow::Result<ExitCode> {
-    let what = label(&plan);
+    let what = target.label();
     let interrupted = if wait { Some(interrupt_flag()?) } else { None };
-    let run = client.run(plan, repeat)?;
+    let run = client.run(target.plan.clone(), repeat)?;
     let Some(interrupted) = interrupted else {
         if json {
-            print_json(&RunJson { outcome: "started", plan: what, run: run.0, status: None })?;
+            print_json(&target.json("started", run, None))?;
         } else {
             println!("running plan {what}: run {}", run.0);
         }
@@ -101,7 +143,7 @@ pub fn start_plan(
         println!("running plan {what}: run {} (Ctrl-C stops it)", run.0);
     }
     let outcome = wait_run(client, run, interrupted)?;
-    report(client, &what, run, &outcome, json)
+    report(client, target, run, &outcome, json)
 }
 
 /// Watches run `run` with a progress bar until it is over or Ctrl-C.
@@ -146,74 +188,75 @@ fn show_progress(bar: &ProgressBar, s: &StatusReport) {
 /// stopped first).
 fn report(
     client: &mut DeviceClient,
-    what: &str,
+    target: &Target,
     run: RunNumber,
     (outcome, steps_seen): &(RunOutcome, usize),
     json: bool,
 ) -> anyhow::Result<ExitCode> {
-    let s = outcome.status();
-    let (code, message) = match outcome {
-        RunOutcome::Done(_) => (
-            ExitCode::SUCCESS,
-            format!(
-                "plan {what} done (run {}): {steps_seen} step(s) seen running, {:.1} ms, {} underrun(s)",
-                run.0,
-                s.elapsed_ms(),
-                s.underruns
-            ),
-        ),
-        RunOutcome::Superseded(_) => (
-            ExitCode::FAILURE,
-            format!(
-                "error: plan {what} (run {}) was superseded by run {} (a stop, drive or plan from \
-             this or another client); the drive is {}",
-                run.0,
-                s.run.0,
-                s.state.name()
-            ),
-        ),
-        RunOutcome::NeverStarted(_) => (
-            ExitCode::FAILURE,
-            format!(
-                "error: plan {what} (run {}) never started: the controller still shows run {}",
-                run.0, s.run.0
-            ),
-        ),
-        RunOutcome::Faulted(_) => (
-            ExitCode::FAILURE,
-            format!(
-                "error: the drive faulted during plan {what} (run {}): {}; `chladni device stop` \
-             clears it",
-                run.0,
-                s.fault.map_or("fault", |f| f.name())
-            ),
-        ),
-        RunOutcome::Interrupted(_) => {
-            let stop = client.stop()?;
-            (
-                ExitCode::from(EXIT_INTERRUPTED),
-                format!(
-                    "interrupted: stopped plan {what} (run {}; the stop is run {})",
-                    run.0, stop.0
-                ),
-            )
-        }
+    let stop = match outcome {
+        RunOutcome::Interrupted(_) => Some(client.stop()?),
+        _ => None,
     };
+    let message = outcome_message(&target.label(), run, outcome, *steps_seen, stop);
     if json {
-        let status = Some(StatusJson::from(s));
-        print_json(&RunJson {
-            outcome: outcome.name(),
-            plan: what.to_string(),
-            run: run.0,
-            status,
-        })?;
+        print_json(&target.json(outcome.name(), run, Some(outcome.status())))?;
     }
+    Ok(match outcome {
+        RunOutcome::Done(_) => {
+            if !json {
+                println!("{message}");
+            }
+            ExitCode::SUCCESS
+        }
+        RunOutcome::Interrupted(_) => {
+            eprintln!("{message}");
+            ExitCode::from(EXIT_INTERRUPTED)
+        }
+        _ => {
+            eprintln!("{message}");
+            ExitCode::FAILURE
+        }
+    })
+}
+
+/// What the user is told about run `run` of plan `what` ended as `outcome`; `stop` is the run
+/// number of the stop sent after Ctrl-C.
+fn outcome_message(
+    what: &str,
+    run: RunNumber,
+    outcome: &RunOutcome,
+    steps_seen: usize,
+    stop: Option<RunNumber>,
+) -> String {
+    let s = outcome.status();
+    let (run, now) = (run.0, s.run.0);
     match outcome {
-        RunOutcome::Done(_) if !json => println!("{message}"),
-        RunOutcome::Done(_) => {}
-        _ => eprintln!("{message}"),
+        RunOutcome::Done(_) => format!(
+            "plan {what} done (run {run}): {steps_seen} step(s) seen running, {:.1} ms, \
+             {} underrun(s)",
+            s.elapsed_ms(),
+            s.underruns
+        ),
+        RunOutcome::Superseded(_) => format!(
+            "error: plan {what} (run {run}) was superseded by run {now} (a stop, drive or plan \
+             from this or another client); the drive is {}",
+            s.state.name()
+        ),
+        RunOutcome::NeverStarted(_) => format!(
+            "error: plan {what} (run {run}) never started: after {} s the controller still \
+             shows run {now}",
+            NEVER_STARTED_AFTER.as_secs()
+        ),
+        RunOutcome::Faulted(_) => format!(
+            "error: the drive faulted during plan {what} (run {run}): {}; `chladni device \
+             stop` clears it",
+            s.fault.map_or("fault", |f| f.name())
+        ),
+        RunOutcome::Interrupted(_) => format!(
+            "interrupted: stopped plan {what} (run {run}; the stop is run {})",
+            stop.map_or("not sent".to_string(), |r| r.0.to_string())
+        ),
     }
-    Ok(code)
 }
 
 /// `monitor`: telemetry lines until `count` samples, Ctrl-C, or the stream stops.
@@ -267,4 +310,60 @@ fn end_monitor(client: &mut DeviceClient, rate_hz: u16) -> anyhow::Result<ExitCo
         _ => eprintln!("monitor stopped"),
     }
     Ok(ExitCode::from(EXIT_INTERRUPTED))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chladni_shared::icd::link::{DriveState, Fault};
+
+    fn status(run: u32, state: DriveState) -> StatusReport {
+        StatusReport {
+            state,
+            step: None,
+            repetition: 0,
+            run: RunNumber(run),
+            plan: None,
+            remaining_samples: 0,
+            fault: (state == DriveState::Faulted).then_some(Fault::Latched),
+            elapsed_samples: 50_000,
+            sample_rate: 50_000,
+            freq_mhz: 0,
+            amplitude_q15: 0,
+            underruns: 2,
+            commands: 4,
+        }
+    }
+
+    #[test]
+    fn each_outcome_is_told_with_the_run_numbers() {
+        let target = Target { plan: PlanRef::Slot(64), name: Some("tri".into()) };
+        let what = target.label();
+        assert_eq!(what, "'tri' (slot 64)");
+        let run = RunNumber(7);
+        let say = |o: RunOutcome| outcome_message(&what, run, &o, 2, Some(RunNumber(8)));
+        assert_eq!(
+            say(RunOutcome::Done(status(7, DriveState::Idle))),
+            "plan 'tri' (slot 64) done (run 7): 2 step(s) seen running, 1000.0 ms, 2 underrun(s)"
+        );
+        assert!(
+            say(RunOutcome::Superseded(status(9, DriveState::Running)))
+                .contains("(run 7) was superseded by run 9")
+        );
+        assert!(
+            say(RunOutcome::NeverStarted(status(6, DriveState::Idle)))
+                .contains("never started: after 2 s the controller still shows run 6")
+        );
+        assert!(say(RunOutcome::Faulted(status(7, DriveState::Faulted))).contains("): latched;"));
+        assert_eq!(
+            say(RunOutcome::Interrupted(status(7, DriveState::Running))),
+            "interrupted: stopped plan 'tri' (slot 64) (run 7; the stop is run 8)"
+        );
+        let json = serde_json::to_value(target.json("done", run, None)).unwrap();
+        assert_eq!(
+            json,
+            serde_json::json!({"outcome": "done", "plan": "tri", "run": 7, "slot": 64, "status": null})
+        );
+        assert_eq!(Target::of(PlanRef::Name("x".try_into().unwrap())).label(), "'x'");
+    }
 }
