@@ -19,7 +19,13 @@ mod image {
 
     #[embassy_executor::task]
     async fn link_task(mut port: board::Link, flash: Option<board::Flash>) -> ! {
-        let store = flash.map(|flash| app::store::PlanStore::new(flash, board::STORE_RANGE));
+        // Yielding: a long store request must not keep the drive task from its next block.
+        let store = flash.map(|flash| {
+            app::store::PlanStore::new(
+                app::store::yielding::Yielding::new(flash),
+                board::STORE_RANGE,
+            )
+        });
         if store.is_none() {
             defmt::warn!("no flash: plans and configuration cannot be stored");
         }

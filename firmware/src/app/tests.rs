@@ -203,3 +203,171 @@ fn a_silent_owner_loses_the_controller_after_its_lease() {
         "the controller is busy: another client holds it (last request 1 ms ago)"
     );
 }
+
+// ---- The link, with a real plan store on the mock flash ----
+
+use super::link::{Identity, Link};
+use super::store::PlanStore;
+use super::store::mock_flash::MockFlash;
+use chladni_shared::icd::link::{Board, Endpoint, Envelope, LinkError, PROTOCOL_VERSION, Response};
+use chladni_shared::icd::store::{PlanRef, UploadBegin, UploadChunk, UploadError, plan_crc};
+
+/// A link over a store of 16 pages of mock flash.
+fn link_over(drive: &DriveShared) -> Link<'_, MockFlash> {
+    let store = PlanStore::new(MockFlash::new(16), 0..16 * 2048);
+    block_on(Link::new(Identity { board: Board::Qemu }, drive, Some(store)))
+}
+
+/// Sends `request` from `session` (id 1) and takes the typed reply, or the response back.
+fn call<E: Endpoint>(
+    link: &mut Link<'_, MockFlash>,
+    session: u32,
+    request: E,
+) -> Result<E::Reply, Response> {
+    E::reply(block_on(link.handle(session, 1, request.into_request(), at(0))))
+}
+
+fn upload(link: &mut Link<'_, MockFlash>, session: u32, p: &Plan) -> Result<(), Response> {
+    let begin = UploadBegin {
+        slot: None,
+        name: p.name.clone(),
+        repeat: p.repeat,
+        steps: p.steps.len() as u16,
+        crc: plan_crc(p),
+    };
+    call(link, session, begin)?;
+    let steps = heapless::Vec::from_slice(&p.steps).unwrap();
+    call(link, session, UploadChunk { index: 0, steps })?;
+    call(link, session, link::UploadCommit).map(|_| ())
+}
+
+#[test]
+fn a_stored_plan_runs_by_name_with_its_run_number() {
+    let drive = DriveShared::new();
+    let mut link = link_over(&drive);
+    let p = plan("square", &[(100_000, 10_000, 12, 2), (200_000, 8_000, 8, 2)]);
+    upload(&mut link, 7, &p).unwrap();
+    let page = call(&mut link, 7, link::ListPlans { from_slot: 0 }).unwrap();
+    assert_eq!(page.plans.len(), 1);
+    assert_eq!((page.plans[0].name.as_str(), page.plans[0].crc), ("square", plan_crc(&p)));
+    let by_name = PlanRef::Name("square".try_into().unwrap());
+    let run = call(&mut link, 7, link::RunPlan { plan: by_name, repeat: Some(2) }).unwrap();
+    assert_eq!(run, RunNumber(1));
+    let mut core = DriveCore::new(&drive);
+    play(&mut core, &mut VecOutput::default(), 1);
+    let s = call(&mut link, 7, link::GetStatus).unwrap();
+    assert_eq!((s.run, s.plan.as_deref(), s.state), (run, Some("square"), DriveState::Running));
+    assert_eq!(s.remaining_samples, (2 * 20 * SAMPLES_PER_MS) as u64 - BLOCK_LEN as u64);
+}
+
+#[test]
+fn another_session_is_refused_while_the_owner_uploads_but_may_stop() {
+    let drive = DriveShared::new();
+    let mut link = link_over(&drive);
+    call(&mut link, 1, link::Hello { client: hello("uploader") }).unwrap();
+    let p = plan("p", &[(100_000, 10_000, 12, 2)]);
+    let begin =
+        UploadBegin { slot: None, name: p.name.clone(), repeat: 1, steps: 1, crc: plan_crc(&p) };
+    call(&mut link, 1, begin).unwrap();
+    let drive_req = link::Drive { freq_mhz: 150_000, amplitude_q15: 100 };
+    match call(&mut link, 2, drive_req) {
+        Err(Response::Refused(Refusal::Busy { owner, .. })) => assert_eq!(owner, "uploader"),
+        other => panic!("expected Busy, got {other:?}"),
+    }
+    // The refused command never reached the drive; a stop from anyone does.
+    assert_eq!(call(&mut link, 2, link::Stop), Ok(RunNumber(1)));
+    // The owner's upload goes on.
+    let steps = heapless::Vec::from_slice(&p.steps).unwrap();
+    assert_eq!(call(&mut link, 1, UploadChunk { index: 0, steps }), Ok(1));
+    assert!(call(&mut link, 1, link::UploadCommit).is_ok());
+    call(&mut link, 1, link::Release).unwrap();
+    assert_eq!(call(&mut link, 2, drive_req), Ok(RunNumber(2)));
+}
+
+#[test]
+fn an_upload_error_is_named_and_leaves_the_store_as_it_was() {
+    let drive = DriveShared::new();
+    let mut link = link_over(&drive);
+    let p = plan("keep", &[(100_000, 10_000, 12, 2)]);
+    upload(&mut link, 3, &p).unwrap();
+    let bad = UploadChunk { index: 1, steps: heapless::Vec::new() };
+    assert_eq!(
+        call(&mut link, 3, bad),
+        Err(Response::Refused(Refusal::Upload(UploadError::NotStarted)))
+    );
+    let mut zero = p.clone();
+    zero.steps[0].freq_mhz = 0;
+    match upload(&mut link, 3, &zero) {
+        Err(Response::Refused(Refusal::Upload(UploadError::Plan(
+            PlanError::FrequencyOutOfRange { step: 0, .. },
+        )))) => {}
+        other => panic!("expected a frequency error, got {other:?}"),
+    }
+    let page = call(&mut link, 3, link::ListPlans { from_slot: 0 }).unwrap();
+    assert_eq!(page.plans[0].crc, plan_crc(&p));
+}
+
+#[test]
+fn frames_are_answered_with_their_session_and_id_and_corrupt_ones_never_act() {
+    let drive = DriveShared::new();
+    let mut link = link_over(&drive);
+    let mut buf = [0u8; link::ENCODE_BUF];
+    let go = Request::Drive(link::Drive { freq_mhz: 123_000, amplitude_q15: 100 });
+    let env = Envelope { version: PROTOCOL_VERSION, session: 9, id: 77, body: go };
+    let wire = link::encode(&env, &mut buf).unwrap().to_vec();
+    // A flipped bit in the frequency: the CRC catches it, nothing is queued.
+    let mut raw = cobs_decode(&wire[1..wire.len() - 1]);
+    raw[5] ^= 0x04; // version, session, id, variant, then the frequency varint from byte 4
+    let mut frame = cobs_encode(&raw);
+    let answer = block_on(link.respond(Ok(&mut frame), at(0)));
+    assert_eq!(answer.body, Response::Error(LinkError::BadCrc));
+    assert_eq!(drive.submit(Command::Stop), Ok(RunNumber(1)), "the corrupt drive took no number");
+    // The intact frame is answered with its session and id.
+    let mut frame = wire[1..wire.len() - 1].to_vec();
+    let answer = block_on(link.respond(Ok(&mut frame), at(0)));
+    assert_eq!((answer.session, answer.id, answer.body), (9, 77, Response::Drive(RunNumber(2))));
+    let answer = block_on(link.respond(Err(LinkError::BadCobs), at(0)));
+    assert_eq!((answer.session, answer.id), (0, 0));
+}
+
+fn cobs_decode(bytes: &[u8]) -> Vec<u8> {
+    let mut out = std::vec![0u8; bytes.len()];
+    let n = cobs::decode(bytes, &mut out).unwrap().frame_size();
+    out.truncate(n);
+    out
+}
+
+fn cobs_encode(bytes: &[u8]) -> Vec<u8> {
+    let mut out = std::vec![0u8; cobs::max_encoding_length(bytes.len())];
+    let n = cobs::encode(bytes, &mut out);
+    out.truncate(n);
+    out
+}
+
+#[test]
+fn telemetry_streams_the_asked_count_at_the_asked_rate() {
+    let drive = DriveShared::new();
+    let mut link = link_over(&drive);
+    assert_eq!(
+        call(&mut link, 4, link::Subscribe { rate_hz: 500, count: 3 }),
+        Err(Response::Refused(Refusal::TelemetryRate { rate_hz: 500 }))
+    );
+    block_on(link.handle(
+        4,
+        11,
+        Request::Subscribe(link::Subscribe { rate_hz: 10, count: 3 }),
+        at(0),
+    ));
+    let mut seen = Vec::new();
+    for ms in (0..1000).step_by(10) {
+        if let Some(env) = link.sample(at(ms)) {
+            assert_eq!((env.session, env.id), (4, 11));
+            match env.body {
+                Response::Telemetry(t) => seen.push((ms, t.seq, t.left)),
+                other => panic!("expected telemetry, got {other:?}"),
+            }
+        }
+    }
+    assert_eq!(seen, [(0, 0, 2), (100, 1, 1), (200, 2, 0)]);
+    assert_eq!(link.next_sample_at(), None);
+}
