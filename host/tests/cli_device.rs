@@ -11,11 +11,14 @@ use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 
 fn emulator(name: &str) -> Emulator {
-    let log =
-        std::env::temp_dir().join(format!("chladni-cli-device-{name}-{}.log", std::process::id()));
+    let base =
+        std::env::temp_dir().join(format!("chladni-cli-device-{name}-{}", std::process::id()));
+    let flash = base.with_extension("flash");
+    let _ = std::fs::remove_file(&flash);
     let config = EmulatorConfig {
         time_limit: Some(Duration::from_secs(300)),
-        log_file: Some(log),
+        log_file: Some(base.with_extension("log")),
+        flash_file: Some(flash),
         ..Default::default()
     };
     Emulator::start(&config).expect("start the emulator")
@@ -57,10 +60,9 @@ fn status_info_ping_config_and_list_print_their_json_shapes() {
     );
     assert_eq!(status["state"], "idle");
     let info = json_of(&chladni(&["device", "info", "--port", &port, "--json"]));
-    assert_eq!(
-        (info["board"].as_str(), info["protocol_version"].as_u64()),
-        (Some("qemu"), Some(2))
-    );
+    // The board's value is checked end to end (tests/e2e.rs); here, the shape.
+    assert_eq!(keys(&info), ["board", "build_id", "firmware_version", "protocol_version"]);
+    assert_eq!(info["protocol_version"], 2);
     let ping = json_of(&chladni(&["device", "ping", "--port", &port, "--count", "3", "--json"]));
     assert_eq!(ping["count"], 3);
     let config = json_of(&chladni(&["device", "config", "get", "--port", &port, "--json"]));
@@ -115,14 +117,8 @@ fn a_second_program_is_told_at_once_who_holds_the_controller() {
     assert!(stderr.contains("the controller is busy: the owner in a test holds it"), "{stderr}");
     assert!(took < Duration::from_secs(2), "took {took:?}");
     // Anyone may stop the shaker, even while another program owns the controller.
-    let out = chladni(&["device", "stop", "--port", &emu.address()]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
-    // The stop takes effect (a few ms after its answer): the owner's drive is superseded.
-    let deadline = Instant::now() + Duration::from_secs(5);
-    while owner.status().unwrap().run <= run {
-        assert!(Instant::now() < deadline, "the stop never took effect");
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    let stop = json_of(&chladni(&["device", "stop", "--port", &emu.address(), "--json"]));
+    assert!(stop["run"].as_u64() > Some(u64::from(run.0)), "{stop}");
 }
 
 /// Starts `chladni device ARGS…` with stdout piped; returns it and a reader of its lines.
@@ -174,11 +170,11 @@ fn monitor_runs_until_ctrl_c_and_says_it_stopped() {
     let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(130), "{stderr}");
-    assert!(stderr.contains("monitor stopped; the controller goes on"), "{stderr}");
+    // "monitor stopped; the controller goes on: …" while the drive runs (firmware permitting).
+    assert!(stderr.contains("monitor stopped"), "{stderr}");
 }
 
 #[test]
-#[ignore = "needs the firmware's plan store (branch h-store, not yet on issue11)"]
 fn ctrl_c_during_run_file_wait_stops_the_plan_and_exits_130() {
     let emu = emulator("run-file-ctrl-c");
     let port = emu.address();
