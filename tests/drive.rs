@@ -23,7 +23,6 @@ fn start(name: &str) -> (Controller, DeviceClient) {
 }
 
 #[test]
-#[ignore = "issue11 cb445eb QEMU image: the drive applies no command and Hello says board stm32l475 (memory corruption?)"]
 fn plan_runs_step_by_step_to_idle() {
     let (_emulator, mut client) = start("plan");
     let steps = [
@@ -79,7 +78,6 @@ fn plan_runs_step_by_step_to_idle() {
 }
 
 #[test]
-#[ignore = "issue11 cb445eb QEMU image: the drive applies no command and Hello says board stm32l475 (memory corruption?); passed on dcc1528"]
 fn manual_drive_stop_and_refusals() {
     let (_emulator, mut client) = start("manual");
 

@@ -93,7 +93,6 @@ fn link_survives_everything_the_host_can_throw_at_it() {
 }
 
 #[test]
-#[ignore = "issue11 cb445eb QEMU image: the drive applies no command and Hello says board stm32l475 (memory corruption?); passed on dcc1528"]
 fn the_controller_names_itself_and_garbage_does_not_disturb_the_drive() {
     let controller = Controller::start("link-drive");
     let mut client = controller.connect("e2e identity").expect("connect to the controller");

@@ -17,7 +17,6 @@ fn start(name: &str) -> Controller {
 }
 
 #[test]
-#[ignore = "issue11 cb445eb QEMU image: the drive applies no command and Hello says board stm32l475 (memory corruption?); passed on dcc1528"]
 fn defect_1_a_second_client_is_told_busy_at_once_and_its_command_never_runs_later() {
     let controller = start("busy");
     let mut first = controller.connect("first client").expect("first client");
@@ -52,7 +51,6 @@ fn defect_1_a_second_client_is_told_busy_at_once_and_its_command_never_runs_late
 }
 
 #[test]
-#[ignore = "issue11 cb445eb QEMU image: the drive applies no command and Hello says board stm32l475 (memory corruption?); passed on dcc1528"]
 fn defect_2_wait_never_reports_done_from_the_previous_runs_status() {
     let controller = start("wait");
     let mut client = controller.connect("waiter").expect("connect");
