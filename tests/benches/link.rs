@@ -63,6 +63,36 @@ fn main() {
     summary("upload+commit 256 steps, first 10 after boot", first);
     summary("upload+commit 256 steps, next 50", later);
 
+    // Where an upload's time goes: one round trip per request, by kind.
+    let p = plan(500);
+    let (mut begin, mut chunks, mut commit) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..10 {
+        let t = Instant::now();
+        client
+            .call(chladni_shared::icd::store::UploadBegin {
+                slot: Some(9),
+                name: p.name.clone(),
+                repeat: 1,
+                steps: p.steps.len() as u16,
+                crc: chladni_shared::icd::store::plan_crc(&p),
+            })
+            .expect("begin");
+        begin.push(t.elapsed());
+        for (index, c) in p.steps.chunks(chladni_shared::icd::store::CHUNK_STEPS).enumerate() {
+            let steps = heapless::Vec::from_slice(c).expect("chunk");
+            let t = Instant::now();
+            let chunk = chladni_shared::icd::store::UploadChunk { index: index as u16, steps };
+            client.call(chunk).expect("chunk");
+            chunks.push(t.elapsed());
+        }
+        let t = Instant::now();
+        client.call(chladni_shared::icd::link::UploadCommit).expect("commit");
+        commit.push(t.elapsed());
+    }
+    summary("  of which UploadBegin", begin);
+    summary("  of which UploadChunk (32 steps, ~400 bytes)", chunks);
+    summary("  of which UploadCommit", commit);
+
     // While the drive runs: the drive must not run dry because of the store.
     let before = client.status().expect("status").underruns;
     client.drive(180_000, 8_000).expect("drive");
