@@ -193,7 +193,7 @@ mod tests {
 
     #[test]
     fn drive_core_runs_a_plan_to_idle() {
-        use chladni_firmware::app::drive::{Command, DriveCore};
+        use chladni_firmware::app::drive::DriveCore;
         use chladni_shared::drive::runner::BLOCK_LEN;
         use chladni_shared::icd::link::DriveState;
         use chladni_shared::icd::plan::{Plan, Step};
