@@ -68,12 +68,29 @@ struct Shared {
     stop: AtomicBool,
     /// QEMU's port (0: none yet); changes when QEMU restarts.
     upstream_port: AtomicU16,
-    /// The connection to QEMU, for writing; `None` while QEMU is not there.
-    upstream: Mutex<Option<TcpStream>>,
+    /// The connection to QEMU, for writing, and the frames waiting for it while QEMU is not
+    /// connected: QEMU's socket is sometimes reset under a burst of input (seen in the
+    /// garbage test: "connection reset by peer" on the proxy's side), and a client's request
+    /// sent in that instant must reach the firmware after the reconnection, not vanish.
+    upstream: Mutex<Upstream>,
     /// Connected clients, for writing QEMU's output to.
     clients: Mutex<Vec<(u64, TcpStream)>>,
     next_client: AtomicU64,
 }
+
+/// The proxy's side of QEMU's socket.
+#[derive(Default)]
+struct Upstream {
+    stream: Option<TcpStream>,
+    waiting: std::collections::VecDeque<(std::time::Instant, Vec<u8>)>,
+}
+
+/// Frames kept while QEMU is not connected (beyond that the oldest are dropped).
+const WAITING_FRAMES: usize = 64;
+/// A waiting frame older than this is dropped, not sent: its client has given up on it by
+/// then or soon will (clients wait 3 s by default), and a request a client gave up on must
+/// never run later.
+const WAIT_LIMIT: Duration = Duration::from_secs(1);
 
 /// Locks `mutex`, also after a thread panicked while holding it (the data stays usable).
 fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -81,14 +98,35 @@ fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 impl Shared {
-    /// Writes one client's frame to QEMU whole; dropped if QEMU is not connected.
+    /// Writes one client's frame to QEMU whole; while QEMU is not connected it waits for
+    /// the reconnection (at most [`WAITING_FRAMES`] frames).
     fn forward(&self, frame: &[u8]) {
         let mut upstream = lock(&self.upstream);
-        if let Some(stream) = upstream.as_mut()
-            && stream.write_all(&delimited(frame)).is_err()
-        {
-            *upstream = None;
+        let bytes = delimited(frame);
+        if let Some(stream) = upstream.stream.as_mut() {
+            if stream.write_all(&bytes).is_ok() {
+                return;
+            }
+            upstream.stream = None;
         }
+        if upstream.waiting.len() == WAITING_FRAMES {
+            upstream.waiting.pop_front();
+        }
+        upstream.waiting.push_back((std::time::Instant::now(), bytes));
+    }
+
+    /// Takes a new connection to QEMU and sends it the frames that waited for it.
+    fn connected(&self, mut stream: TcpStream) {
+        let mut upstream = lock(&self.upstream);
+        while let Some((since, bytes)) = upstream.waiting.pop_front() {
+            if since.elapsed() > WAIT_LIMIT {
+                continue;
+            }
+            if stream.write_all(&bytes).is_err() {
+                return;
+            }
+        }
+        upstream.stream = Some(stream);
     }
 
     /// Writes one frame from QEMU to every client; drops clients that cannot take it.
@@ -138,8 +176,11 @@ impl Proxy {
     /// Connects (and after a restart, reconnects) to QEMU's serial socket on `port`.
     pub fn set_upstream(&self, port: u16) {
         self.shared.upstream_port.store(port, Ordering::SeqCst);
-        // Drop a connection to an old QEMU at once rather than at its end of file.
-        if let Some(stream) = lock(&self.shared.upstream).take() {
+        // Drop a connection to an old QEMU at once rather than at its end of file, and what
+        // was sent for it: a new controller never gets requests meant for the old one.
+        let mut upstream = lock(&self.shared.upstream);
+        upstream.waiting.clear();
+        if let Some(stream) = upstream.stream.take() {
             let _ = stream.shutdown(std::net::Shutdown::Both);
         }
     }
@@ -155,7 +196,7 @@ impl Proxy {
         for (_, stream) in lock(&self.shared.clients).drain(..) {
             let _ = stream.shutdown(std::net::Shutdown::Both);
         }
-        if let Some(stream) = lock(&self.shared.upstream).take() {
+        if let Some(stream) = lock(&self.shared.upstream).stream.take() {
             let _ = stream.shutdown(std::net::Shutdown::Both);
         }
         for thread in self.threads.drain(..) {
@@ -226,7 +267,7 @@ fn upstream_loop(shared: Arc<Shared>) {
         // QEMU ends its side when it stops or restarts (a reset connection is one way to end):
         // either way, connect again to whatever port QEMU is on then.
         let _ = pump(stream, &shared);
-        *lock(&shared.upstream) = None;
+        lock(&shared.upstream).stream = None;
     }
 }
 
@@ -235,7 +276,7 @@ fn pump(mut stream: TcpStream, shared: &Shared) -> std::io::Result<()> {
     stream.set_nodelay(true)?;
     stream.set_read_timeout(Some(POLL))?;
     stream.set_write_timeout(Some(WRITE_TIMEOUT))?;
-    *lock(&shared.upstream) = Some(stream.try_clone()?);
+    shared.connected(stream.try_clone()?);
     let mut splitter = FrameSplitter::default();
     let mut buf = [0u8; 4096];
     while !shared.stop.load(Ordering::SeqCst) {
