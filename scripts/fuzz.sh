@@ -11,7 +11,9 @@
 #   scripts/fuzz.sh list                 the targets
 #
 # Targets build with debug assertions (integer overflow panics) and AddressSanitizer, into
-# fuzz/target. A crash lands in fuzz/artifacts/<target>/; a run's log in fuzz/target/logs/.
+# fuzz/target. Corpus: fuzz/corpus/<target>/ (generated seeds and what libFuzzer adds), plus
+# the committed crash inputs of fuzz/regressions/<target>/, replayed at every start. A crash
+# lands in fuzz/artifacts/<target>/; the log of the last run in fuzz/target/logs/<target>.log.
 # FUZZ_SANITIZER=none|address|... picks another sanitizer (none runs about twice as fast).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -69,7 +71,11 @@ fuzz_one() {
   shift 2
   mkdir -p fuzz/target/logs
   local log=fuzz/target/logs/$target.log t0=$SECONDS rc=0
-  local run=(cargo "+$FUZZ_NIGHTLY" fuzz run "${build_args[@]}" "$target" --
+  # The working corpus (new inputs go there), then the committed crash regressions, which
+  # libFuzzer replays first: a crash that came back fails at once.
+  local corpora=("fuzz/corpus/$target")
+  if [ -d "fuzz/regressions/$target" ]; then corpora+=("fuzz/regressions/$target"); fi
+  local run=(cargo "+$FUZZ_NIGHTLY" fuzz run "${build_args[@]}" "$target" "${corpora[@]}" --
     -print_final_stats=1 -timeout=10 "$@")
   if [ "$quiet" = 1 ]; then
     "${run[@]}" >"$log" 2>&1 || rc=$?
@@ -133,7 +139,7 @@ case "$cmd" in
     fuzz_one "$target" 0 "$@"
     ;;
   *)
-    sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'
+    awk 'NR > 1 && !/^#/ { exit } NR > 1 { sub(/^# ?/, ""); print }' "$0"
     [ -z "$cmd" ] || [ "$cmd" = help ] || [ "$cmd" = -h ] || exit 2
     ;;
 esac
