@@ -6,6 +6,8 @@
 //! dependencies): structured inputs are valid messages encoded here, then mutated.
 #![forbid(unsafe_code)]
 
+pub mod flash;
+
 use chladni_shared::icd::frame::{CRC32, ENCODE_BUF, Envelope, PROTOCOL_VERSION, encode};
 use chladni_shared::icd::link::{
     Board, DeletePlan, DeviceInfo, Drive, DriveError, DriveState, Fault, GetConfig, GetInfo,
@@ -220,6 +222,13 @@ impl<'a> Choices<'a> {
     /// A number in `0..n` (`n > 0`).
     pub fn below(&mut self, n: usize) -> usize {
         self.u16() as usize % n
+    }
+
+    /// The next `n` bytes (fewer at the end).
+    pub fn take(&mut self, n: usize) -> &'a [u8] {
+        let (head, rest) = self.bytes.split_at(n.min(self.bytes.len()));
+        self.bytes = rest;
+        head
     }
 
     /// The bytes not used yet.
