@@ -18,7 +18,7 @@ compile_error!("select a board: --features board-qemu or --features board-stm32l
 #[cfg(all(feature = "board-qemu", feature = "board-stm32l475"))]
 compile_error!("select exactly one board feature");
 
-#[cfg(all(test, not(target_os = "none")))]
+#[cfg(all(any(test, feature = "mock-flash"), not(target_os = "none")))]
 extern crate std;
 
 pub mod app;

@@ -18,8 +18,20 @@ mod image {
     static DRIVE: app::drive::DriveShared = app::drive::DriveShared::new();
 
     #[embassy_executor::task]
-    async fn link_task(mut link: board::Link) -> ! {
-        app::link::serve(app::link::Identity { board: board::BOARD }, &DRIVE, &mut link).await
+    async fn link_task(mut port: board::Link, flash: Option<board::Flash>) -> ! {
+        // Yielding: a long store request must not keep the drive task from its next block.
+        let store = flash.map(|flash| {
+            app::store::PlanStore::new(
+                app::store::yielding::Yielding::new(flash),
+                board::STORE_RANGE,
+            )
+        });
+        if store.is_none() {
+            defmt::warn!("no flash: plans and configuration cannot be stored");
+        }
+        let identity = app::link::Identity { board: board::BOARD };
+        let mut link = app::link::Link::new(identity, &DRIVE, store).await;
+        app::link::serve(&mut link, &mut port).await
     }
 
     #[embassy_executor::task]
@@ -37,8 +49,11 @@ mod image {
             chladni_firmware::BUILD_ID
         );
         board::run(|spawner| {
-            spawner.spawn(link_task(board.link).expect("link task: spawn pool exhausted"));
+            spawner.spawn(
+                link_task(board.link, board.flash).expect("link task: spawn pool exhausted"),
+            );
             spawner.spawn(drive_task(board.drive).expect("drive task: spawn pool exhausted"));
+            board::spawn_tasks(spawner, board.tasks);
         })
     }
 }

@@ -59,11 +59,23 @@ async fn timer_task() {
     TIMER_RESULT.store(if ok { 1 } else { 2 }, core::sync::atomic::Ordering::Release);
 }
 
+/// The link's answer to `request` (no flash: nothing is stored).
+fn answer(request: chladni_shared::icd::link::Request) -> chladni_shared::icd::link::Response {
+    use chladni_firmware::app::link::{Identity, Link};
+    let drive = chladni_firmware::app::drive::DriveShared::new();
+    let identity = Identity { board: chladni_shared::icd::link::Board::Qemu };
+    embassy_futures::block_on(async {
+        let mut link =
+            Link::<chladni_firmware::board::qemu::flash::FileFlash>::new(identity, &drive, None)
+                .await;
+        link.handle(7, 1, request, embassy_time::Instant::now()).await
+    })
+}
+
 #[defmt_test::tests]
 mod tests {
     use chladni_firmware::app::drive::DriveShared;
-    use chladni_firmware::app::link::{Identity, handle};
-    use chladni_shared::icd::link::{Board, PROTOCOL_VERSION, Request, Response};
+    use chladni_shared::icd::link::{self, Board, PROTOCOL_VERSION, Request, Response};
 
     use chladni_firmware::board::qemu::flash::{self, FileFlashError};
     use embedded_storage::nor_flash::{NorFlash, NorFlashErrorKind, ReadNorFlash};
@@ -163,18 +175,16 @@ mod tests {
 
     #[test]
     fn ping_echoes_nonce() {
-        let id = Identity { board: Board::Qemu };
         assert_eq!(
-            handle(&id, &DriveShared::new(), &Request::Ping { nonce: 0x5eed }),
-            Response::Pong { nonce: 0x5eed }
+            super::answer(Request::Ping(link::Ping { nonce: 0x5eed })),
+            Response::Ping(0x5eed)
         );
     }
 
     #[test]
     fn info_names_board_and_protocol() {
-        let id = Identity { board: Board::Qemu };
-        match handle(&id, &DriveShared::new(), &Request::GetInfo) {
-            Response::Info(info) => {
+        match super::answer(Request::GetInfo(link::GetInfo)) {
+            Response::GetInfo(info) => {
                 assert_eq!(info.board, Board::Qemu);
                 assert_eq!(info.protocol_version, PROTOCOL_VERSION);
                 assert_eq!(info.firmware_version.as_str(), chladni_firmware::FIRMWARE_VERSION);

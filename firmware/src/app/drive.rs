@@ -1,19 +1,21 @@
 //! The drive task: owns the plan runner and feeds its sample blocks to the board's output.
 //!
 //! The link task talks to it through [`DriveShared`]: commands go through an embassy-sync
-//! [`Channel`], and the drive publishes a [`StatusReport`] after every block into a
-//! blocking mutex the link reads. The runner itself is owned by the drive task alone.
+//! [`Channel`], each with the [`RunNumber`] it was given when accepted, and the drive publishes
+//! a [`StatusReport`] after every block into a blocking mutex the link reads. The status names
+//! the run number of the command in effect, so a host can tell "its" run from an older one. The
+//! runner itself is owned by the drive task alone.
 //!
 //! The output is anything that takes blocks of 12-bit DAC codes at the sample rate
 //! ([`SampleOutput`]): on the board, the DAC's circular DMA buffer; in QEMU,
 //! [`SimulatedDac`], which paces blocks with embassy-time and feeds the simulated plant.
 
-use core::cell::Cell;
+use core::cell::{Cell, RefCell};
 use core::future::Future;
 
 use chladni_shared::drive::plant::{Plant, PlantParams};
 use chladni_shared::drive::runner::{BLOCK_LEN, Runner};
-use chladni_shared::icd::link::{DriveError, DriveState, StatusReport};
+use chladni_shared::icd::link::{DriveError, DriveState, RunNumber, StatusReport};
 use chladni_shared::icd::plan::{DeviceLimits, Plan};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
@@ -42,7 +44,11 @@ pub enum Command {
 const IDLE: StatusReport = StatusReport {
     state: DriveState::Idle,
     step: None,
-    run: 0,
+    repetition: 0,
+    run: RunNumber(0),
+    plan: None,
+    remaining_samples: 0,
+    fault: None,
     elapsed_samples: 0,
     sample_rate: chladni_shared::drive::dds::SAMPLE_RATE,
     freq_mhz: 0,
@@ -53,9 +59,10 @@ const IDLE: StatusReport = StatusReport {
 
 /// What the link task and the drive task share.
 pub struct DriveShared {
-    commands: Channel<CriticalSectionRawMutex, Command, 2>,
-    status: Mutex<CriticalSectionRawMutex, Cell<StatusReport>>,
-    limits: DeviceLimits,
+    commands: Channel<CriticalSectionRawMutex, (RunNumber, Command), 2>,
+    status: Mutex<CriticalSectionRawMutex, RefCell<StatusReport>>,
+    limits: Mutex<CriticalSectionRawMutex, Cell<DeviceLimits>>,
+    last_run: Mutex<CriticalSectionRawMutex, Cell<u32>>,
 }
 
 impl Default for DriveShared {
@@ -69,33 +76,51 @@ impl DriveShared {
     pub const fn new() -> Self {
         Self {
             commands: Channel::new(),
-            status: Mutex::new(Cell::new(IDLE)),
-            limits: DeviceLimits::DEFAULT,
+            status: Mutex::new(RefCell::new(IDLE)),
+            limits: Mutex::new(Cell::new(DeviceLimits::DEFAULT)),
+            last_run: Mutex::new(Cell::new(0)),
         }
     }
 
     /// The device limits commands are checked against.
-    pub fn limits(&self) -> &DeviceLimits {
-        &self.limits
+    pub fn limits(&self) -> DeviceLimits {
+        self.limits.lock(|l| l.get())
     }
 
-    /// Queues `command` for the drive task (validating plans and setpoints first, so the
-    /// caller can answer with the precise error).
-    pub fn submit(&self, command: Command) -> Result<(), DriveError> {
+    /// Checks later commands against `limits` (a new configuration); what runs goes on.
+    pub fn set_limits(&self, limits: DeviceLimits) {
+        self.limits.lock(|l| l.set(limits));
+    }
+
+    /// Queues `command` for the drive task and returns the run number it will carry in the
+    /// status. Plans and setpoints are validated first, and a faulted drive refuses anything
+    /// but a stop, so the caller can answer with the precise error.
+    pub fn submit(&self, command: Command) -> Result<RunNumber, DriveError> {
+        let limits = self.limits();
         match &command {
-            Command::RunPlan(plan) => plan.validate(&self.limits).map_err(DriveError::Plan)?,
-            Command::Drive { freq_mhz, amplitude_q15 } => self
-                .limits
-                .check_setpoint(*freq_mhz, *amplitude_q15)
-                .map_err(DriveError::Setpoint)?,
+            Command::RunPlan(plan) => plan.validate(&limits).map_err(DriveError::Plan)?,
+            Command::Drive { freq_mhz, amplitude_q15 } => {
+                limits.check_setpoint(*freq_mhz, *amplitude_q15).map_err(DriveError::Setpoint)?
+            }
             Command::Stop => {}
         }
-        self.commands.try_send(command).map_err(|_| DriveError::Busy)
+        if command != Command::Stop && self.status.lock(|s| s.borrow().state) == DriveState::Faulted
+        {
+            return Err(DriveError::Faulted);
+        }
+        // Numbered and queued in one critical section, so numbers reach the drive in order.
+        critical_section::with(|cs| {
+            let last = self.last_run.borrow(cs);
+            let run = RunNumber(last.get().wrapping_add(1).max(1));
+            self.commands.try_send((run, command)).map_err(|_| DriveError::QueueFull)?;
+            last.set(run.0);
+            Ok(run)
+        })
     }
 
     /// The status published after the last block.
     pub fn status(&self) -> StatusReport {
-        self.status.lock(|s| s.get())
+        self.status.lock(|s| s.borrow().clone())
     }
 }
 
@@ -103,17 +128,22 @@ impl DriveShared {
 pub struct DriveCore<'a> {
     shared: &'a DriveShared,
     runner: Runner,
+    run: RunNumber,
 }
 
 impl<'a> DriveCore<'a> {
     /// An idle drive.
     pub fn new(shared: &'a DriveShared) -> Self {
-        Self { shared, runner: Runner::new(shared.limits) }
+        Self { shared, runner: Runner::new(shared.limits()), run: RunNumber(0) }
     }
 
     /// Applies queued commands, fills `block`, publishes the status.
     pub fn refill(&mut self, block: &mut [u16]) {
-        while let Ok(command) = self.shared.commands.try_receive() {
+        while let Ok((run, command)) = self.shared.commands.try_receive() {
+            // The command is in effect from here on, even if the runner refuses it (a fault
+            // latched since it was queued): the status then shows that run number as faulted.
+            self.run = run;
+            self.runner.set_limits(self.shared.limits());
             let result = match command {
                 Command::RunPlan(plan) => {
                     defmt::info!(
@@ -155,8 +185,9 @@ impl<'a> DriveCore<'a> {
     }
 
     fn publish(&self) {
-        let status = self.runner.status();
-        self.shared.status.lock(|s| s.set(status));
+        let mut status = self.runner.status();
+        status.run = self.run;
+        self.shared.status.lock(|s| *s.borrow_mut() = status);
     }
 }
 

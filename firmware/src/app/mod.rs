@@ -4,6 +4,7 @@
 
 pub mod drive;
 pub mod link;
+pub mod store;
 
 #[cfg(all(test, not(target_os = "none")))]
 mod tests;

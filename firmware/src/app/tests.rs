@@ -7,16 +7,14 @@ use std::vec::Vec;
 use chladni_shared::drive::dds::{DAC_MID, SAMPLE_RATE, SAMPLES_PER_MS};
 use chladni_shared::drive::runner::{BLOCK_LEN, STOP_RAMP_MS};
 use chladni_shared::icd::link::{
-    self, Board, DriveError, DriveState, Envelope, LinkError, PROTOCOL_VERSION, Request, Response,
-    SetpointError,
+    self, DriveError, DriveState, OWNER_LEASE_MS, Refusal, Request, RunNumber, SetpointError,
 };
-use chladni_shared::icd::plan::{Plan, PlanError, Step};
+use chladni_shared::icd::plan::{DeviceLimits, Plan, PlanError, Step};
 use embassy_futures::block_on;
+use embassy_time::Instant;
 
 use super::drive::{Command, DriveCore, DriveShared, SampleOutput, Underrun};
-use super::link::{Identity, handle, respond};
-
-const QEMU: Identity = Identity { board: Board::Qemu };
+use super::link::Sessions;
 
 /// Keeps every block; reports an underrun for the block numbers in `dry`.
 #[derive(Default)]
@@ -51,88 +49,82 @@ fn plan(name: &str, steps: &[(u32, u16, u32, u32)]) -> Plan {
 }
 
 #[test]
-fn ping_gets_a_pong_with_its_nonce() {
-    for nonce in [0, 0x5eed, u32::MAX] {
-        let answer = handle(&QEMU, &DriveShared::new(), &Request::Ping { nonce });
-        assert_eq!(answer, Response::Pong { nonce });
-    }
-}
-
-#[test]
-fn get_info_names_the_board() {
-    for board in [Board::Qemu, Board::Stm32l475] {
-        match handle(&Identity { board }, &DriveShared::new(), &Request::GetInfo) {
-            Response::Info(info) => {
-                assert_eq!(info.board, board);
-                assert_eq!(info.protocol_version, PROTOCOL_VERSION);
-                assert_eq!(info.firmware_version.as_str(), crate::FIRMWARE_VERSION);
-                assert_eq!(info.build_id, crate::BUILD_ID);
-            }
-            other => panic!("expected Info, got {other:?}"),
-        }
-    }
-}
-
-#[test]
-fn a_bad_setpoint_is_refused_with_its_typed_error() {
+fn a_bad_setpoint_or_plan_is_refused_with_its_typed_error_and_never_queued() {
     let drive = DriveShared::new();
-    let too_fast = Request::Drive { freq_mhz: 5_000_000, amplitude_q15: 100 };
     let refused = SetpointError::FrequencyOutOfRange {
         freq_mhz: 5_000_000,
         min_mhz: 1_000,
         max_mhz: 2_000_000,
     };
-    assert_eq!(handle(&QEMU, &drive, &too_fast), Response::Rejected(DriveError::Setpoint(refused)));
+    let too_fast = Command::Drive { freq_mhz: 5_000_000, amplitude_q15: 100 };
+    assert_eq!(drive.submit(too_fast), Err(DriveError::Setpoint(refused)));
     let message = std::format!("{}", DriveError::Setpoint(refused));
     assert_eq!(message, "invalid setpoint: frequency 5000.000 Hz outside 1.000..=2000.000 Hz");
-    let too_loud = Request::Drive { freq_mhz: 440_000, amplitude_q15: 40_000 };
+    let too_loud = Command::Drive { freq_mhz: 440_000, amplitude_q15: 40_000 };
     assert_eq!(
-        handle(&QEMU, &drive, &too_loud),
-        Response::Rejected(DriveError::Setpoint(SetpointError::AmplitudeTooHigh {
+        drive.submit(too_loud),
+        Err(DriveError::Setpoint(SetpointError::AmplitudeTooHigh {
             amplitude_q15: 40_000,
             max_q15: 32_767
         }))
     );
     // A bad plan names its step; nothing refused reached the drive.
     let bad = plan("bad", &[(100_000, 1_000, 10, 0), (999, 1_000, 10, 0)]);
-    match handle(&QEMU, &drive, &Request::RunPlan(bad)) {
-        Response::Rejected(DriveError::Plan(PlanError::FrequencyOutOfRange {
-            step: 1, ..
-        })) => {}
-        other => panic!("expected a step-1 frequency error, got {other:?}"),
-    }
+    assert!(matches!(
+        drive.submit(Command::RunPlan(bad)),
+        Err(DriveError::Plan(PlanError::FrequencyOutOfRange { step: 1, .. }))
+    ));
     let mut core = DriveCore::new(&drive);
     let mut out = VecOutput::default();
     play(&mut core, &mut out, 2);
-    assert_eq!(drive.status().commands, 0);
+    assert_eq!((drive.status().commands, drive.status().run), (0, RunNumber(0)));
     assert!(out.samples.iter().all(|&c| c == DAC_MID));
 }
 
 #[test]
-fn a_submitted_plan_shows_up_in_status_as_the_drive_runs_blocks() {
+fn narrower_limits_apply_to_the_next_command() {
+    let drive = DriveShared::new();
+    let narrow = DeviceLimits { max_freq_mhz: 300_000, ..DeviceLimits::DEFAULT };
+    drive.set_limits(narrow);
+    let err = drive.submit(Command::Drive { freq_mhz: 400_000, amplitude_q15: 1 }).unwrap_err();
+    assert!(matches!(
+        err,
+        DriveError::Setpoint(SetpointError::FrequencyOutOfRange { max_mhz: 300_000, .. })
+    ));
+    assert_eq!(
+        drive.submit(Command::Drive { freq_mhz: 250_000, amplitude_q15: 1 }),
+        Ok(RunNumber(1))
+    );
+}
+
+#[test]
+fn a_submitted_plan_shows_up_in_status_with_its_run_number_and_remaining_time() {
     let drive = DriveShared::new();
     let p = plan("two", &[(100_000, 10_000, 12, 2), (200_000, 8_000, 8, 2)]);
-    assert_eq!(handle(&QEMU, &drive, &Request::RunPlan(p)), Response::Ack);
-    // Queued, not yet applied: the drive core has not run.
-    assert_eq!(drive.status().state, DriveState::Idle);
+    let run = drive.submit(Command::RunPlan(p)).unwrap();
+    assert_eq!(run, RunNumber(1));
+    // Queued, not yet applied: the drive core has not run, and status still names run 0.
+    assert_eq!((drive.status().state, drive.status().run), (DriveState::Idle, RunNumber(0)));
 
     let mut core = DriveCore::new(&drive);
     let mut out = VecOutput::default();
     play(&mut core, &mut out, 1); // 5 ms: inside step 0, past its 2 ms ramp
     let s = drive.status();
-    assert_eq!((s.state, s.step, s.run, s.commands), (DriveState::Running, Some(0), 0, 1));
+    assert_eq!((s.state, s.step, s.repetition, s.commands), (DriveState::Running, Some(0), 0, 1));
+    assert_eq!((s.run, s.plan.as_deref()), (run, Some("two")));
     assert_eq!((s.freq_mhz, s.amplitude_q15), (100_000, 10_000));
     assert_eq!((s.elapsed_samples, s.sample_rate), (BLOCK_LEN as u64, SAMPLE_RATE));
-    assert_eq!(handle(&QEMU, &drive, &Request::Status), Response::Status(s));
+    assert_eq!(s.remaining_samples, (20 * SAMPLES_PER_MS) as u64 - BLOCK_LEN as u64);
 
     play(&mut core, &mut out, 2); // 15 ms: step 1, ramping down to its amplitude
     let s = drive.status();
     assert_eq!((s.step, s.freq_mhz), (Some(1), 200_000));
+    assert_eq!(s.remaining_samples, (5 * SAMPLES_PER_MS) as u64);
 
     // The plan's 20 ms, then the 20 ms ramp to zero: idle after 40 ms = 8 blocks.
     play(&mut core, &mut out, 5);
     let s = drive.status();
-    assert_eq!((s.state, s.step), (DriveState::Idle, None));
+    assert_eq!((s.state, s.step, s.run, s.plan), (DriveState::Idle, None, run, None));
     let total = (20 + STOP_RAMP_MS) * SAMPLES_PER_MS;
     assert_eq!(s.elapsed_samples, total as u64);
     assert_eq!(out.samples.len(), 8 * BLOCK_LEN);
@@ -143,47 +135,239 @@ fn a_submitted_plan_shows_up_in_status_as_the_drive_runs_blocks() {
 #[test]
 fn manual_drive_stop_underruns_and_a_full_queue() {
     let drive = DriveShared::new();
-    let go = Request::Drive { freq_mhz: 440_500, amplitude_q15: 16_384 };
-    assert_eq!(handle(&QEMU, &drive, &go), Response::Ack);
-    assert_eq!(handle(&QEMU, &drive, &Request::Stop), Response::Ack);
-    // The queue holds two commands until the drive core takes them.
-    assert_eq!(handle(&QEMU, &drive, &go), Response::Rejected(DriveError::Busy));
-    assert_eq!(drive.submit(Command::Stop), Err(DriveError::Busy));
+    let go = Command::Drive { freq_mhz: 440_500, amplitude_q15: 16_384 };
+    assert_eq!(drive.submit(go.clone()), Ok(RunNumber(1)));
+    assert_eq!(drive.submit(Command::Stop), Ok(RunNumber(2)));
+    // The queue holds two commands until the drive core takes them; a refused one takes
+    // no number.
+    assert_eq!(drive.submit(go.clone()), Err(DriveError::QueueFull));
+    assert_eq!(drive.submit(Command::Stop), Err(DriveError::QueueFull));
 
     let mut core = DriveCore::new(&drive);
     let mut out = VecOutput { dry: std::vec![1, 2], ..Default::default() };
     play(&mut core, &mut out, 6); // drive, then stop: ramped to zero within 20 ms
     let s = drive.status();
-    assert_eq!((s.state, s.commands, s.underruns), (DriveState::Idle, 2, 2));
+    assert_eq!((s.state, s.commands, s.underruns, s.run), (DriveState::Idle, 2, 2, RunNumber(2)));
 
-    assert_eq!(handle(&QEMU, &drive, &go), Response::Ack);
+    assert_eq!(drive.submit(go), Ok(RunNumber(3)));
     play(&mut core, &mut out, 10);
     let s = drive.status();
     assert_eq!((s.state, s.freq_mhz, s.amplitude_q15), (DriveState::Running, 440_500, 16_384));
 }
 
+fn at(ms: u64) -> Instant {
+    Instant::from_millis(1_000_000 + ms)
+}
+
+fn hello(name: &str) -> heapless::String<{ link::MAX_CLIENT_NAME }> {
+    name.try_into().unwrap()
+}
+
 #[test]
-fn frames_are_answered_with_their_id_or_the_error() {
-    let drive = DriveShared::new();
-    let mut buf = [0u8; link::MAX_FRAME + 2];
-    let request = Envelope { version: PROTOCOL_VERSION, id: 77, body: Request::Ping { nonce: 5 } };
-    let wire = link::encode(&request, &mut buf).unwrap();
-    // Without its two delimiters, as FrameReader::push hands it over.
-    let mut frame = wire[1..wire.len() - 1].to_vec();
-    let answer = respond(&QEMU, &drive, Ok(&mut frame));
+fn one_session_owns_the_controller_and_others_are_told_who_at_once() {
+    let mut sessions = Sessions::new();
+    let drive = Request::Drive(link::Drive { freq_mhz: 100_000, amplitude_q15: 1 });
+    let stop = Request::Stop(link::Stop);
+    let status = Request::Status(link::GetStatus);
+    sessions.hello(0xa, hello("run --wait (pid 1)"));
+    sessions.hello(0xb, hello("drive (pid 2)"));
+    assert_eq!(sessions.admit(0xa, &drive, at(0)), Ok(()));
+    // B may read and stop, not drive.
+    assert_eq!(sessions.admit(0xb, &status, at(10)), Ok(()));
+    assert_eq!(sessions.admit(0xb, &stop, at(20)), Ok(()));
     assert_eq!(
-        answer,
-        Envelope { version: PROTOCOL_VERSION, id: 77, body: Response::Pong { nonce: 5 } }
+        sessions.admit(0xb, &drive, at(500)),
+        Err(Refusal::Busy { owner: hello("run --wait (pid 1)"), idle_ms: 500 })
     );
+    // A's requests renew its lease, so B stays out while A is active.
+    assert_eq!(sessions.admit(0xa, &status, at(2_900)), Ok(()));
+    assert!(sessions.admit(0xb, &drive, at(5_000)).is_err());
+    // A released: B gets it.
+    sessions.release(0xa);
+    assert_eq!(sessions.admit(0xb, &drive, at(5_001)), Ok(()));
+    assert!(matches!(sessions.admit(0xa, &drive, at(5_002)), Err(Refusal::Busy { .. })));
+}
 
-    let old = Envelope { version: PROTOCOL_VERSION - 1, id: 78, body: Request::GetInfo };
-    let wire = link::encode(&old, &mut buf).unwrap();
+#[test]
+fn a_silent_owner_loses_the_controller_after_its_lease() {
+    let mut sessions = Sessions::new();
+    let drive = Request::Drive(link::Drive { freq_mhz: 100_000, amplitude_q15: 1 });
+    assert_eq!(sessions.admit(1, &drive, at(0)), Ok(()));
+    let lease = OWNER_LEASE_MS as u64;
+    assert!(sessions.admit(2, &drive, at(lease)).is_err());
+    assert_eq!(sessions.admit(2, &drive, at(lease + 1)), Ok(()));
+    // A nameless owner is still named as such.
+    let err = sessions.admit(1, &drive, at(lease + 2)).unwrap_err();
+    assert_eq!(
+        std::format!("{err}"),
+        "the controller is busy: another client holds it (last request 1 ms ago)"
+    );
+}
+
+// ---- The link, with a real plan store on the mock flash ----
+
+use super::link::{Identity, Link};
+use super::store::PlanStore;
+use super::store::mock_flash::MockFlash;
+use chladni_shared::icd::link::{Board, Endpoint, Envelope, LinkError, PROTOCOL_VERSION, Response};
+use chladni_shared::icd::store::{PlanRef, UploadBegin, UploadChunk, UploadError, plan_crc};
+
+/// A link over a store of 16 pages of mock flash.
+fn link_over(drive: &DriveShared) -> Link<'_, MockFlash> {
+    let store = PlanStore::new(MockFlash::new(16), 0..16 * 2048);
+    block_on(Link::new(Identity { board: Board::Qemu }, drive, Some(store)))
+}
+
+/// Sends `request` from `session` (id 1) and takes the typed reply, or the response back.
+fn call<E: Endpoint>(
+    link: &mut Link<'_, MockFlash>,
+    session: u32,
+    request: E,
+) -> Result<E::Reply, Response> {
+    E::reply(block_on(link.handle(session, 1, request.into_request(), at(0))))
+}
+
+fn upload(link: &mut Link<'_, MockFlash>, session: u32, p: &Plan) -> Result<(), Response> {
+    let begin = UploadBegin {
+        slot: None,
+        name: p.name.clone(),
+        repeat: p.repeat,
+        steps: p.steps.len() as u16,
+        crc: plan_crc(p),
+    };
+    call(link, session, begin)?;
+    let steps = heapless::Vec::from_slice(&p.steps).unwrap();
+    call(link, session, UploadChunk { index: 0, steps })?;
+    call(link, session, link::UploadCommit).map(|_| ())
+}
+
+#[test]
+fn a_stored_plan_runs_by_name_with_its_run_number() {
+    let drive = DriveShared::new();
+    let mut link = link_over(&drive);
+    let p = plan("square", &[(100_000, 10_000, 12, 2), (200_000, 8_000, 8, 2)]);
+    upload(&mut link, 7, &p).unwrap();
+    let page = call(&mut link, 7, link::ListPlans { from_slot: 0 }).unwrap();
+    assert_eq!(page.plans.len(), 1);
+    assert_eq!((page.plans[0].name.as_str(), page.plans[0].crc), ("square", plan_crc(&p)));
+    let by_name = PlanRef::Name("square".try_into().unwrap());
+    let run = call(&mut link, 7, link::RunPlan { plan: by_name, repeat: Some(2) }).unwrap();
+    assert_eq!(run, RunNumber(1));
+    let mut core = DriveCore::new(&drive);
+    play(&mut core, &mut VecOutput::default(), 1);
+    let s = call(&mut link, 7, link::GetStatus).unwrap();
+    assert_eq!((s.run, s.plan.as_deref(), s.state), (run, Some("square"), DriveState::Running));
+    assert_eq!(s.remaining_samples, (2 * 20 * SAMPLES_PER_MS) as u64 - BLOCK_LEN as u64);
+}
+
+#[test]
+fn another_session_is_refused_while_the_owner_uploads_but_may_stop() {
+    let drive = DriveShared::new();
+    let mut link = link_over(&drive);
+    call(&mut link, 1, link::Hello { client: hello("uploader") }).unwrap();
+    let p = plan("p", &[(100_000, 10_000, 12, 2)]);
+    let begin =
+        UploadBegin { slot: None, name: p.name.clone(), repeat: 1, steps: 1, crc: plan_crc(&p) };
+    call(&mut link, 1, begin).unwrap();
+    let drive_req = link::Drive { freq_mhz: 150_000, amplitude_q15: 100 };
+    match call(&mut link, 2, drive_req) {
+        Err(Response::Refused(Refusal::Busy { owner, .. })) => assert_eq!(owner, "uploader"),
+        other => panic!("expected Busy, got {other:?}"),
+    }
+    // The refused command never reached the drive; a stop from anyone does.
+    assert_eq!(call(&mut link, 2, link::Stop), Ok(RunNumber(1)));
+    // The owner's upload goes on.
+    let steps = heapless::Vec::from_slice(&p.steps).unwrap();
+    assert_eq!(call(&mut link, 1, UploadChunk { index: 0, steps }), Ok(1));
+    assert!(call(&mut link, 1, link::UploadCommit).is_ok());
+    call(&mut link, 1, link::Release).unwrap();
+    assert_eq!(call(&mut link, 2, drive_req), Ok(RunNumber(2)));
+}
+
+#[test]
+fn an_upload_error_is_named_and_leaves_the_store_as_it_was() {
+    let drive = DriveShared::new();
+    let mut link = link_over(&drive);
+    let p = plan("keep", &[(100_000, 10_000, 12, 2)]);
+    upload(&mut link, 3, &p).unwrap();
+    let bad = UploadChunk { index: 1, steps: heapless::Vec::new() };
+    assert_eq!(
+        call(&mut link, 3, bad),
+        Err(Response::Refused(Refusal::Upload(UploadError::NotStarted)))
+    );
+    let mut zero = p.clone();
+    zero.steps[0].freq_mhz = 0;
+    match upload(&mut link, 3, &zero) {
+        Err(Response::Refused(Refusal::Upload(UploadError::Plan(
+            PlanError::FrequencyOutOfRange { step: 0, .. },
+        )))) => {}
+        other => panic!("expected a frequency error, got {other:?}"),
+    }
+    let page = call(&mut link, 3, link::ListPlans { from_slot: 0 }).unwrap();
+    assert_eq!(page.plans[0].crc, plan_crc(&p));
+}
+
+#[test]
+fn frames_are_answered_with_their_session_and_id_and_corrupt_ones_never_act() {
+    let drive = DriveShared::new();
+    let mut link = link_over(&drive);
+    let mut buf = [0u8; link::ENCODE_BUF];
+    let go = Request::Drive(link::Drive { freq_mhz: 123_000, amplitude_q15: 100 });
+    let env = Envelope { version: PROTOCOL_VERSION, session: 9, id: 77, body: go };
+    let wire = link::encode(&env, &mut buf).unwrap().to_vec();
+    // A flipped bit in the frequency: the CRC catches it, nothing is queued.
+    let mut raw = cobs_decode(&wire[1..wire.len() - 1]);
+    raw[5] ^= 0x04; // version, session, id, variant, then the frequency varint from byte 4
+    let mut frame = cobs_encode(&raw);
+    let answer = block_on(link.respond(Ok(&mut frame), at(0)));
+    assert_eq!(answer.body, Response::Error(LinkError::BadCrc));
+    assert_eq!(drive.submit(Command::Stop), Ok(RunNumber(1)), "the corrupt drive took no number");
+    // The intact frame is answered with its session and id.
     let mut frame = wire[1..wire.len() - 1].to_vec();
-    let answer = respond(&QEMU, &drive, Ok(&mut frame));
-    let refused =
-        LinkError::UnsupportedVersion { got: PROTOCOL_VERSION - 1, supported: PROTOCOL_VERSION };
-    assert_eq!((answer.id, answer.body), (78, Response::Error(refused)));
+    let answer = block_on(link.respond(Ok(&mut frame), at(0)));
+    assert_eq!((answer.session, answer.id, answer.body), (9, 77, Response::Drive(RunNumber(2))));
+    let answer = block_on(link.respond(Err(LinkError::BadCobs), at(0)));
+    assert_eq!((answer.session, answer.id), (0, 0));
+}
 
-    let answer = respond(&QEMU, &drive, Err(LinkError::BadCobs));
-    assert_eq!((answer.id, answer.body), (0, Response::Error(LinkError::BadCobs)));
+fn cobs_decode(bytes: &[u8]) -> Vec<u8> {
+    let mut out = std::vec![0u8; bytes.len()];
+    let n = cobs::decode(bytes, &mut out).unwrap().frame_size();
+    out.truncate(n);
+    out
+}
+
+fn cobs_encode(bytes: &[u8]) -> Vec<u8> {
+    let mut out = std::vec![0u8; cobs::max_encoding_length(bytes.len())];
+    let n = cobs::encode(bytes, &mut out);
+    out.truncate(n);
+    out
+}
+
+#[test]
+fn telemetry_streams_the_asked_count_at_the_asked_rate() {
+    let drive = DriveShared::new();
+    let mut link = link_over(&drive);
+    assert_eq!(
+        call(&mut link, 4, link::Subscribe { rate_hz: 500, count: 3 }),
+        Err(Response::Refused(Refusal::TelemetryRate { rate_hz: 500 }))
+    );
+    block_on(link.handle(
+        4,
+        11,
+        Request::Subscribe(link::Subscribe { rate_hz: 10, count: 3 }),
+        at(0),
+    ));
+    let mut seen = Vec::new();
+    for ms in (0..1000).step_by(10) {
+        if let Some(env) = link.sample(at(ms)) {
+            assert_eq!((env.session, env.id), (4, 11));
+            match env.body {
+                Response::Telemetry(t) => seen.push((ms, t.seq, t.left)),
+                other => panic!("expected telemetry, got {other:?}"),
+            }
+        }
+    }
+    assert_eq!(seen, [(0, 0, 2), (100, 1, 1), (200, 2, 0)]);
+    assert_eq!(link.next_sample_at(), None);
 }

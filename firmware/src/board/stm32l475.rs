@@ -1,209 +1,121 @@
 //! The B-L475E-IOT01A: embassy-stm32 drivers, flashed with probe-rs.
 //!
-//! The host link is USART1 on the ST-LINK virtual COM port (PB6 TX / PB7 RX), 115200 8N1.
+//! - Host link ([`Link`]): USB CDC-ACM on USB OTG FS ([`usb`]), VID:PID and product string from
+//!   `chladni_shared::icd::link`, serial number = the chip's unique id. The USB device runs in
+//!   a task of its own ([`spawn_tasks`]).
+//! - Debug console: USART1 on the ST-LINK virtual COM port, 115200 8N1, a boot banner only
+//!   ([`console`]); defmt logs go over RTT.
+//! - Drive ([`DriveOutput`]): DAC1 ch1 on PA4, TIM6-paced, fed by circular DMA ([`dac`]).
+//! - Plan store ([`Flash`]): flash bank 2 (0x0808_0000, 512 KiB), async through the FLASH
+//!   interrupt ([`bank2`]: with the L47x data cache erratum worked around and ECC errors read
+//!   as data). The program is linked into bank 1 only (memory.x: FLASH = 512 KiB at
+//!   0x0800_0000), and the L475's two banks are read-while-write, so erasing a plan page
+//!   (about 22 ms) never stalls the code running from bank 1.
+//! - Clocks ([`clocks`]): 80 MHz SYSCLK and 48 MHz USB from MSI locked to the 32.768 kHz crystal.
+//! - A panic, HardFault or unexpected NMI parks the output at mid-scale first, then detaches
+//!   from USB ([`failsafe`]).
 //!
-//! The drive is DAC1 channel 1 on PA4, converting on every TIM6 TRGO (update event at the
-//! sample rate). DMA1 channel 3 (request 6) moves samples from a circular buffer of two
-//! blocks into DHR12R1, one 32-bit word per sample (RM0351 asks for word accesses to the DAC
-//! registers; the 12-bit code sits in bits 11:0); its half-transfer and transfer-complete
-//! interrupts wake the drive task, which refills the half just played (embassy-stm32's
-//! `WritableRingBuffer`, which starts full of the mid-scale codes it was given). If the DMA
-//! catches up with the writer (a refill missed its half period) the ring reports an overrun
-//! and resets itself: counted as an underrun.
+//! Scheduling: every task (link, drive, USB device, ...) runs on one thread-mode executor, so
+//! none preempts another; the drive must refill half its ring within one block (5 ms). The USB
+//! task only wakes on bus events (an interrupt) and handles each in microseconds (descriptor
+//! copies, at most 64-byte FIFO transfers), as do the link's reads and writes; flash operations
+//! wait for the FLASH interrupt instead of spinning. The interrupt handlers (OTG_FS, FLASH,
+//! DMA1_CHANNEL3) all keep embassy-stm32's default priority, so they never preempt each other,
+//! and each does a bounded amount of work (OTG_FS: drain the RX FIFO, at most a few packets).
+//! The DMA keeps playing the ring whatever the CPU does.
 //!
-//! A panic or HardFault parks the output at mid-scale first ([`failsafe`]).
-//!
-//! Clocks: the 32.768 kHz crystal (LSE, X3) trims MSI continuously (MSI PLL mode), so the
-//! 80 MHz system clock and the 50 kS/s sample rate are as accurate as the crystal (see
-//! [`clocks`]).
+//! Hardware status: everything USB and flash-related here is built and checked against the
+//! embassy sources but not yet run on a board (QEMU models neither); docs/firmware.md has the
+//! bring-up checklist.
 
+pub mod bank2;
+pub mod clocks;
+pub mod console;
+pub mod dac;
 pub mod failsafe;
+pub mod usb;
 
-use chladni_shared::drive::dds::SAMPLE_RATE;
-use chladni_shared::drive::runner::BLOCK_LEN;
+use core::ops::Range;
+
 use defmt_rtt as _;
-use embassy_stm32::dac::{self, DacChannel};
-use embassy_stm32::dma::{self, TransferOptions, WritableRingBuffer};
-use embassy_stm32::mode::Blocking;
-use embassy_stm32::time::Hertz;
-use embassy_stm32::timer::low_level::{MasterMode, RoundTo, Timer};
-use embassy_stm32::usart::{self, BufferedUart};
-use embassy_stm32::{bind_interrupts, peripherals};
-use static_cell::StaticCell;
+use embassy_stm32::{bind_interrupts, dma, flash, peripherals};
+use embedded_storage_async::nor_flash::NorFlash;
 use stm32_metapac as pac;
-
-use crate::app::drive::{SampleOutput, Underrun};
 
 /// This board's identity on the link.
 pub const BOARD: chladni_shared::icd::link::Board = chladni_shared::icd::link::Board::Stm32l475;
 
-/// The host link: USART1 through the ST-LINK virtual COM port.
-pub type Link = BufferedUart<'static>;
+/// The host link: USB CDC-ACM (see [`usb`] for its read and write rules).
+pub type Link = usb::UsbLink;
+
+/// Flash bank 2, for the plan store: embassy-stm32's async region (native async on the L4:
+/// program and erase complete through the FLASH interrupt) with the L4's data cache erratum and
+/// ECC errors handled ([`bank2`]). Offsets are relative to the start of the bank (0x0808_0000);
+/// 2 KiB pages, 8-byte (double-word) writes, erased state 0xFF, and a double word can be
+/// written only once between erases.
+pub type Flash = bank2::Bank2;
+
+/// Offsets within [`Flash`] given to the plan store: all of bank 2 (256 pages of 2 KiB).
+pub const STORE_RANGE: Range<u32> = 0..flash::BANK2_REGION.size;
+
+// The store's layout, checked when the image is built: bank 2 is the 512 KiB that memory.x
+// leaves out of the program, and the range is whole pages.
+const _: () = {
+    assert!(STORE_RANGE.end == 512 * 1024);
+    assert!(<Flash as NorFlash>::ERASE_SIZE == 2048);
+    assert!(<Flash as NorFlash>::WRITE_SIZE == 8);
+    assert!(STORE_RANGE.start.is_multiple_of(2048) && STORE_RANGE.end.is_multiple_of(2048));
+};
 
 /// The drive output: DAC1 ch1 fed by circular DMA, paced by TIM6.
-pub type DriveOutput = DacOutput;
+pub type DriveOutput = dac::DacOutput;
 
 /// The initialised board.
 pub struct Board {
     /// Host link.
     pub link: Link,
+    /// Flash bank 2 for the plan store (always present on this board).
+    pub flash: Option<Flash>,
     /// Drive output.
     pub drive: DriveOutput,
+    /// This board's background work, for [`spawn_tasks`].
+    pub tasks: BoardTasks,
+}
+
+/// What this board runs in the background: the USB device.
+pub struct BoardTasks {
+    usb: usb::UsbDevice,
 }
 
 bind_interrupts!(struct Irqs {
-    USART1 => usart::BufferedInterruptHandler<peripherals::USART1>;
     DMA1_CHANNEL3 => dma::InterruptHandler<peripherals::DMA1_CH3>;
+    OTG_FS => embassy_stm32::usb::InterruptHandler<peripherals::USB_OTG_FS>;
+    FLASH => flash::InterruptHandler;
 });
 
-/// DAC1 channel 1 on PA4, triggered by TIM6 TRGO, fed by circular DMA over two blocks.
-pub struct DacOutput {
-    ring: WritableRingBuffer<'static, u32>,
-    _dac: DacChannel<'static, Blocking>,
-    _timer: Timer<'static, peripherals::TIM6>,
-}
-
-impl DacOutput {
-    fn new(
-        dac1: embassy_stm32::Peri<'static, peripherals::DAC1>,
-        pa4: embassy_stm32::Peri<'static, peripherals::PA4>,
-        dma_ch: embassy_stm32::Peri<'static, peripherals::DMA1_CH3>,
-        tim6: embassy_stm32::Peri<'static, peripherals::TIM6>,
-    ) -> Self {
-        static BUF: StaticCell<[u32; 2 * BLOCK_LEN]> = StaticCell::new();
-        let buf = BUF.init([u32::from(chladni_shared::drive::dds::DAC_MID); 2 * BLOCK_LEN]);
-
-        // The DAC channel (clock, analog pin); then trigger and DMA request by register, since
-        // the ring buffer owns the DMA channel rather than the DAC driver.
-        let dac_ch = DacChannel::new_blocking(dac1, pa4);
-        let trigger = <embassy_stm32::triggers::TIM6_TRGO as dac::ChannelTrigger<
-            peripherals::DAC1,
-        >>::signal(&embassy_stm32::triggers::TIM6_TRGO);
-        pac::DAC1.cr().modify(|w| {
-            w.set_en(0, false);
-            w.set_tsel(0, trigger);
-            w.set_ten(0, true);
-            w.set_dmaen(0, true);
-        });
-        pac::DAC1.cr().modify(|w| w.set_en(0, true));
-
-        let request =
-            <peripherals::DMA1_CH3 as dac::Dma<peripherals::DAC1, dac::Ch1>>::request(&dma_ch);
-        let channel = dma::Channel::new(dma_ch, Irqs);
-        let dhr = pac::DAC1.dhr12r(0).as_ptr() as *mut u32;
-        // SAFETY: `dhr` is DAC1's 12-bit right-aligned data register for channel 1, written
-        // one word at a time (bits 31:12 are reserved and get 0); `buf` is 'static and owned
-        // by the ring from here on.
-        let mut ring = unsafe {
-            WritableRingBuffer::new(channel, request, dhr, buf, TransferOptions::default())
-        };
-        ring.start();
-
-        // TIM6: update event at the sample rate (80 MHz / 1600 = 50 kHz), TRGO = update.
-        let timer = Timer::new(tim6);
-        timer.set_frequency(Hertz(SAMPLE_RATE), RoundTo::Slower);
-        timer.regs_basic().cr2().modify(|w| w.set_mms(MasterMode::UPDATE));
-        timer.start();
-        defmt::info!("drive: DAC1 ch1 at {} S/s (TIM6 {} Hz)", SAMPLE_RATE, update_rate(&timer));
-        Self { ring, _dac: dac_ch, _timer: timer }
-    }
-}
-
-/// The timer's update rate as the hardware makes it: clock / (PSC + 1) / (ARR + 1), rounded.
-/// (embassy-stm32 0.6.0's `get_frequency()` divides by ARR, not ARR + 1: it says 50 031 Hz for
-/// the 50 000 Hz that PSC = 0, ARR = 1599 give at 80 MHz.)
-fn update_rate(timer: &Timer<'static, peripherals::TIM6>) -> u32 {
-    let regs = timer.regs_basic();
-    let divider = (u64::from(regs.psc().read()) + 1) * (u64::from(regs.arr().read().arr()) + 1);
-    let clock = u64::from(timer.get_clock_frequency().0);
-    ((clock + divider / 2) / divider) as u32
-}
-
-/// Samples widened to 32-bit words per ring write: a small stack buffer (it lives in the drive
-/// task's future across the await) instead of a whole block.
-const WORDS_PER_WRITE: usize = 50;
-
-impl SampleOutput for DacOutput {
-    async fn write_block(&mut self, block: &[u16]) -> Result<(), Underrun> {
-        let mut result = Ok(());
-        let mut words = [0u32; WORDS_PER_WRITE];
-        for codes in block.chunks(WORDS_PER_WRITE) {
-            let words = &mut words[..codes.len()];
-            words.iter_mut().zip(codes).for_each(|(w, &code)| *w = u32::from(code));
-            if self.ring.write_exact(words).await.is_err() {
-                // The DMA overtook the writer (some old samples were played again). The ring
-                // has reset itself to a full buffer's lead; queue these samples behind it.
-                let _ = self.ring.write_exact(words).await;
-                result = Err(Underrun);
-            }
-        }
-        result
-    }
-}
-
-/// 80 MHz from MSI 4 MHz through PLL1 (×40 /2): TIM6 then divides exactly to 50 kS/s.
-///
-/// Untrimmed, MSI is only good to about ±1 % (RM0351/datasheet), which would put every drive
-/// frequency off by as much. With the LSE crystal running, MSI PLL mode (RCC_CR.MSIPLLEN)
-/// locks MSI to 32.768 kHz × N. embassy-stm32 0.6.0 sets MSIPLLEN itself in `rcc::init` when
-/// `ls.lse` is a 32 768 Hz crystal, after LSERDY (rcc/l.rs: `if config.ls.lse ... ==
-/// Some(Hertz(32_768)) { msipllen = true }`), which is the order RM0351 asks for; `init` checks
-/// it afterwards. `default_lse` also clocks the (unused) RTC from LSE instead of LSI.
-fn clocks() -> embassy_stm32::Config {
-    use embassy_stm32::rcc::*;
-    let mut config = embassy_stm32::Config::default();
-    config.rcc.ls = LsConfig::default_lse();
-    config.rcc.msi = Some(MSIRange::RANGE4M);
-    config.rcc.pll = Some(Pll {
-        source: PllSource::MSI,
-        prediv: PllPreDiv::DIV1,
-        mul: PllMul::MUL40,
-        divp: None,
-        divq: None,
-        divr: Some(PllRDiv::DIV2),
-    });
-    config.rcc.sys = Sysclk::PLL1_R;
-    config
-}
-
-/// Brings the board up: 80 MHz system clock, the link, the drive output.
+/// Brings the board up: clocks, the debug console's banner, USB, flash bank 2, then the drive
+/// output (last, so that nothing blocking runs once its DMA plays).
 pub fn init() -> Board {
-    let p = embassy_stm32::init(clocks());
-    check_clocks();
+    let p = embassy_stm32::init(clocks::config());
+    clocks::check();
     // A debugger halting the core (breakpoint, or a fault caught before its handler runs)
     // also stops TIM6, so the DAC holds one code instead of the DMA replaying the ring.
     pac::DBGMCU.apb1fzr1().modify(|w| w.set_tim6(true));
-    static TX: StaticCell<[u8; 1024]> = StaticCell::new();
-    static RX: StaticCell<[u8; 1024]> = StaticCell::new();
-    let mut config = usart::Config::default();
-    config.baudrate = 115_200;
-    let link = BufferedUart::new(
-        p.USART1,
-        p.PB7,
-        p.PB6,
-        TX.init([0; 1024]),
-        RX.init([0; 1024]),
-        Irqs,
-        config,
-    )
-    .expect("USART1 config");
-    let drive = DacOutput::new(p.DAC1, p.PA4, p.DMA1_CH3, p.TIM6);
-    Board { link, drive }
+    console::start(p.USART1, p.PB6);
+    let (link, usb) = usb::new(p.USB_OTG_FS, p.PA12, p.PA11);
+    let flash = bank2::Bank2::new(flash::Flash::new(p.FLASH, Irqs).into_regions().bank2_region);
+    let drive = dac::DacOutput::new(p.DAC1, p.PA4, p.DMA1_CH3, p.TIM6);
+    Board { link, flash: Some(flash), drive, tasks: BoardTasks { usb } }
 }
 
-/// Logs the clock tree's trim state: LSE ready and MSI in PLL mode, or why not.
-fn check_clocks() {
-    let lse_ready = pac::RCC.bdcr().read().lserdy();
-    let msi_pll = pac::RCC.cr().read().msipllen();
-    if lse_ready && msi_pll {
-        defmt::info!("clocks: 80 MHz from MSI 4 MHz locked to LSE 32.768 kHz (MSI PLL mode)");
-    } else {
-        defmt::warn!("clocks: MSI untrimmed (LSE ready {}, MSIPLLEN {})", lse_ready, msi_pll);
-    }
+/// Spawns this board's background tasks: the USB device ([`usb::run`]). Call once.
+pub fn spawn_tasks(spawner: embassy_executor::Spawner, tasks: BoardTasks) {
+    spawner.spawn(usb::run(tasks.usb).expect("usb task: spawn pool exhausted"));
 }
 
 /// Runs embassy's thread-mode executor forever; `init` spawns the first tasks.
 pub fn run(init: impl FnOnce(embassy_executor::Spawner)) -> ! {
-    static EXECUTOR: StaticCell<embassy_executor::Executor> = StaticCell::new();
+    static EXECUTOR: static_cell::StaticCell<embassy_executor::Executor> =
+        static_cell::StaticCell::new();
     EXECUTOR.init(embassy_executor::Executor::new()).run(init)
 }

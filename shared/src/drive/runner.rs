@@ -75,6 +75,11 @@ impl Runner {
         self.gain
     }
 
+    /// Checks later commands against `limits` (a new device configuration); what runs goes on.
+    pub fn set_limits(&mut self, limits: DeviceLimits) {
+        self.limits = limits;
+    }
+
     /// The plan loaded last.
     pub fn plan(&self) -> &Plan {
         &self.plan

@@ -230,6 +230,7 @@ mod tests {
     use super::*;
     use std::vec::Vec;
 
+    #[allow(clippy::large_enum_variant)]
     #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
     enum Msg {
         Ping(u32),

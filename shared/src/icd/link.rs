@@ -55,6 +55,8 @@ pub trait Endpoint: Sized {
     /// The response carrying `reply`.
     fn respond(reply: Self::Reply) -> Response;
     /// The reply, if `response` is this request's answer; else the response back.
+    // The response comes back whole so the caller can name it; no allocator to box it.
+    #[allow(clippy::result_large_err)]
     fn reply(response: Response) -> Result<Self::Reply, Response>;
 }
 
@@ -66,6 +68,8 @@ macro_rules! endpoints {
     ($( $(#[$doc:meta])* $name:ident ( $req:ty ) => $reply:ty; )*) => {
         /// Requests from the host to the controller. Each is answered by the [`Response`]
         /// variant of the same name (see [`Endpoint`]).
+        // An upload chunk rides inline (no allocator on the controller to box it).
+        #[allow(clippy::large_enum_variant)]
         #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
         #[cfg_attr(feature = "defmt", derive(defmt::Format))]
         pub enum Request {
@@ -74,6 +78,8 @@ macro_rules! endpoints {
 
         /// Responses from the controller: one variant per request (its answer), then the
         /// two ways any request can fail, then the telemetry stream.
+        // A plan page rides inline (no allocator on the controller to box it).
+        #[allow(clippy::large_enum_variant)]
         #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
         #[cfg_attr(feature = "defmt", derive(defmt::Format))]
         pub enum Response {
@@ -107,6 +113,7 @@ macro_rules! endpoints {
                 fn respond(reply: $reply) -> Response {
                     Response::$name(reply)
                 }
+                #[allow(clippy::result_large_err)]
                 fn reply(response: Response) -> Result<$reply, Response> {
                     match response {
                         Response::$name(reply) => Ok(reply),
@@ -514,6 +521,48 @@ mod tests {
         }));
         round_trip(Response::Refused(Refusal::Busy { owner: "x".try_into().unwrap(), idle_ms: 7 }));
         round_trip(Response::Stop(RunNumber(3)));
+    }
+
+    /// The worked example of docs/protocol.md, byte for byte.
+    #[test]
+    fn documented_ping_frame() {
+        let env = Envelope {
+            version: PROTOCOL_VERSION,
+            session: 0x1234_5678,
+            id: 1,
+            body: Request::Ping(Ping { nonce: 0x0102_0304 }),
+        };
+        let mut buf = [0u8; ENCODE_BUF];
+        let wire = encode(&env, &mut buf).unwrap();
+        assert_eq!(
+            wire,
+            [
+                0x00, 0x11, 0x02, 0xf8, 0xac, 0xd1, 0x91, 0x01, 0x01, 0x01, 0x84, 0x86, 0x88, 0x08,
+                0x1d, 0xf8, 0x95, 0xdd, 0x00
+            ]
+        );
+        // Variant numbers are the table's order: a client in another language relies on them.
+        let requests = [
+            Request::Hello(Hello { client: heapless::String::new() }),
+            Request::Ping(Ping { nonce: 0 }),
+            Request::GetInfo(GetInfo),
+            Request::Release(Release),
+            Request::Drive(Drive { freq_mhz: 0, amplitude_q15: 0 }),
+            Request::RunPlan(RunPlan { plan: crate::icd::store::PlanRef::Slot(0), repeat: None }),
+            Request::Stop(Stop),
+            Request::Status(GetStatus),
+            Request::UploadCommit(UploadCommit),
+            Request::ListPlans(ListPlans { from_slot: 0 }),
+            Request::Subscribe(Subscribe { rate_hz: 1, count: 1 }),
+            Request::GetConfig(GetConfig),
+        ];
+        let numbers: std::vec::Vec<u8> =
+            requests.iter().map(|r| postcard::to_stdvec(r).unwrap()[0]).collect();
+        assert_eq!(numbers, [0, 1, 2, 3, 4, 5, 6, 7, 10, 11, 13, 14]);
+        let error = postcard::to_stdvec(&Response::Error(LinkError::BadCrc)).unwrap();
+        let refused =
+            postcard::to_stdvec(&Response::Refused(Refusal::TelemetryRate { rate_hz: 0 }));
+        assert_eq!((error[0], refused.unwrap()[0]), (16, 17));
     }
 
     #[test]

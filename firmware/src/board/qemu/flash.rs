@@ -7,6 +7,10 @@
 //! only clear bits (new = old AND data), so code that works here respects NOR rules there.
 //!
 //! The file's path reaches the firmware on the semihosting command line as `flash=PATH`.
+//!
+//! The plan store takes an async NorFlash: the async traits below run the blocking file
+//! operations to completion (a semihosting call is a few microseconds of host I/O, so nothing
+//! is gained by yielding, and a store operation is never cancelled halfway).
 
 use cortex_m_semihosting::{nr, syscall};
 use embedded_storage::nor_flash::{
@@ -165,4 +169,29 @@ pub fn cmdline_arg<'a>(key: &str, out: &'a mut [u8; 256]) -> Option<&'a str> {
     }
     let line = core::str::from_utf8(&out[..block[1].min(out.len())]).ok()?;
     line.split(' ').find_map(|word| word.strip_prefix(key)?.strip_prefix('='))
+}
+
+impl embedded_storage_async::nor_flash::ReadNorFlash for FileFlash {
+    const READ_SIZE: usize = <Self as ReadNorFlash>::READ_SIZE;
+
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        ReadNorFlash::read(self, offset, bytes)
+    }
+
+    fn capacity(&self) -> usize {
+        CAPACITY
+    }
+}
+
+impl embedded_storage_async::nor_flash::NorFlash for FileFlash {
+    const WRITE_SIZE: usize = <Self as NorFlash>::WRITE_SIZE;
+    const ERASE_SIZE: usize = <Self as NorFlash>::ERASE_SIZE;
+
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        NorFlash::erase(self, from, to)
+    }
+
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        NorFlash::write(self, offset, bytes)
+    }
 }

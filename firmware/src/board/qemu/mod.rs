@@ -29,16 +29,30 @@ pub type Link = usart::Usart1;
 /// simulated shaker + plate, which the fault handlers park.
 pub type DriveOutput = failsafe::ParkableDac;
 
+/// Flash bank 2 for the plan store: a host file (see [`flash`]).
+pub type Flash = flash::FileFlash;
+
+/// The part of [`Flash`] the plan store uses: all of bank 2.
+pub const STORE_RANGE: core::ops::Range<u32> = 0..flash::CAPACITY as u32;
+
 /// The initialised board.
 pub struct Board {
     /// Host link.
     pub link: Link,
     /// Flash bank 2, when QEMU was given a backing file (`flash=PATH` on the semihosting
-    /// command line); without one, nothing survives a restart.
-    pub flash: Option<flash::FileFlash>,
+    /// command line); without one there is no plan store.
+    pub flash: Option<Flash>,
     /// Drive output.
     pub drive: DriveOutput,
+    /// This board's own tasks: none in QEMU.
+    pub tasks: BoardTasks,
 }
+
+/// Background work of the board itself (the real board runs its USB device here).
+pub struct BoardTasks;
+
+/// Spawns the board's own tasks: QEMU has none.
+pub fn spawn_tasks(_spawner: embassy_executor::Spawner, _tasks: BoardTasks) {}
 
 /// Brings the board up: time driver first (everything else may wait on time), then the link.
 pub fn init() -> Board {
@@ -53,7 +67,7 @@ pub fn init() -> Board {
         }
         opened.ok()
     });
-    Board { link: usart::Usart1::new(), flash, drive: DriveOutput::new() }
+    Board { link: usart::Usart1::new(), flash, drive: DriveOutput::new(), tasks: BoardTasks }
 }
 
 pub use executor::run;

@@ -14,6 +14,10 @@
 //! module does what panic-probe does, in a safe order: park, disable interrupts, guard against
 //! recursion, print the message through defmt (panic-probe's `print-defmt`), then `udf` into
 //! HardFault (panic-probe's `hard_fault()`), which probe-rs reports with a backtrace.
+//!
+//! After parking, the handlers also detach from USB ([`detach_usb`]): a halted core no longer
+//! answers the host, and a device that just stops answering leaves the host's `chladni` waiting
+//! on timeouts; a detached one looks unplugged, so the host reports the link closed at once.
 
 use core::sync::atomic::{AtomicBool, Ordering};
 
@@ -44,6 +48,14 @@ pub fn park_output() {
         w.set_ten(DAC_CH1, false);
     });
     pac::DAC1.dhr12r(DAC_CH1).write(|w| w.set_dhr(DAC_MID));
+}
+
+/// Detaches the controller from USB: OTG_FS DCTL.SDIS (soft disconnect) makes the core release
+/// its DP pull-up, which a host sees as an unplug. Raw register write like [`park_output`]:
+/// idempotent, and ignored while the USB clock is still off (before `init`, or before the USB
+/// task's first poll).
+pub fn detach_usb() {
+    pac::USB_OTG_FS.dctl().modify(|w| w.set_sdis(true));
 }
 
 /// Logs what the output holds now (DOR1 and whether TIM6 still runs), for the fault report.
@@ -77,6 +89,7 @@ fn halt() -> ! {
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     park_output();
+    detach_usb();
     cortex_m::interrupt::disable();
     if !PANICKED.swap(true, Ordering::Relaxed) {
         defmt::error!("panic: {}", defmt::Display2Format(info));
@@ -93,11 +106,35 @@ fn hard_fault() -> ! {
     cortex_m::asm::udf()
 }
 
+// SAFETY (of defining the handler, which cortex-m-rt marks unsafe): it only parks through raw
+// register writes, logs and halts; it never returns into the faulting code.
 #[cortex_m_rt::exception]
 unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
     park_output();
+    detach_usb();
     if !PANICKED.load(Ordering::Relaxed) {
         defmt::error!("hard fault at pc {=u32:#010x}", frame.pc());
+        report_output();
+    }
+    halt()
+}
+
+/// NMI: an uncorrectable ECC error in flash bank 2 (the plan store) is data, absorbed and
+/// returned from ([`super::bank2`]); anything else (an ECC error in the program itself, an SRAM2
+/// parity error) is a fault: park, detach, log, halt, as for a HardFault. (cortex-m-rt's
+/// default NMI handler would spin with the DMA still replaying the ring.)
+// SAFETY (of defining the handler, which cortex-m-rt marks unsafe because an NMI preempts even
+// critical sections): it touches only FLASH_ECCR, an atomic counter and the parking registers,
+// all of which are safe to access from any context.
+#[cortex_m_rt::exception]
+unsafe fn NonMaskableInt() {
+    if super::bank2::absorb_ecc_error() {
+        return;
+    }
+    park_output();
+    detach_usb();
+    if !PANICKED.load(Ordering::Relaxed) {
+        defmt::error!("NMI (not an ECC error in flash bank 2)");
         report_output();
     }
     halt()
