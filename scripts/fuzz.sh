@@ -73,6 +73,7 @@ fuzz_one() {
   local log=fuzz/target/logs/$target.log t0=$SECONDS rc=0
   # The working corpus (new inputs go there), then the committed crash regressions, which
   # libFuzzer replays first: a crash that came back fails at once.
+  mkdir -p "fuzz/corpus/$target"
   local corpora=("fuzz/corpus/$target")
   if [ -d "fuzz/regressions/$target" ]; then corpora+=("fuzz/regressions/$target"); fi
   local run=(cargo "+$FUZZ_NIGHTLY" fuzz run "${build_args[@]}" "$target" "${corpora[@]}" --
@@ -131,7 +132,7 @@ case "$cmd" in
     target=${1:-}
     [ -n "$target" ] || die "usage: scripts/fuzz.sh run TARGET [-- libFuzzer args]"
     shift
-    targets | grep -qx "$target" || die "no target '$target' (scripts/fuzz.sh list)"
+    targets | grep -x "$target" >/dev/null || die "no target '$target' (scripts/fuzz.sh list)"
     [ "${1:-}" = "--" ] && shift
     require
     seeds

@@ -1,12 +1,20 @@
 //! A NOR flash in RAM with the rules of the controller's (STM32L4 bank 2, and QEMU's file flash):
 //! 2 KiB pages, 8-byte words, erase sets every bit, a write only clears bits and only into an
-//! erased word (the trait's "not twice"; a store that breaks it fails on the chip, so here it
-//! panics). Power can be cut at any numbered operation.
+//! erased word, except that zeros may be written over anything (the L4's PROGERR rule); a store
+//! that breaks it fails on the chip, so here it panics. Power can be cut at any numbered
+//! operation.
 //!
-//! Power cut, as `embedded_storage_async::nor_flash::NorFlash` allows: the word being written
-//! holds undefined bits (here: some of the bits that should clear stay set), the page being
-//! erased holds undefined bytes (here: a prefix erased, the rest as it was, with noise); every
-//! operation after the cut fails until [`RamFlash::reboot`].
+//! Power cut, within what `embedded_storage_async::nor_flash::NorFlash` allows: the word being
+//! written holds undefined bits (here: some of the bits that should clear stay set; the words
+//! after it in the same write are not written); the page being erased is undefined (here, as in
+//! sequential-storage's shutoff model, which recognises a cut erase by its page markers: the
+//! erase progressed from the start of the page, so a prefix of words is erased, the word where
+//! it stopped is garbled and the rest is as it was). Every operation after the cut, reads
+//! included, fails until [`RamFlash::reboot`]. Each word written and each page erased counts as
+//! one operation.
+
+use std::cell::RefCell;
+use std::rc::Rc;
 
 use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
@@ -112,14 +120,8 @@ impl RamFlash {
     }
 }
 
-impl ErrorType for RamFlash {
-    type Error = RamFlashError;
-}
-
-impl ReadNorFlash for RamFlash {
-    const READ_SIZE: usize = 1;
-
-    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+impl RamFlash {
+    fn read_now(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), RamFlashError> {
         if self.off {
             return Err(RamFlashError::PowerCut);
         }
@@ -128,16 +130,7 @@ impl ReadNorFlash for RamFlash {
         Ok(())
     }
 
-    fn capacity(&self) -> usize {
-        self.bytes.len()
-    }
-}
-
-impl NorFlash for RamFlash {
-    const WRITE_SIZE: usize = WORD;
-    const ERASE_SIZE: usize = PAGE;
-
-    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+    fn erase_now(&mut self, from: u32, to: u32) -> Result<(), RamFlashError> {
         if to < from {
             return Err(RamFlashError::Request(NorFlashErrorKind::OutOfBounds));
         }
@@ -146,10 +139,14 @@ impl NorFlash for RamFlash {
             let torn = self.step()?;
             let page = &mut self.bytes[start..start + PAGE];
             if let Some(noise) = torn {
-                // Torn erase: a prefix erased, the rest as it was with some bits set.
-                let split = noise as usize * PAGE / 256;
+                // Torn erase: the words before the cut erased, the cut word garbled (some bits
+                // raised), the rest as it was.
+                let split = noise as usize * (PAGE / WORD) / 256 * WORD;
                 page[..split].fill(0xff);
-                page[split..].iter_mut().for_each(|b| *b |= noise.rotate_left(3));
+                let garbled = &mut page[split..split + WORD];
+                for (j, b) in garbled.iter_mut().enumerate() {
+                    *b |= noise.rotate_left(j as u32 + 1);
+                }
                 return Err(RamFlashError::PowerCut);
             }
             page.fill(0xff);
@@ -157,13 +154,15 @@ impl NorFlash for RamFlash {
         Ok(())
     }
 
-    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+    fn write_now(&mut self, offset: u32, bytes: &[u8]) -> Result<(), RamFlashError> {
         let at = self.check(offset, bytes.len(), WORD)?;
         for (i, data) in bytes.chunks(WORD).enumerate() {
             let start = at + i * WORD;
             let word = &self.bytes[start..start + WORD];
+            // The L4 programs a double word only when it is erased, or when the data is all
+            // zeros (RM0351, PROGERR); anything else fails on the chip.
             assert!(
-                word.iter().all(|&b| b == 0xff),
+                word.iter().all(|&b| b == 0xff) || data.iter().all(|&b| b == 0),
                 "write into a word that is not erased at {start:#x}: {word:02x?} <- {data:02x?}"
             );
             let torn = self.step()?;
@@ -180,5 +179,80 @@ impl NorFlash for RamFlash {
             }
         }
         Ok(())
+    }
+}
+
+impl ErrorType for RamFlash {
+    type Error = RamFlashError;
+}
+
+impl ReadNorFlash for RamFlash {
+    const READ_SIZE: usize = 1;
+
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        self.read_now(offset, bytes)
+    }
+
+    fn capacity(&self) -> usize {
+        self.bytes.len()
+    }
+}
+
+impl NorFlash for RamFlash {
+    const WRITE_SIZE: usize = WORD;
+    const ERASE_SIZE: usize = PAGE;
+
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.erase_now(from, to)
+    }
+
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        self.write_now(offset, bytes)
+    }
+}
+
+/// A [`RamFlash`] shared between the store that owns a handle and the harness that cuts the
+/// power and looks at the bytes (single-threaded; no borrow is held across an await).
+#[derive(Debug, Clone)]
+pub struct SharedFlash(pub Rc<RefCell<RamFlash>>);
+
+impl SharedFlash {
+    /// `pages` erased pages.
+    pub fn new(pages: usize) -> Self {
+        Self(Rc::new(RefCell::new(RamFlash::new(pages))))
+    }
+
+    /// The flash itself, for a moment.
+    pub fn with<R>(&self, f: impl FnOnce(&mut RamFlash) -> R) -> R {
+        f(&mut self.0.borrow_mut())
+    }
+}
+
+impl ErrorType for SharedFlash {
+    type Error = RamFlashError;
+}
+
+impl ReadNorFlash for SharedFlash {
+    const READ_SIZE: usize = 1;
+
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        self.0.borrow_mut().read_now(offset, bytes)
+    }
+
+    fn capacity(&self) -> usize {
+        self.0.borrow().bytes.len()
+    }
+}
+
+impl NorFlash for SharedFlash {
+    const WRITE_SIZE: usize = WORD;
+    const ERASE_SIZE: usize = PAGE;
+
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.0.borrow_mut().erase_now(from, to)
+    }
+
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        self.0.borrow_mut().write_now(offset, bytes)
     }
 }

@@ -14,10 +14,10 @@ use chladni_shared::icd::link::{
     GetStatus, Hello, ListPlans, Ping, Refusal, Release, Request, Response, RunNumber, RunPlan,
     SetConfig, StatusReport, Stop, Subscribe, Telemetry, UploadCommit,
 };
-use chladni_shared::icd::plan::{DeviceLimits, PlanError, Step};
+use chladni_shared::icd::plan::{DeviceLimits, Plan, PlanError, Step};
 use chladni_shared::icd::store::{
     CHUNK_STEPS, DeviceConfig, PlanPage, PlanRef, PlanSummary, StoreError, UploadBegin,
-    UploadChunk, UploadError,
+    UploadChunk, UploadError, plan_crc,
 };
 use serde::Serialize;
 
@@ -64,43 +64,62 @@ fn step(i: u32) -> Step {
     }
 }
 
-/// One valid request of every kind (some twice, with other field shapes).
+/// The plan the sample upload carries: 40 valid steps (two chunks, the second short).
+pub fn sample_plan() -> Plan {
+    Plan { name: name("square-45"), repeat: 1, steps: (0..40).map(step).collect() }
+}
+
+/// The chunks of an upload of `plan`.
+pub fn chunks_of(plan: &Plan) -> Vec<UploadChunk> {
+    plan.steps
+        .chunks(CHUNK_STEPS)
+        .enumerate()
+        .map(|(i, steps)| UploadChunk { index: i as u16, steps: steps.iter().copied().collect() })
+        .collect()
+}
+
+/// The `UploadBegin` of `plan` into `slot`, with its CRC.
+pub fn begin_of(plan: &Plan, slot: Option<u8>) -> UploadBegin {
+    UploadBegin {
+        slot,
+        name: plan.name.clone(),
+        repeat: plan.repeat,
+        steps: plan.steps.len() as u16,
+        crc: plan_crc(plan),
+    }
+}
+
+/// One valid request of every kind (some twice, with other field shapes). The uploads are
+/// consistent: `UploadBegin` (slot 4) then the two `UploadChunk`s then `UploadCommit` stores
+/// [`sample_plan`]; the second `UploadBegin` and the one-step chunk store a plan "x".
 pub fn sample_requests() -> Vec<Request> {
-    let chunk = |index: u16, n: u32| UploadChunk { index, steps: (0..n).map(step).collect() };
-    vec![
+    let plan = sample_plan();
+    let small = Plan { name: name("x"), repeat: 3, steps: [step(0)].into_iter().collect() };
+    let mut requests = vec![
         Request::Hello(Hello { client: name("chladni device run (pid 4242)") }),
         Request::Ping(Ping { nonce: 0xdead_beef }),
         Request::GetInfo(GetInfo),
         Request::Release(Release),
         Request::Drive(Drive { freq_mhz: 123_000, amplitude_q15: 16_384 }),
-        Request::RunPlan(RunPlan { plan: PlanRef::Slot(3), repeat: None }),
+        Request::RunPlan(RunPlan { plan: PlanRef::Slot(4), repeat: None }),
         Request::RunPlan(RunPlan { plan: PlanRef::Name(name("square-45")), repeat: Some(2) }),
         Request::Stop(Stop),
         Request::Status(GetStatus),
-        Request::UploadBegin(UploadBegin {
-            slot: Some(4),
-            name: name("square-45"),
-            repeat: 1,
-            steps: 40,
-            crc: 0x1234_5678,
-        }),
-        Request::UploadBegin(UploadBegin {
-            slot: None,
-            name: name("x"),
-            repeat: 3,
-            steps: 1,
-            crc: 7,
-        }),
-        Request::UploadChunk(chunk(0, CHUNK_STEPS as u32)),
-        Request::UploadChunk(chunk(1, 8)),
+        Request::UploadBegin(begin_of(&plan, Some(4))),
+        Request::UploadBegin(begin_of(&small, None)),
+    ];
+    requests.extend(chunks_of(&plan).into_iter().map(Request::UploadChunk));
+    requests.extend(chunks_of(&small).into_iter().map(Request::UploadChunk));
+    requests.extend([
         Request::UploadCommit(UploadCommit),
         Request::ListPlans(ListPlans { from_slot: 0 }),
-        Request::DeletePlan(DeletePlan { plan: PlanRef::Name(name("old")) }),
-        Request::DeletePlan(DeletePlan { plan: PlanRef::Slot(64) }),
+        Request::DeletePlan(DeletePlan { plan: PlanRef::Name(name("x")) }),
+        Request::DeletePlan(DeletePlan { plan: PlanRef::Slot(4) }),
         Request::Subscribe(Subscribe { rate_hz: 10, count: 100 }),
         Request::GetConfig(GetConfig),
         Request::SetConfig(SetConfig(DeviceConfig::DEFAULT)),
-    ]
+    ]);
+    requests
 }
 
 fn status() -> StatusReport {
