@@ -14,7 +14,8 @@
 # fuzz/target. Corpus: fuzz/corpus/<target>/ (generated seeds and what libFuzzer adds), plus
 # the committed crash inputs of fuzz/regressions/<target>/, replayed at every start. A crash
 # lands in fuzz/artifacts/<target>/; the log of the last run in fuzz/target/logs/<target>.log.
-# FUZZ_SANITIZER=none|address|... picks another sanitizer (none runs about twice as fast).
+# FUZZ_SANITIZER=none|address|... picks another sanitizer (none runs two to four times as
+# fast); FUZZ_BUILD_FLAGS adds cargo-fuzz build options (e.g. --no-trace-compares).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # shellcheck source=../fuzz/toolchain.env
@@ -58,7 +59,12 @@ seeds() {
     --example seeds -- fuzz/corpus
 }
 
-build_args=(--debug-assertions --sanitizer "${FUZZ_SANITIZER:-address}")
+# No `--cfg fuzzing`: sequential-storage 8 prints its page-state cache to stderr under it,
+# which floods the log and slows the store's targets several times over.
+build_args=(--debug-assertions --no-cfg-fuzzing --sanitizer "${FUZZ_SANITIZER:-address}")
+# More `cargo fuzz build` options, e.g. FUZZ_BUILD_FLAGS=--no-trace-compares.
+read -r -a extra <<<"${FUZZ_BUILD_FLAGS:-}"
+build_args+=("${extra[@]}")
 
 build() {
   cargo "+$FUZZ_NIGHTLY" fuzz build "${build_args[@]}" "$@"
