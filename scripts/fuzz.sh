@@ -88,9 +88,15 @@ fuzz_one() {
     "${run[@]}" >"$log" 2>&1 || rc=$?
   else
     # ^C stops libFuzzer (which prints its final stats), not this script: the summary follows.
-    trap 'true' INT
+    local interrupted=0
+    trap 'interrupted=1' INT
     "${run[@]}" 2>&1 | tee -i "$log" || rc=$?
     trap - INT
+    if [ $interrupted = 1 ]; then
+      summary "$target" "$log" $((SECONDS - t0))
+      echo "fuzz: $target interrupted"
+      return 130
+    fi
   fi
   summary "$target" "$log" $((SECONDS - t0))
   if [ $rc != 0 ]; then

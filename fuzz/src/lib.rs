@@ -21,6 +21,14 @@ use chladni_shared::icd::store::{
 };
 use serde::Serialize;
 
+/// Drops what the firmware logged. On the host, defmt (feature `unstable-test`, as in the
+/// firmware's own host tests) appends every log frame to a thread-local buffer that only this
+/// empties: without it a long run grows by every log line (about 400 bytes an execution for
+/// `request_handler`) until libFuzzer stops it for memory.
+pub fn discard_logs() {
+    drop(defmt::export::fetch_bytes());
+}
+
 /// The bytes sent for `envelope`: `0x00 · COBS(postcard · CRC) · 0x00`.
 ///
 /// Panics if it does not encode: only for messages known to fit a frame.
