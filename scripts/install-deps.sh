@@ -7,6 +7,8 @@
 #   - qemu-system-arm 10 from Debian bookworm-backports (the emulated B-L475E-IOT01A)
 #   - binutils-arm-none-eabi (arm-none-eabi-size/nm/objdump: size report, image checks)
 #   - defmt-print (decodes the QEMU firmware's defmt log)
+#   - for fuzzing, the pinned nightly toolchain and cargo-fuzz (scripts/fuzz.sh install; the
+#     pins are in fuzz/toolchain.env)
 # With --board it also installs probe-rs-tools (the `probe-rs` command, for
 # `scripts/firmware.sh run stm32l475`: flash the real board and print its defmt log over RTT).
 # Idempotent: every step checks first, so running it twice costs seconds.
@@ -72,3 +74,6 @@ if $board && ! command -v probe-rs >/dev/null; then
   echo "install-deps: cargo install probe-rs-tools (a few minutes)"
   cargo install --locked probe-rs-tools@0.32.0 2>&1 | tail -n 2
 fi
+
+# 4. Fuzzing: the pinned nightly and cargo-fuzz (about 40 s from nothing; docs/fuzzing.md).
+scripts/fuzz.sh install

@@ -16,6 +16,12 @@ cargo fmt --all -- --check
 step "clippy (host crates)"
 cargo clippy --all-targets -- -D warnings
 
+# The fuzz crate is its own workspace (fuzz/): formatted and linted with the same stable
+# toolchain; without libFuzzer's runtime, so no C++ is compiled for the check.
+step "format + clippy (fuzz crate)"
+cargo fmt --manifest-path fuzz/Cargo.toml -- --check
+cargo clippy --manifest-path fuzz/Cargo.toml --all-targets --no-default-features -- -D warnings
+
 for board in qemu stm32l475; do
   step "clippy + build firmware ($board)"
   scripts/firmware.sh clippy "$board"
@@ -29,6 +35,11 @@ cargo test
 # so that the Cortex-M builds never try a std test harness; asked for by name here.
 step "firmware app on the host"
 cargo test -p chladni-firmware --lib
+
+# Each fuzz target for a short time on the pinned nightly (the long runs are by hand:
+# docs/fuzzing.md). Fails on any crash.
+step "fuzz smoke run (${CHLADNI_FUZZ_SECONDS:-15} s per target)"
+scripts/fuzz.sh smoke "${CHLADNI_FUZZ_SECONDS:-15}"
 
 # scripts/hitl.sh runs the end-to-end suite against a port instead of its own QEMU; try that
 # path here against a standalone `chladni emulator` (no board on CI).

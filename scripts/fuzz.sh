@@ -1,0 +1,158 @@
+#!/usr/bin/env bash
+# Fuzzing with cargo-fuzz (libFuzzer) on the pinned nightly; docs/fuzzing.md.
+#
+#   scripts/fuzz.sh install              the pinned nightly and cargo-fuzz (fuzz/toolchain.env);
+#                                        idempotent, offline when both are there
+#   scripts/fuzz.sh seeds                (re)writes the seed corpora, fuzz/corpus/<target>/seed-*
+#   scripts/fuzz.sh smoke [SECONDS]      every target for SECONDS each (default 20): fails on a
+#                                        crash, prints executions and coverage per target
+#   scripts/fuzz.sh run TARGET [-- ARGS] one target until libFuzzer's ARGS stop it
+#                                        (e.g. -- -runs=10000000 or -max_total_time=3600), or ^C
+#   scripts/fuzz.sh list                 the targets
+#
+# Targets build with debug assertions (integer overflow panics) and AddressSanitizer, into
+# fuzz/target. Corpus: fuzz/corpus/<target>/ (generated seeds and what libFuzzer adds), plus
+# the committed crash inputs of fuzz/regressions/<target>/, replayed at every start. A crash
+# lands in fuzz/artifacts/<target>/; the log of the last run in fuzz/target/logs/<target>.log.
+# FUZZ_SANITIZER=none|address|... picks another sanitizer (none runs two to four times as
+# fast); FUZZ_BUILD_FLAGS adds cargo-fuzz build options (e.g. --no-trace-compares).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+# shellcheck source=../fuzz/toolchain.env
+source fuzz/toolchain.env
+
+die() { echo "fuzz: $*" >&2; exit 2; }
+
+targets() {
+  local f
+  for f in fuzz/fuzz_targets/*.rs; do basename "$f" .rs; done
+}
+
+nightly_installed() {
+  rustup toolchain list | grep -q "^$FUZZ_NIGHTLY-"
+}
+
+cargo_fuzz_installed() {
+  [ "$(cargo "+$FUZZ_NIGHTLY" fuzz --version 2>/dev/null)" = "cargo-fuzz $CARGO_FUZZ_VERSION" ]
+}
+
+install() {
+  if ! nightly_installed; then
+    echo "fuzz: rustup toolchain install $FUZZ_NIGHTLY"
+    rustup toolchain install --no-self-update --profile minimal "$FUZZ_NIGHTLY"
+  fi
+  if ! cargo_fuzz_installed; then
+    echo "fuzz: cargo install cargo-fuzz@$CARGO_FUZZ_VERSION (about a minute)"
+    cargo "+$FUZZ_NIGHTLY" install --locked "cargo-fuzz@$CARGO_FUZZ_VERSION" 2>&1 | tail -n 2
+  fi
+  cargo "+$FUZZ_NIGHTLY" fuzz --version
+  rustup run "$FUZZ_NIGHTLY" rustc --version
+}
+
+require() {
+  nightly_installed && cargo_fuzz_installed ||
+    die "$FUZZ_NIGHTLY and cargo-fuzz $CARGO_FUZZ_VERSION are needed: run scripts/fuzz.sh install"
+}
+
+seeds() {
+  cargo "+$FUZZ_NIGHTLY" run --quiet --manifest-path fuzz/Cargo.toml --no-default-features \
+    --example seeds -- fuzz/corpus
+}
+
+# No `--cfg fuzzing`: sequential-storage 8 prints its page-state cache to stderr under it,
+# which floods the log and slows the store's targets several times over.
+build_args=(--debug-assertions --no-cfg-fuzzing --sanitizer "${FUZZ_SANITIZER:-address}")
+# More `cargo fuzz build` options, e.g. FUZZ_BUILD_FLAGS=--no-trace-compares.
+read -r -a extra <<<"${FUZZ_BUILD_FLAGS:-}"
+build_args+=("${extra[@]}")
+
+build() {
+  cargo "+$FUZZ_NIGHTLY" fuzz build "${build_args[@]}" "$@"
+}
+
+# One target; libFuzzer's output to the terminal (or not, with quiet=1) and to its log.
+# Defaults first, so the caller's libFuzzer arguments override them.
+fuzz_one() {
+  local target=$1 quiet=$2
+  shift 2
+  mkdir -p fuzz/target/logs
+  local log=fuzz/target/logs/$target.log t0=$SECONDS rc=0
+  # The working corpus (new inputs go there), then the committed crash regressions, which
+  # libFuzzer replays first: a crash that came back fails at once.
+  mkdir -p "fuzz/corpus/$target"
+  local corpora=("fuzz/corpus/$target")
+  if [ -d "fuzz/regressions/$target" ]; then corpora+=("fuzz/regressions/$target"); fi
+  local run=(cargo "+$FUZZ_NIGHTLY" fuzz run "${build_args[@]}" "$target" "${corpora[@]}" --
+    -print_final_stats=1 -timeout=10 "$@")
+  if [ "$quiet" = 1 ]; then
+    "${run[@]}" >"$log" 2>&1 || rc=$?
+  else
+    # ^C stops libFuzzer (which prints its final stats), not this script: the summary follows.
+    local interrupted=0
+    trap 'interrupted=1' INT
+    "${run[@]}" 2>&1 | tee -i "$log" || rc=$?
+    trap - INT
+    if [ $interrupted = 1 ]; then
+      summary "$target" "$log" $((SECONDS - t0))
+      echo "fuzz: $target interrupted"
+      return 130
+    fi
+  fi
+  summary "$target" "$log" $((SECONDS - t0))
+  if [ $rc != 0 ]; then
+    echo "fuzz: $target FAILED (exit $rc); the end of $log:" >&2
+    tail -n 40 "$log" >&2
+    ls -1 fuzz/artifacts/"$target"/ 2>/dev/null | sed "s|^|fuzz: artifact fuzz/artifacts/$target/|" >&2
+  fi
+  return $rc
+}
+
+# Executions, speed and coverage from libFuzzer's last status line and final stats.
+summary() {
+  local target=$1 log=$2 secs=$3 status runs speed
+  status=$(grep -E '^#[0-9]+.*cov: ' "$log" | tail -n 1 || true)
+  runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -n 1)
+  speed=$(sed -n 's/^stat::average_exec_per_sec: *//p' "$log" | tail -n 1)
+  printf 'fuzz: %-16s %12s execs  %8s exec/s  %5d s  cov: %s  ft: %s  corp: %s\n' "$target" \
+    "${runs:-?}" "${speed:-?}" "$secs" \
+    "$(sed -n 's/.* cov: \([0-9]*\).*/\1/p' <<<"$status")" \
+    "$(sed -n 's/.* ft: \([0-9]*\).*/\1/p' <<<"$status")" \
+    "$(sed -n 's/.* corp: \([^ ]*\).*/\1/p' <<<"$status")"
+}
+
+cmd=${1:-}
+[ $# -gt 0 ] && shift
+case "$cmd" in
+  install) install ;;
+  list) targets ;;
+  seeds) require; seeds ;;
+  smoke)
+    secs=${1:-20}
+    [[ "$secs" =~ ^[0-9]+$ ]] || die "smoke takes a number of seconds, not '$secs'"
+    require
+    seeds
+    build
+    failed=()
+    for t in $(targets); do
+      fuzz_one "$t" 1 -max_total_time="$secs" || failed+=("$t")
+    done
+    if [ ${#failed[@]} -gt 0 ]; then
+      die "crash or failure in: ${failed[*]} (see above; docs/fuzzing.md: reproduce and minimise)"
+    fi
+    ;;
+  run)
+    target=${1:-}
+    [ -n "$target" ] || die "usage: scripts/fuzz.sh run TARGET [-- libFuzzer args]"
+    shift
+    targets | grep -x "$target" >/dev/null || die "no target '$target' (scripts/fuzz.sh list)"
+    [ "${1:-}" = "--" ] && shift
+    require
+    seeds
+    build "$target"
+    fuzz_one "$target" 0 "$@"
+    ;;
+  *)
+    awk 'NR > 1 && !/^#/ { exit } NR > 1 { sub(/^# ?/, ""); print }' "$0"
+    [ -z "$cmd" ] || [ "$cmd" = help ] || [ "$cmd" = -h ] || exit 2
+    ;;
+esac
