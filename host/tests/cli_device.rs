@@ -62,7 +62,7 @@ fn status_info_ping_config_and_list_print_their_json_shapes() {
     let info = json_of(&chladni(&["device", "info", "--port", &port, "--json"]));
     // The board's value is checked end to end (tests/e2e.rs); here, the shape.
     assert_eq!(keys(&info), ["board", "build_id", "firmware_version", "protocol_version"]);
-    assert_eq!(info["protocol_version"], 2);
+    assert_eq!(info["protocol_version"], chladni_shared::icd::link::PROTOCOL_VERSION);
     let ping = json_of(&chladni(&["device", "ping", "--port", &port, "--count", "3", "--json"]));
     assert_eq!(ping["count"], 3);
     let config = json_of(&chladni(&["device", "config", "get", "--port", &port, "--json"]));
