@@ -180,3 +180,24 @@ pub fn steps(count: usize, base_mhz: u32, duration_ms: u32) -> Vec<Step> {
         })
         .collect()
 }
+
+/// Frames received until one satisfies `wanted` (all of them, that one last), or every frame
+/// received within `limit` if none does. QEMU's serial port takes a burst of bytes at its own
+/// pace, so the answer to a frame sent after kilobytes of garbage may take seconds to come.
+pub fn frames_until(
+    client: &mut chladni::controller::client::DeviceClient,
+    limit: Duration,
+    wanted: impl Fn(&chladni::controller::client::Frame) -> bool,
+) -> Vec<chladni::controller::client::Frame> {
+    let start = std::time::Instant::now();
+    let mut frames = Vec::new();
+    while start.elapsed() < limit {
+        let more = client.receive_frames(Duration::from_millis(200)).expect("receive frames");
+        let done = more.iter().any(&wanted);
+        frames.extend(more);
+        if done {
+            break;
+        }
+    }
+    frames
+}

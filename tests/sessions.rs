@@ -122,10 +122,9 @@ fn defect_4_a_drive_with_a_corrupted_crc_is_not_executed() {
     for bit in 8..16 {
         let drive = Drive { freq_mhz: 123_000, amplitude_q15: 6_000 };
         let id = client.send_tampered(drive, Tamper::FlipBodyBit(bit)).unwrap();
-        let frames = client.receive_frames(Duration::from_millis(300)).unwrap();
-        let answered = frames.iter().any(|f| {
-            matches!(f, Ok(env) if env.id == id && env.body == Response::Error(LinkError::BadCrc))
-        });
+        let is_answer = |f: &chladni::controller::client::Frame| matches!(f, Ok(env) if env.id == id && env.body == Response::Error(LinkError::BadCrc));
+        let frames = chladni_e2e::frames_until(&mut client, Duration::from_secs(20), is_answer);
+        let answered = frames.iter().any(is_answer);
         assert!(answered, "bit {bit}: no BadCrc answer with the frame's id: {frames:?}");
     }
     let after = client.status().unwrap();
