@@ -182,6 +182,10 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         if let Some(slot) = begin.slot.filter(|&s| s >= PLAN_SLOTS) {
             return Err(Refusal::Upload(UploadError::BadSlot { slot }));
         }
+        if begin.name.trim().is_empty() {
+            // A plan is run and deleted by name: one without a visible name could not be.
+            return Err(Refusal::Upload(UploadError::EmptyName));
+        }
         limits
             .check_plan_header(begin.repeat, begin.steps)
             .map_err(|e| Refusal::Upload(UploadError::Plan(e)))?;

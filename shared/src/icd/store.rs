@@ -259,6 +259,8 @@ pub enum UploadError {
         /// Computed over what arrived.
         got: u32,
     },
+    /// The plan's name is empty or blank (plans are run and deleted by name).
+    EmptyName,
 }
 
 impl core::fmt::Display for UploadError {
@@ -289,6 +291,7 @@ impl core::fmt::Display for UploadError {
                 f,
                 "plan CRC {got:08x} of the steps received differs from the announced {expected:08x}"
             ),
+            UploadError::EmptyName => write!(f, "the plan has no name (give it one: --name)"),
         }
     }
 }

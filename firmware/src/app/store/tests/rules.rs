@@ -49,6 +49,8 @@ fn slots_and_names() {
     assert_eq!(load(&mut s, PlanRef::Slot(7)).unwrap(), a2);
     // Another slot below the scratch slot may not take the name.
     assert_eq!(upload(&mut s, &a, Some(3)), upload_err(UploadError::NameTaken { slot: 7 }));
+    // A plan is run and deleted by name: a blank one is refused.
+    assert_eq!(upload(&mut s, &plan(" ", 1, 1), None), upload_err(UploadError::EmptyName));
     // The scratch slot may, and a lookup by name finds the other slot first.
     let scratch = plan("a", 2, 3);
     assert_eq!(upload(&mut s, &scratch, Some(SCRATCH_SLOT)).unwrap().slot, SCRATCH_SLOT);
