@@ -43,9 +43,17 @@ start_emulator $chladni $out --flash-file $out/flash.bin --log $out/firmware.log
 say chladni device info --port $port
 $chladni device info --port "$port"
 
-say chladni device run-file --port $port $out/plan.json --wait
-$chladni device run-file --port "$port" "$out/plan.json" --wait
+# Plans are kept on the controller: upload, list, run by name (and they survive a restart).
+say chladni device upload --port $port $out/plan.json --name demo-orient
+$chladni device upload --port "$port" "$out/plan.json" --name demo-orient
 
+say chladni device plans --port $port
+$chladni device plans --port "$port"
+
+say chladni device run --port $port demo-orient --wait
+$chladni device run --port "$port" demo-orient --wait
+
+# A file can also run straight away (it goes to the controller's scratch slot).
 say chladni device run-file --port $port $out/rectangle-plan.json --wait
 $chladni device run-file --port "$port" "$out/rectangle-plan.json" --wait
 

@@ -4,49 +4,22 @@
 //! Timing assertions are on sample counts reported by the firmware, never on wall time: QEMU's
 //! clock follows the host's and slips under load. Polling uses generous deadlines.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use chladni::controller::client::{DeviceClient, DeviceError};
-use chladni_e2e::Controller;
+use chladni_e2e::{Controller, plan, poll_until};
 use chladni_shared::drive::dds::SAMPLES_PER_MS;
 use chladni_shared::drive::runner::{BLOCK_LEN, MANUAL_RAMP_MS};
-use chladni_shared::icd::link::{
-    DriveError, DriveState, Plan, PlanError, SetpointError, StatusReport,
-};
+use chladni_shared::icd::link::{DriveError, DriveState, Refusal, SetpointError};
 use chladni_shared::icd::plan::Step;
+use chladni_shared::icd::store::PlanRef;
 
 fn start(name: &str) -> (Controller, DeviceClient) {
+    let _ = std::fs::remove_file(chladni_e2e::flash_path(&format!("drive-{name}")));
     let controller = Controller::start(&format!("drive-{name}"));
-    let mut client = controller.connect().expect("connect");
+    let mut client = controller.connect(&format!("e2e drive {name}")).expect("connect");
     client.set_timeout(Duration::from_secs(10));
     (controller, client)
-}
-
-fn plan(name: &str, steps: &[Step], repeat: u16) -> Plan {
-    Plan {
-        name: heapless::String::try_from(name).unwrap(),
-        repeat,
-        steps: heapless::Vec::from_slice(steps).unwrap(),
-    }
-}
-
-/// Polls status until `done` says so; returns every status seen.
-fn poll_until(
-    client: &mut DeviceClient,
-    limit: Duration,
-    mut done: impl FnMut(&StatusReport) -> bool,
-) -> Vec<StatusReport> {
-    let deadline = Instant::now() + limit;
-    let mut seen = Vec::new();
-    loop {
-        let s = client.status().expect("status");
-        seen.push(s);
-        if done(&s) {
-            return seen;
-        }
-        assert!(Instant::now() < deadline, "gave up waiting; last status {s:?}");
-        std::thread::sleep(Duration::from_millis(5));
-    }
 }
 
 #[test]
@@ -60,12 +33,13 @@ fn plan_runs_step_by_step_to_idle() {
     // Steps last ≥ 600 ms so that a poller stalled by a loaded host still sees each of them.
     let before = client.status().expect("status");
     assert_eq!(before.state, DriveState::Idle);
-    client.run_plan(plan("e2e", &steps, 1)).expect("plan accepted");
+    client.upload(&plan("e2e", &steps, 1), None, |_, _| {}).expect("upload");
+    let run = client.run(PlanRef::Name("e2e".try_into().unwrap()), None).expect("plan accepted");
 
     let seen = poll_until(&mut client, Duration::from_secs(90), |s| {
-        s.commands > before.commands && s.state == DriveState::Idle
+        s.run == run && s.state == DriveState::Idle
     });
-    let seen: Vec<_> = seen.into_iter().filter(|s| s.commands > before.commands).collect();
+    let seen: Vec<_> = seen.into_iter().filter(|s| s.run == run).collect();
 
     // Step windows in samples: step i covers [start_i, end_i).
     let mut bounds = Vec::new();
@@ -89,6 +63,7 @@ fn plan_runs_step_by_step_to_idle() {
             );
             assert!(i >= last_step, "steps went backwards: {seen:?}");
             assert_eq!(s.freq_mhz, steps[i as usize].freq_mhz);
+            assert_eq!(s.plan.as_deref(), Some("e2e"));
             last_step = i;
             steps_seen.insert(i);
         }
@@ -106,42 +81,27 @@ fn plan_runs_step_by_step_to_idle() {
 fn manual_drive_stop_and_refusals() {
     let (_emulator, mut client) = start("manual");
 
-    // Invalid plans are refused by the controller itself with the typed error.
-    let bad = plan(
-        "bad",
-        &[
-            Step { freq_mhz: 100_000, amplitude_q15: 1000, duration_ms: 10, ramp_ms: 0 },
-            Step { freq_mhz: 2_500_000, amplitude_q15: 1000, duration_ms: 10, ramp_ms: 0 },
-        ],
-        1,
-    );
-    match client.run_plan(bad) {
-        Err(DeviceError::Rejected {
-            error: DriveError::Plan(PlanError::FrequencyOutOfRange { step: 1, freq_mhz, .. }),
-            ..
-        }) => assert_eq!(freq_mhz, 2_500_000),
-        other => panic!("expected a frequency error for step 1, got {other:?}"),
-    }
+    // An invalid setpoint is refused by the controller itself with the typed error.
     match client.drive(440_000, 40_000) {
-        Err(DeviceError::Rejected { error: DriveError::Setpoint(e), .. }) => {
+        Err(DeviceError::Refused(Refusal::Drive(DriveError::Setpoint(e)))) => {
             assert!(matches!(e, SetpointError::AmplitudeTooHigh { amplitude_q15: 40_000, .. }))
         }
         other => panic!("expected an amplitude error, got {other:?}"),
     }
     assert_eq!(client.status().unwrap().state, DriveState::Idle);
 
-    client.drive(440_500, 16_384).expect("drive accepted");
+    let run = client.drive(440_500, 16_384).expect("drive accepted");
     let seen = poll_until(&mut client, Duration::from_secs(60), |s| {
-        s.state == DriveState::Running && s.amplitude_q15 == 16_384
+        s.run == run && s.state == DriveState::Running && s.amplitude_q15 == 16_384
     });
-    let s = *seen.last().unwrap();
-    assert_eq!((s.freq_mhz, s.step), (440_500, None));
+    let s = seen.last().unwrap().clone();
+    assert_eq!((s.freq_mhz, s.step, s.plan.clone()), (440_500, None, None));
     // The manual ramp takes MANUAL_RAMP_MS: running at full amplitude only after it.
     assert!(s.elapsed_samples >= (MANUAL_RAMP_MS * SAMPLES_PER_MS) as u64);
 
-    client.stop().expect("stop accepted");
+    let stop = client.stop().expect("stop accepted");
     let seen = poll_until(&mut client, Duration::from_secs(60), |t| {
-        t.commands > s.commands && t.state == DriveState::Idle
+        t.run == stop && t.state == DriveState::Idle
     });
     // The amplitude only ever falls while stopping: a ramp, not a cut.
     let amps: Vec<u16> = seen.iter().map(|s| s.amplitude_q15).collect();

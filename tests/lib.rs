@@ -9,7 +9,8 @@ use std::time::Duration;
 
 use chladni::controller::client::{DeviceClient, DeviceError};
 use chladni::controller::emulator::{Emulator, EmulatorConfig};
-use chladni_shared::icd::link::Board;
+use chladni_shared::icd::link::{Board, StatusReport};
+use chladni_shared::icd::plan::{Plan, Step};
 
 /// The environment variable that points the tests at a real controller.
 pub const PORT_VAR: &str = "CHLADNI_PORT";
@@ -24,8 +25,8 @@ static REAL_BOARD: Mutex<()> = Mutex::new(());
 
 /// The controller a test talks to.
 pub enum Controller {
-    /// The firmware in QEMU, owned by the test.
-    Emulated(Emulator),
+    /// The firmware in QEMU, owned by the test (boxed: it is far larger than the other).
+    Emulated(Box<Emulator>),
     /// A real board on a port; the guard keeps other tests of this process off it.
     Real {
         /// Serial path or `tcp://HOST:PORT`.
@@ -43,15 +44,24 @@ impl Controller {
                 port,
                 _turn: REAL_BOARD.lock().unwrap_or_else(|poisoned| poisoned.into_inner()),
             },
-            None => Controller::Emulated(start_emulator(name)),
+            None => Controller::Emulated(Box::new(start_emulator(name))),
         }
     }
 
-    /// A new client on the controller's link.
-    pub fn connect(&self) -> Result<DeviceClient, DeviceError> {
+    /// A new client on the controller's link, named `client_name` (a busy controller shows
+    /// the owner's name to others).
+    pub fn connect(&self, client_name: &str) -> Result<DeviceClient, DeviceError> {
         match self {
-            Controller::Emulated(emulator) => emulator.connect(),
-            Controller::Real { port, .. } => DeviceClient::open(port),
+            Controller::Emulated(emulator) => emulator.connect(client_name),
+            Controller::Real { port, .. } => DeviceClient::open(port, client_name),
+        }
+    }
+
+    /// The link address (`tcp://…` or the serial device).
+    pub fn address(&self) -> String {
+        match self {
+            Controller::Emulated(emulator) => emulator.address(),
+            Controller::Real { port, .. } => port.clone(),
         }
     }
 
@@ -127,4 +137,67 @@ pub fn read_log(path: &std::path::Path) -> String {
 pub fn pseudo_random_bytes(seed: u64, len: usize) -> Vec<u8> {
     let mut rng = chladni::rng::Rng::seeded(seed);
     (0..len).map(|_| (rng.next_u64() >> 56) as u8).collect()
+}
+
+/// Polls `status` until `done` holds (generous deadline: QEMU's clock slips under load);
+/// returns every status seen.
+pub fn poll_until(
+    client: &mut DeviceClient,
+    limit: Duration,
+    mut done: impl FnMut(&StatusReport) -> bool,
+) -> Vec<StatusReport> {
+    let deadline = std::time::Instant::now() + limit;
+    let mut seen = Vec::new();
+    loop {
+        let status = client.status().expect("status");
+        let finished = done(&status);
+        seen.push(status);
+        if finished {
+            return seen;
+        }
+        assert!(std::time::Instant::now() < deadline, "gave up waiting; last {:?}", seen.last());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// A plan named `name` of `steps`, run `repeat` times.
+pub fn plan(name: &str, steps: &[Step], repeat: u16) -> Plan {
+    Plan {
+        name: heapless::String::try_from(name).unwrap(),
+        repeat,
+        steps: heapless::Vec::from_slice(steps).unwrap(),
+    }
+}
+
+/// `count` steps of `duration_ms` each, frequencies rising from `base_mhz`.
+pub fn steps(count: usize, base_mhz: u32, duration_ms: u32) -> Vec<Step> {
+    (0..count)
+        .map(|i| Step {
+            freq_mhz: base_mhz + 1_000 * i as u32,
+            amplitude_q15: 4_000 + (i as u16 % 8) * 1_000,
+            duration_ms,
+            ramp_ms: duration_ms.min(5),
+        })
+        .collect()
+}
+
+/// Frames received until one satisfies `wanted` (all of them, that one last), or every frame
+/// received within `limit` if none does. QEMU's serial port takes a burst of bytes at its own
+/// pace, so the answer to a frame sent after kilobytes of garbage may take seconds to come.
+pub fn frames_until(
+    client: &mut chladni::controller::client::DeviceClient,
+    limit: Duration,
+    wanted: impl Fn(&chladni::controller::client::Frame) -> bool,
+) -> Vec<chladni::controller::client::Frame> {
+    let start = std::time::Instant::now();
+    let mut frames = Vec::new();
+    while start.elapsed() < limit {
+        let more = client.receive_frames(Duration::from_millis(200)).expect("receive frames");
+        let done = more.iter().any(&wanted);
+        frames.extend(more);
+        if done {
+            break;
+        }
+    }
+    frames
 }

@@ -30,7 +30,8 @@ mod image {
             defmt::warn!("no flash: plans and configuration cannot be stored");
         }
         let identity = app::link::Identity { board: board::BOARD };
-        let mut link = app::link::Link::new(identity, &DRIVE, store).await;
+        let mut link = app::link::Link::new(identity, &DRIVE, store);
+        link.load_config().await;
         app::link::serve(&mut link, &mut port).await
     }
 

@@ -28,3 +28,17 @@ fn a_directory_as_flash_file_is_bad_input_named_as_a_directory() {
     assert!(stderr.contains("is a directory"), "{stderr}");
     assert!(!stderr.contains("bytes"), "the old size message came back: {stderr}");
 }
+
+#[test]
+fn an_emulator_on_a_busy_port_says_so_and_never_claims_ready() {
+    // Something already listens there (here: a bare socket; in issue 11, another emulator,
+    // which answered the new one's start-up ping, so it printed "controller ready").
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port().to_string();
+    let out = chladni(&["emulator", "--tcp", &port, "--time-limit-s", "3"]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert!(stderr.contains(&format!("port {port} is in use")), "{stderr}");
+    assert!(!stdout.contains("controller ready"), "{stdout}");
+}

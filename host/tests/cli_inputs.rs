@@ -135,3 +135,33 @@ fn emulator_and_drive_ranges_are_checked_before_anything_starts() {
     refused(&drive("100", "1.5"), "amplitude 1.5 outside 0..=1");
     refused(&chladni(&["device", "ping", "--port", port, "--count", "0"]), "--count");
 }
+
+#[test]
+fn device_plan_slots_names_and_config_values_are_checked_before_connecting() {
+    // Port 1 has no controller: each refusal must come before any connection is tried.
+    let port = "tcp://127.0.0.1:1";
+    let device = |args: &[&str]| {
+        let mut all = vec!["device"];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["--port", port]);
+        chladni(&all)
+    };
+    refused(&device(&["run", "65"]), "slot 65 does not exist: slots are 0..=64");
+    refused(&device(&["delete", "300"]), "slot 300 does not exist");
+    refused(&device(&["run", &"n".repeat(33)]), "is 33 bytes, at most 32 fit");
+    refused(&device(&["run", "x", "--repeat", "0"]), "--repeat");
+    refused(&device(&["upload", "p.json", "--slot", "70"]), "slot 70 does not exist");
+    refused(&device(&["monitor", "--rate", "0"]), "--rate");
+    refused(&device(&["monitor", "--rate", "101"]), "--rate");
+    refused(&device(&["config", "get", "speed"]), "unknown configuration key 'speed'");
+    refused(
+        &device(&["config", "set", "max_steps", "0"]),
+        "max_steps must be a whole number in 1..=256, got '0'",
+    );
+    refused(
+        &device(&["config", "set", "max_freq_hz", "9000"]),
+        "max_freq_hz: frequency 9000 Hz is outside",
+    );
+    let missing = tmp("no-such-plan.json");
+    refused(&device(&["run-file", missing.to_str().unwrap()]), "cannot read plan");
+}

@@ -22,13 +22,9 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_time::{Duration, Instant, Timer};
 
-/// A command for the drive task.
-// A plan rides inline (no allocator); the queue holds two commands.
-#[allow(clippy::large_enum_variant)]
-#[derive(Debug, Clone, PartialEq)]
+/// A command for the drive task (plans go through [`DriveShared::run_plan`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Command {
-    /// Run a (validated) plan.
-    RunPlan(Plan),
     /// Manual drive.
     Drive {
         /// Frequency, mHz.
@@ -38,6 +34,22 @@ pub enum Command {
     },
     /// Ramp to zero and idle.
     Stop,
+}
+
+/// What the command queue carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Queued {
+    /// Run the plan staged by [`DriveShared::run_plan`].
+    RunPlan,
+    /// A manual drive or a stop.
+    Command(Command),
+}
+
+/// The plan waiting for the drive task: plans (up to ~4 KiB) are handed over here, one at a
+/// time, rather than through the command queue, so no plan is ever copied on the stack.
+struct Staged {
+    plan: Plan,
+    waiting: bool,
 }
 
 /// Status of a runner that has never run.
@@ -59,7 +71,8 @@ const IDLE: StatusReport = StatusReport {
 
 /// What the link task and the drive task share.
 pub struct DriveShared {
-    commands: Channel<CriticalSectionRawMutex, (RunNumber, Command), 2>,
+    commands: Channel<CriticalSectionRawMutex, (RunNumber, Queued), 2>,
+    staged: Mutex<CriticalSectionRawMutex, RefCell<Staged>>,
     status: Mutex<CriticalSectionRawMutex, RefCell<StatusReport>>,
     limits: Mutex<CriticalSectionRawMutex, Cell<DeviceLimits>>,
     last_run: Mutex<CriticalSectionRawMutex, Cell<u32>>,
@@ -76,6 +89,14 @@ impl DriveShared {
     pub const fn new() -> Self {
         Self {
             commands: Channel::new(),
+            staged: Mutex::new(RefCell::new(Staged {
+                plan: Plan {
+                    name: heapless::String::new(),
+                    repeat: 0,
+                    steps: heapless::Vec::new(),
+                },
+                waiting: false,
+            })),
             status: Mutex::new(RefCell::new(IDLE)),
             limits: Mutex::new(Cell::new(DeviceLimits::DEFAULT)),
             last_run: Mutex::new(Cell::new(0)),
@@ -92,30 +113,58 @@ impl DriveShared {
         self.limits.lock(|l| l.set(limits));
     }
 
-    /// Queues `command` for the drive task and returns the run number it will carry in the
-    /// status. Plans and setpoints are validated first, and a faulted drive refuses anything
-    /// but a stop, so the caller can answer with the precise error.
+    /// Checks `plan`, stages a copy of it and queues it to run; returns its run number.
+    /// Only one plan waits at a time: a second one before the drive took the first is
+    /// [`DriveError::QueueFull`].
+    pub fn run_plan(&self, plan: &Plan) -> Result<RunNumber, DriveError> {
+        plan.validate(&self.limits()).map_err(DriveError::Plan)?;
+        self.check_not_faulted()?;
+        critical_section::with(|cs| {
+            let mut staged = self.staged.borrow(cs).borrow_mut();
+            if staged.waiting {
+                return Err(DriveError::QueueFull);
+            }
+            let run = self.queue(cs, Queued::RunPlan)?;
+            staged.plan.clone_from(plan);
+            staged.waiting = true;
+            Ok(run)
+        })
+    }
+
+    /// Queues a manual drive or a stop for the drive task and returns the run number it will
+    /// carry in the status. Setpoints are validated first, and a faulted drive refuses
+    /// anything but a stop, so the caller can answer with the precise error.
     pub fn submit(&self, command: Command) -> Result<RunNumber, DriveError> {
-        let limits = self.limits();
-        match &command {
-            Command::RunPlan(plan) => plan.validate(&limits).map_err(DriveError::Plan)?,
+        match command {
             Command::Drive { freq_mhz, amplitude_q15 } => {
-                limits.check_setpoint(*freq_mhz, *amplitude_q15).map_err(DriveError::Setpoint)?
+                let limits = self.limits();
+                limits.check_setpoint(freq_mhz, amplitude_q15).map_err(DriveError::Setpoint)?;
+                self.check_not_faulted()?;
             }
             Command::Stop => {}
         }
-        if command != Command::Stop && self.status.lock(|s| s.borrow().state) == DriveState::Faulted
-        {
-            return Err(DriveError::Faulted);
+        critical_section::with(|cs| self.queue(cs, Queued::Command(command)))
+    }
+
+    fn check_not_faulted(&self) -> Result<(), DriveError> {
+        match self.status.lock(|s| s.borrow().state) {
+            DriveState::Faulted => Err(DriveError::Faulted),
+            _ => Ok(()),
         }
-        // Numbered and queued in one critical section, so numbers reach the drive in order.
-        critical_section::with(|cs| {
-            let last = self.last_run.borrow(cs);
-            let run = RunNumber(last.get().wrapping_add(1).max(1));
-            self.commands.try_send((run, command)).map_err(|_| DriveError::QueueFull)?;
-            last.set(run.0);
-            Ok(run)
-        })
+    }
+
+    /// Numbers and queues `command` in one critical section, so numbers reach the drive in
+    /// order; a refused command takes no number.
+    fn queue(
+        &self,
+        cs: critical_section::CriticalSection<'_>,
+        command: Queued,
+    ) -> Result<RunNumber, DriveError> {
+        let last = self.last_run.borrow(cs);
+        let run = RunNumber(last.get().wrapping_add(1).max(1));
+        self.commands.try_send((run, command)).map_err(|_| DriveError::QueueFull)?;
+        last.set(run.0);
+        Ok(run)
     }
 
     /// The status published after the last block.
@@ -145,18 +194,20 @@ impl<'a> DriveCore<'a> {
             self.run = run;
             self.runner.set_limits(self.shared.limits());
             let result = match command {
-                Command::RunPlan(plan) => {
+                Queued::RunPlan => self.shared.staged.lock(|staged| {
+                    let mut staged = staged.borrow_mut();
+                    staged.waiting = false;
                     defmt::info!(
                         "drive: plan '{}', {} steps",
-                        plan.name.as_str(),
-                        plan.steps.len()
+                        staged.plan.name.as_str(),
+                        staged.plan.steps.len()
                     );
-                    self.runner.start_plan(plan)
-                }
-                Command::Drive { freq_mhz, amplitude_q15 } => {
+                    self.runner.start_plan_from(&mut staged.plan)
+                }),
+                Queued::Command(Command::Drive { freq_mhz, amplitude_q15 }) => {
                     self.runner.drive(freq_mhz, amplitude_q15)
                 }
-                Command::Stop => {
+                Queued::Command(Command::Stop) => {
                     self.runner.stop();
                     Ok(())
                 }

@@ -160,14 +160,10 @@ pub struct Link<'a, F: NorFlash> {
 }
 
 impl<'a, F: NorFlash> Link<'a, F> {
-    /// A link over `store` (`None`: no flash, so nothing can be stored), with the stored
-    /// configuration applied to the drive.
-    pub async fn new(
-        identity: Identity,
-        drive: &'a DriveShared,
-        store: Option<PlanStore<F>>,
-    ) -> Self {
-        let mut link = Self {
+    /// A link over `store` (`None`: no flash, so nothing can be stored), with the default
+    /// configuration until [`Link::load_config`].
+    pub fn new(identity: Identity, drive: &'a DriveShared, store: Option<PlanStore<F>>) -> Self {
+        Self {
             identity,
             drive,
             store,
@@ -175,12 +171,16 @@ impl<'a, F: NorFlash> Link<'a, F> {
             sessions: Sessions::new(),
             stream: None,
             plan: Plan { name: heapless::String::new(), repeat: 0, steps: heapless::Vec::new() },
-        };
-        if let Some(store) = &mut link.store {
-            link.config = store.load_config().await;
         }
-        drive.set_limits(link.config.limits);
-        link
+    }
+
+    /// Reads the stored configuration (the default without one) and applies it to the drive.
+    // Separate from `new` so that no future ever holds a whole `Link` (~17 KiB) by value.
+    pub async fn load_config(&mut self) {
+        if let Some(store) = &mut self.store {
+            self.config = store.load_config().await;
+        }
+        self.drive.set_limits(self.config.limits);
     }
 
     /// The response to one frame from [`FrameReader::push`]: the answer to its request, or the
@@ -262,7 +262,7 @@ impl<'a, F: NorFlash> Link<'a, F> {
                 if let Some(repeat) = run.repeat {
                     self.plan.repeat = repeat;
                 }
-                let run = self.drive.submit(Command::RunPlan(self.plan.clone()));
+                let run = self.drive.run_plan(&self.plan);
                 link::RunPlan::respond(run.map_err(Refusal::Drive)?)
             }
             Request::UploadBegin(begin) => {

@@ -71,7 +71,7 @@ fn a_bad_setpoint_or_plan_is_refused_with_its_typed_error_and_never_queued() {
     // A bad plan names its step; nothing refused reached the drive.
     let bad = plan("bad", &[(100_000, 1_000, 10, 0), (999, 1_000, 10, 0)]);
     assert!(matches!(
-        drive.submit(Command::RunPlan(bad)),
+        drive.run_plan(&bad),
         Err(DriveError::Plan(PlanError::FrequencyOutOfRange { step: 1, .. }))
     ));
     let mut core = DriveCore::new(&drive);
@@ -101,7 +101,7 @@ fn narrower_limits_apply_to_the_next_command() {
 fn a_submitted_plan_shows_up_in_status_with_its_run_number_and_remaining_time() {
     let drive = DriveShared::new();
     let p = plan("two", &[(100_000, 10_000, 12, 2), (200_000, 8_000, 8, 2)]);
-    let run = drive.submit(Command::RunPlan(p)).unwrap();
+    let run = drive.run_plan(&p).unwrap();
     assert_eq!(run, RunNumber(1));
     // Queued, not yet applied: the drive core has not run, and status still names run 0.
     assert_eq!((drive.status().state, drive.status().run), (DriveState::Idle, RunNumber(0)));
@@ -215,7 +215,9 @@ use chladni_shared::icd::store::{PlanRef, UploadBegin, UploadChunk, UploadError,
 /// A link over a store of 16 pages of mock flash.
 fn link_over(drive: &DriveShared) -> Link<'_, MockFlash> {
     let store = PlanStore::new(MockFlash::new(16), 0..16 * 2048);
-    block_on(Link::new(Identity { board: Board::Qemu }, drive, Some(store)))
+    let mut link = Link::new(Identity { board: Board::Qemu }, drive, Some(store));
+    block_on(link.load_config());
+    link
 }
 
 /// Sends `request` from `session` (id 1) and takes the typed reply, or the response back.

@@ -1,41 +1,61 @@
-//! `chladni device …`: requests to a running controller.
+//! `chladni device …`: requests to a running controller (the board or the emulator).
+//!
+//! Thin: parse, call [`chladni::controller::client`], render. Every command takes `--json`.
+//! The submodules hold the value parsers and config keys ([`values`]), the JSON shapes and
+//! tables ([`render`]), serial port listing ([`ports`]) and what takes time: waiting for a run,
+//! the telemetry monitor, Ctrl-C ([`watch`]).
 
-use std::path::PathBuf;
+mod ports;
+mod render;
+mod values;
+mod watch;
+
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
 use chladni::controller::client::DeviceClient;
 use chladni::model::plan_file::PlanFile;
-use chladni_shared::icd::link::StatusReport;
 use chladni_shared::icd::plan::{DeviceLimits, Plan};
-use chladni_shared::icd::units::{MilliHz, Q15};
+use chladni_shared::icd::store::{DeviceConfig, PlanName, PlanRef, SCRATCH_SLOT};
 use clap::{Args, Subcommand};
-use serde::Serialize;
 
 use super::InputError;
 use super::parse::{drive_amplitude, drive_freq};
+use render::{PlanJson, print_json};
+use values::{ConfigKey, config_key, plan_name, plan_target, slot};
 
 /// Where the controller is.
 #[derive(Debug, Args)]
 pub struct PortArg {
-    /// Serial device (e.g. /dev/ttyACM0) or tcp://HOST:PORT (the emulator prints it).
+    /// Serial device (e.g. /dev/ttyACM0, see `chladni device list`) or tcp://HOST:PORT (the
+    /// emulator prints it).
     #[arg(long, short)]
     port: String,
 }
 
 impl PortArg {
-    fn open(&self) -> anyhow::Result<DeviceClient> {
-        DeviceClient::open(&self.port).with_context(|| format!("connecting to {}", self.port))
+    /// Opens a session named after the command and this process (others see it when busy).
+    fn open(&self, command: &str) -> anyhow::Result<DeviceClient> {
+        let name = format!("chladni device {command} (pid {})", std::process::id());
+        DeviceClient::open(&self.port, &name)
+            .with_context(|| format!("connecting to {}", self.port))
     }
 }
 
 #[derive(Debug, Subcommand)]
 pub enum DeviceCommand {
+    /// Serial ports, with USB vendor:product ids; the controller and the ST-LINK console marked.
+    List {
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// Firmware version, board, protocol version and build id.
     Info {
         #[command(flatten)]
         port: PortArg,
-        /// Print one JSON object instead of a table.
+        /// Print JSON.
         #[arg(long)]
         json: bool,
     },
@@ -50,6 +70,64 @@ pub enum DeviceCommand {
         #[arg(long)]
         json: bool,
     },
+    /// The plans stored on the controller, and the free flash.
+    Plans {
+        #[command(flatten)]
+        port: PortArg,
+        /// Print JSON: {"plans":[{"slot","name","steps","total_ms","crc","bytes"}],"free_bytes"}.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Store a plan file on the controller (replaces the plan of the same name or slot).
+    Upload {
+        #[command(flatten)]
+        port: PortArg,
+        /// Plan file (as written by `chladni plan --out`; see docs/plan.md).
+        plan: PathBuf,
+        /// Slot to store into (0..=64); default: the plan of the same name, else the first free.
+        #[arg(long, value_parser = slot)]
+        slot: Option<u8>,
+        /// Store under this name instead of the file's.
+        #[arg(long, value_parser = plan_name)]
+        name: Option<PlanName>,
+        /// Print the stored plan as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Delete a stored plan, by name or slot (a value that is a number is a slot).
+    Delete {
+        #[command(flatten)]
+        port: PortArg,
+        /// Plan name, or slot number.
+        #[arg(value_name = "NAME|SLOT", value_parser = plan_target)]
+        plan: PlanRef,
+        /// Print what was deleted as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Run a stored plan, by name or slot (a value that is a number is a slot).
+    Run {
+        #[command(flatten)]
+        port: PortArg,
+        /// Plan name, or slot number.
+        #[arg(value_name = "NAME|SLOT", value_parser = plan_target)]
+        plan: PlanRef,
+        /// Run the steps this many times instead of the plan's own repeat count.
+        #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
+        repeat: Option<u16>,
+        #[command(flatten)]
+        wait: WaitArgs,
+    },
+    /// Upload a plan file to the scratch slot (64) and run it.
+    RunFile {
+        #[command(flatten)]
+        port: PortArg,
+        /// Plan file (as written by `chladni plan --out`): {"name", "repeat", "steps":
+        /// [{"freq_hz", "duration_ms", "amplitude" (0..1), "ramp_ms"}], ...}; see docs/plan.md.
+        plan: PathBuf,
+        #[command(flatten)]
+        wait: WaitArgs,
+    },
     /// Drive a steady sine (manual mode) until `stop` or another command.
     Drive {
         #[command(flatten)]
@@ -60,24 +138,19 @@ pub enum DeviceCommand {
         /// Amplitude, fraction of the DAC's full scale (0–1).
         #[arg(long, value_name = "A", value_parser = drive_amplitude)]
         amplitude: u16,
-    },
-    /// Send a plan (JSON file) and run it.
-    RunFile {
-        #[command(flatten)]
-        port: PortArg,
-        /// Plan file (as written by `chladni plan --out`): {"name", "repeat", "steps":
-        /// [{"freq_hz", "duration_ms", "amplitude" (0..1), "ramp_ms"}], ...}; see docs/plan.md.
-        plan: PathBuf,
-        /// Stay and show the plan's progress until the drive is idle again (exit 1 on a fault).
+        /// Print JSON.
         #[arg(long)]
-        wait: bool,
+        json: bool,
     },
-    /// Ramp the drive to zero and idle (also clears a fault).
+    /// Ramp the drive to zero and idle (also clears a fault). Taken from any client.
     Stop {
         #[command(flatten)]
         port: PortArg,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
     },
-    /// The drive's state, step, elapsed time, frequency, amplitude and underruns.
+    /// The drive's state, plan, step, times, frequency, amplitude, run number and fault.
     Status {
         #[command(flatten)]
         port: PortArg,
@@ -85,10 +158,68 @@ pub enum DeviceCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Live telemetry: one line per sample until Ctrl-C (or --count samples).
+    Monitor {
+        #[command(flatten)]
+        port: PortArg,
+        /// Samples per second (1..=100).
+        #[arg(long, value_name = "HZ", default_value_t = 10,
+              value_parser = clap::value_parser!(u16).range(1..=100))]
+        rate: u16,
+        /// Stop after this many samples.
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+        count: Option<u32>,
+        /// One JSON object per line.
+        #[arg(long)]
+        json: bool,
+    },
+    /// The controller's configuration (device limits).
+    #[command(subcommand)]
+    Config(ConfigCommand),
+}
+
+/// `--wait` and `--json` of the commands that start a plan.
+#[derive(Debug, Args)]
+pub struct WaitArgs {
+    /// Stay until the plan ends: exit 1 if it never starts, is superseded or faults; Ctrl-C
+    /// stops the plan (exit 130).
+    #[arg(long)]
+    wait: bool,
+    /// Print JSON (with --wait: at the end).
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ConfigCommand {
+    /// Print the configuration, or one key of it.
+    Get {
+        #[command(flatten)]
+        port: PortArg,
+        /// min_freq_hz, max_freq_hz, max_amplitude, max_steps or max_total_ms.
+        #[arg(value_parser = config_key)]
+        key: Option<ConfigKey>,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Change one key (the controller checks and stores the whole configuration).
+    Set {
+        #[command(flatten)]
+        port: PortArg,
+        /// min_freq_hz, max_freq_hz, max_amplitude, max_steps or max_total_ms.
+        #[arg(value_parser = config_key)]
+        key: ConfigKey,
+        /// The new value: Hz for frequencies, 0..1 of full scale for the amplitude.
+        value: String,
+        /// Print the configuration now in effect as JSON.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 /// Reads and validates a plan file; every problem is bad input (exit code 2).
-pub fn read_plan(path: &std::path::Path) -> Result<Plan, InputError> {
+pub fn read_plan(path: &Path) -> Result<Plan, InputError> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| InputError(format!("cannot read plan {}: {e}", path.display())))?;
     let file =
@@ -97,224 +228,139 @@ pub fn read_plan(path: &std::path::Path) -> Result<Plan, InputError> {
         .map_err(|e| InputError(format!("plan {} refused: {e}", path.display())))
 }
 
-/// The `status --json` object (keys in alphabetical order, as printed).
-#[derive(Debug, Serialize)]
-pub struct StatusJson {
-    amplitude: f64,
-    elapsed_ms: f64,
-    freq_hz: f64,
-    state: &'static str,
-    step: Option<u16>,
-    underruns: u32,
-}
-
-impl From<&StatusReport> for StatusJson {
-    fn from(s: &StatusReport) -> Self {
-        StatusJson {
-            amplitude: Q15(s.amplitude_q15).to_fraction(),
-            elapsed_ms: s.elapsed_ms(),
-            freq_hz: MilliHz(s.freq_mhz).to_hz(),
-            state: s.state.name(),
-            step: s.step,
-            underruns: s.underruns,
-        }
-    }
-}
-
-/// The `status --json` object as a JSON value.
-#[cfg(test)]
-pub fn status_json(s: &StatusReport) -> serde_json::Value {
-    serde_json::to_value(StatusJson::from(s)).unwrap_or_default()
-}
-
-/// The `info --json` object.
-#[derive(Debug, Serialize)]
-struct InfoJson<'a> {
-    board: &'static str,
-    build_id: String,
-    firmware_version: &'a str,
-    protocol_version: u16,
-}
-
-/// The `ping --json` object.
-#[derive(Debug, Serialize)]
-struct PingJson {
-    count: u32,
-    max_ms: f64,
-    mean_ms: f64,
-}
-
 impl DeviceCommand {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
         match self {
-            DeviceCommand::Info { port, json } => {
-                let info = port.open()?.info()?;
+            DeviceCommand::List { json } => ports::list(*json),
+            DeviceCommand::Info { port, json } => render::info(port.open("info")?.info(), *json),
+            DeviceCommand::Ping { port, count, json } => ping(port, *count, *json),
+            DeviceCommand::Plans { port, json } => {
+                let (plans, free) = port.open("plans")?.list_plans()?;
+                render::plans(&plans, free, *json)
+            }
+            DeviceCommand::Upload { port, plan, slot, name, json } => {
+                let mut plan = read_plan(plan)?;
+                if let Some(name) = name {
+                    plan.name = name.clone();
+                }
+                let summary = watch::upload(&mut port.open("upload")?, &plan, *slot)?;
+                render::uploaded(&summary, *json)
+            }
+            DeviceCommand::Delete { port, plan, json } => {
+                let deleted = port.open("delete")?.delete(plan.clone())?;
                 if *json {
-                    let value = InfoJson {
-                        board: info.board.name(),
-                        build_id: format!("{:08x}", info.build_id),
-                        firmware_version: info.firmware_version.as_str(),
-                        protocol_version: info.protocol_version,
-                    };
-                    println!("{}", serde_json::to_string(&value)?);
+                    print_json(&serde_json::json!({ "deleted": PlanJson::from(&deleted) }))?;
                 } else {
-                    println!("firmware   {}", info.firmware_version);
-                    println!("board      {}", info.board.name());
-                    println!("protocol   {}", info.protocol_version);
-                    println!("build id   {:08x}", info.build_id);
+                    println!("deleted '{}' from slot {}", deleted.name, deleted.slot);
                 }
+                Ok(ExitCode::SUCCESS)
             }
-            DeviceCommand::Ping { port, count, json } => {
-                let mut client = port.open()?;
-                let mut rtts = Vec::with_capacity(*count as usize);
-                for _ in 0..*count {
-                    rtts.push(client.ping()?.as_secs_f64() * 1e3);
-                }
-                let mean = rtts.iter().sum::<f64>() / rtts.len() as f64;
-                let max = rtts.iter().cloned().fold(0.0, f64::max);
-                if *json {
-                    let value = PingJson { count: *count, max_ms: max, mean_ms: mean };
-                    println!("{}", serde_json::to_string(&value)?);
-                } else {
-                    println!("{count} ping(s): mean {mean:.3} ms, max {max:.3} ms");
-                }
+            DeviceCommand::Run { port, plan, repeat, wait } => {
+                let mut client = port.open("run")?;
+                let target = watch::Target::of(plan.clone());
+                watch::start_plan(&mut client, &target, *repeat, wait.wait, wait.json)
             }
-            DeviceCommand::Drive { port, freq, amplitude } => {
-                let (f, a) = (*freq, *amplitude);
-                DeviceLimits::DEFAULT
-                    .check_setpoint(f, a)
-                    .map_err(|e| InputError(format!("drive refused: {e}")))?;
-                port.open()?.drive(f, a)?;
-                println!(
-                    "driving {:.3} Hz at amplitude {:.4}",
-                    MilliHz(f).to_hz(),
-                    Q15(a).to_fraction()
-                );
+            DeviceCommand::RunFile { port, plan, wait } => run_file(port, plan, wait),
+            DeviceCommand::Drive { port, freq, amplitude, json } => {
+                drive(port, *freq, *amplitude, *json)
             }
-            DeviceCommand::RunFile { port, plan, wait } => {
-                let plan = read_plan(plan)?;
-                let (name, steps, ms) = (plan.name.clone(), plan.steps.len(), plan.total_ms());
-                let mut client = port.open()?;
-                client.run_plan(plan)?;
-                println!("running plan '{name}': {steps} step(s), {ms} ms");
-                if *wait {
-                    return watch_plan(&mut client, steps, ms);
-                }
-            }
-            DeviceCommand::Stop { port } => {
-                port.open()?.stop()?;
-                println!("stopping");
+            DeviceCommand::Stop { port, json } => {
+                let run = port.open("stop")?.stop()?;
+                render::stopped(run, *json)
             }
             DeviceCommand::Status { port, json } => {
-                let s = port.open()?.status()?;
-                if *json {
-                    println!("{}", serde_json::to_string(&StatusJson::from(&s))?);
-                } else {
-                    println!("state      {}", s.state.name());
-                    match s.step {
-                        Some(step) => println!("step       {step} (run {})", s.run),
-                        None => println!("step       -"),
-                    }
-                    println!("elapsed    {:.2} ms ({} samples)", s.elapsed_ms(), s.elapsed_samples);
-                    println!("frequency  {:.3} Hz", MilliHz(s.freq_mhz).to_hz());
-                    println!("amplitude  {:.4}", Q15(s.amplitude_q15).to_fraction());
-                    println!("underruns  {}", s.underruns);
-                }
+                render::status(&port.open("status")?.status()?, *json)
             }
+            DeviceCommand::Monitor { port, rate, count, json } => {
+                watch::monitor(&mut port.open("monitor")?, *rate, *count, *json)
+            }
+            DeviceCommand::Config(cmd) => cmd.run(),
         }
-        Ok(ExitCode::SUCCESS)
     }
 }
 
-/// Polls the controller until its drive is idle, with a progress bar over the plan's length;
-/// prints what happened. A fault, or a drive that stops answering, fails the command.
-fn watch_plan(client: &mut DeviceClient, steps: usize, total_ms: u64) -> anyhow::Result<ExitCode> {
-    use chladni_shared::icd::link::DriveState;
-    let bar = indicatif::ProgressBar::new(total_ms.max(1));
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{bar:40.cyan/blue} {pos:>7}/{len} ms  {msg}")
-            .expect("static template"),
-    );
-    let mut steps_seen = std::collections::BTreeSet::new();
-    let last = loop {
-        let s = client.status()?;
-        if let Some(step) = s.step {
-            steps_seen.insert(step);
-        }
-        bar.set_position((s.elapsed_ms() as u64).min(total_ms));
-        bar.set_message(format!(
-            "{} · step {}/{} · {:.3} Hz · amplitude {:.3}",
-            s.state.name(),
-            s.step.map_or("-".to_string(), |i| (i + 1).to_string()),
-            steps,
-            MilliHz(s.freq_mhz).to_hz(),
-            Q15(s.amplitude_q15).to_fraction()
-        ));
-        match s.state {
-            DriveState::Idle => break s,
-            DriveState::Faulted => {
-                bar.abandon_with_message("faulted");
-                anyhow::bail!("the drive faulted after {:.1} ms", s.elapsed_ms());
+fn ping(port: &PortArg, count: u32, json: bool) -> anyhow::Result<ExitCode> {
+    let mut client = port.open("ping")?;
+    let mut rtts = Vec::with_capacity(count as usize);
+    for _ in 0..count {
+        rtts.push(client.ping()?.as_secs_f64() * 1e3);
+    }
+    render::pings(&rtts, json)
+}
+
+fn drive(port: &PortArg, freq: u32, amplitude: u16, json: bool) -> anyhow::Result<ExitCode> {
+    DeviceLimits::DEFAULT
+        .check_setpoint(freq, amplitude)
+        .map_err(|e| InputError(format!("drive refused: {e}")))?;
+    let run = port.open("drive")?.drive(freq, amplitude)?;
+    render::driving(freq, amplitude, run, json)
+}
+
+/// `run-file`: the plan checked here first (bad input exits 2 before any connection), then
+/// uploaded to the scratch slot and run from there.
+fn run_file(port: &PortArg, path: &Path, wait: &WaitArgs) -> anyhow::Result<ExitCode> {
+    let plan = read_plan(path)?;
+    let mut client = port.open("run-file")?;
+    // Ctrl-C during the upload must not start the plan afterwards.
+    let interrupted = if wait.wait { Some(watch::interrupt_flag()?) } else { None };
+    let summary = watch::upload(&mut client, &plan, Some(SCRATCH_SLOT))?;
+    if interrupted.is_some_and(|flag| flag.load(std::sync::atomic::Ordering::SeqCst)) {
+        eprintln!("interrupted during the upload: the plan was not started");
+        return Ok(ExitCode::from(watch::EXIT_INTERRUPTED));
+    }
+    if !wait.json {
+        println!(
+            "uploaded '{}' to the scratch slot {}: {} step(s), {} ms",
+            summary.name, summary.slot, summary.steps, summary.total_ms
+        );
+    }
+    let target =
+        watch::Target { plan: PlanRef::Slot(SCRATCH_SLOT), name: Some(plan.name.to_string()) };
+    watch::start_plan(&mut client, &target, None, wait.wait, wait.json)
+}
+
+impl ConfigCommand {
+    fn run(&self) -> anyhow::Result<ExitCode> {
+        match self {
+            ConfigCommand::Get { port, key, json } => {
+                let config = port.open("config get")?.config()?;
+                render::config(&config, *key, *json)
             }
-            _ => std::thread::sleep(std::time::Duration::from_millis(100)),
+            ConfigCommand::Set { port, key, value, json } => {
+                // The value alone is checked before connecting (bad input exits 2 at once).
+                key.set(&mut DeviceConfig::default(), value)?;
+                let mut client = port.open("config set")?;
+                let mut config = client.config()?;
+                key.set(&mut config, value)?;
+                config
+                    .validate()
+                    .map_err(|e| InputError(format!("{} {value} refused: {e}", key.name())))?;
+                let now = client.set_config(config)?;
+                render::config(&now, None, *json)
+            }
         }
-    };
-    bar.finish_and_clear();
-    println!(
-        "plan done: {} of {} step(s) seen running, {:.1} ms, {} underrun(s)",
-        steps_seen.len(),
-        steps,
-        last.elapsed_ms(),
-        last.underruns
-    );
-    Ok(ExitCode::SUCCESS)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use chladni_shared::icd::link::DriveState;
 
     #[test]
-    fn status_json_has_exactly_the_documented_fields() {
-        let s = StatusReport {
-            state: DriveState::RampUp,
-            step: Some(2),
-            run: 0,
-            elapsed_samples: 12_345,
-            sample_rate: 50_000,
-            freq_mhz: 181_500,
-            amplitude_q15: 32767,
-            underruns: 3,
-            commands: 9,
-        };
-        let v = status_json(&s);
-        let keys: Vec<&str> = v.as_object().unwrap().keys().map(|k| k.as_str()).collect();
-        assert_eq!(keys, ["amplitude", "elapsed_ms", "freq_hz", "state", "step", "underruns"]);
-        assert_eq!(v["state"], "ramp_up");
-        assert_eq!(v["step"], 2);
-        assert_eq!(v["elapsed_ms"], 246.9);
-        assert_eq!(v["freq_hz"], 181.5);
-        assert_eq!(v["amplitude"], 1.0);
-        assert_eq!(v["underruns"], 3);
-        let idle = StatusReport { state: DriveState::Idle, step: None, ..s };
-        assert!(status_json(&idle)["step"].is_null());
-    }
-
-    #[test]
-    fn bad_input_is_named() {
-        use super::super::parse::{drive_amplitude, drive_freq};
-        assert!(drive_amplitude("1.5").unwrap_err().contains("amplitude 1.5"));
-        assert_eq!(drive_amplitude("1.0"), Ok(32767));
-        assert!(drive_freq("NaN").is_err());
-        assert_eq!(drive_freq("440.125"), Ok(440_125));
+    fn a_bad_plan_file_is_bad_input_naming_the_step() {
         let dir = std::env::temp_dir().join(format!("chladni-plan-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("p.json");
-        std::fs::write(&path, r#"{"name":"x","repeat":1,"steps":[{"freq_hz":0.5,"amplitude":0.1,"duration_ms":5,"ramp_ms":0}]}"#).unwrap();
+        let step = r#"{"freq_hz":0.5,"amplitude":0.1,"duration_ms":5,"ramp_ms":0}"#;
+        std::fs::write(&path, format!(r#"{{"name":"x","repeat":1,"steps":[{step}]}}"#)).unwrap();
         assert!(read_plan(&path).unwrap_err().0.contains("step 0: frequency 0.500 Hz"));
         std::fs::write(&path, "{").unwrap();
         assert!(read_plan(&path).unwrap_err().0.contains("not a valid plan"));
+        let many: Vec<&str> =
+            vec![r#"{"freq_hz":50,"amplitude":0.1,"duration_ms":5,"ramp_ms":0}"#; 257];
+        std::fs::write(&path, format!(r#"{{"name":"x","repeat":1,"steps":[{}]}}"#, many.join(",")))
+            .unwrap();
+        assert!(read_plan(&path).unwrap_err().0.contains("257 steps: a plan holds at most 256"));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -1,5 +1,12 @@
 //! Runs the controller in QEMU: the QEMU-board firmware on `qemu-system-arm -M b-l475e-iot01a`,
-//! its USART1 on a TCP socket on 127.0.0.1 that [`crate::controller::client::DeviceClient`] connects to.
+//! its USART1 on a TCP socket on 127.0.0.1 that [`crate::controller::client::DeviceClient`]
+//! connects to.
+//!
+//! QEMU's socket serves one TCP client at a time and lets a second one wait unseen, its bytes
+//! run late when the first leaves; so the public port belongs to a frame-aware
+//! [`Proxy`] that shares the serial line among any number of clients, as a real serial port
+//! is shared, and QEMU listens on an internal port behind it. The proxy binds the public port
+//! before anything else starts, so an emulator on a busy port fails with the port's number.
 //!
 //! `chladni emulator`, the end-to-end tests and the demo all start the controller through
 //! [`Emulator::start`]. QEMU is stopped by PID when the [`Emulator`] is dropped; with
@@ -18,6 +25,7 @@ use nix::unistd::Pid;
 
 use crate::controller::client::{DeviceClient, DeviceError};
 use crate::controller::firmware::{self, FirmwareError};
+use crate::controller::proxy::Proxy;
 
 /// How to start the emulated controller.
 #[derive(Debug, Clone, Default)]
@@ -71,21 +79,50 @@ pub enum EmulatorError {
     /// QEMU exited before the firmware answered.
     #[error("QEMU exited during start-up ({0}); see its log")]
     EarlyExit(String),
-    /// The firmware did not answer a ping in time.
+    /// The firmware did not answer a `Hello` in time.
     #[error("the emulated controller did not answer within {0:?}: {1}")]
     NotReady(Duration, DeviceError),
+    /// The firmware answered, in another protocol version.
+    #[error("the emulated controller cannot be used: {0}")]
+    Incompatible(DeviceError),
+    /// The link's port is taken (another emulator, or any other program).
+    #[error(
+        "port {port} is in use (another emulator or program listens there): pick another \
+         with --tcp, or leave it out to use a free port"
+    )]
+    PortInUse {
+        /// The port asked for.
+        port: u16,
+    },
 }
 
-/// A running emulated controller. Dropping it stops QEMU.
+/// How long QEMU and the firmware get to answer a `Hello` after (re)start.
+const READY_WITHIN: Duration = Duration::from_secs(20);
+
+/// A running emulated controller: QEMU behind the link proxy. Dropping it stops both.
 pub struct Emulator {
     qemu: Child,
     log_decoder: Option<Child>,
-    port: u16,
+    proxy: Proxy,
+    qemu_port: u16,
+    elf: PathBuf,
+    flash: Option<PathBuf>,
+    config: EmulatorConfig,
 }
 
 impl Emulator {
-    /// Builds the firmware if needed, starts QEMU, and waits until the firmware answers a ping.
+    /// Binds the link's port, builds the firmware if needed, starts QEMU behind the proxy, and
+    /// waits until the firmware answers a `Hello`.
     pub fn start(config: &EmulatorConfig) -> Result<Self, EmulatorError> {
+        // The public port first: on a busy port nothing else starts, and no other program's
+        // answer can be taken for this emulator's.
+        let proxy = Proxy::bind(config.port).map_err(|e| match e.kind() {
+            std::io::ErrorKind::AddrInUse => {
+                EmulatorError::PortInUse { port: config.port.unwrap_or_default() }
+            }
+            _ => EmulatorError::Io(e),
+        })?;
+        let flash = config.flash_file.as_deref().map(prepare_flash_file).transpose()?;
         let elf = match &config.firmware {
             Some(path) => path.clone(),
             None => firmware::build(Board::Qemu)?,
@@ -93,66 +130,41 @@ impl Emulator {
         if !elf.is_file() {
             return Err(EmulatorError::NoImage(elf));
         }
-        let port = match config.port {
-            Some(port) => port,
-            None => free_port()?,
-        };
-        let flash = config.flash_file.as_deref().map(prepare_flash_file).transpose()?;
-        let mut emulator = Self::spawn(&elf, port, flash.as_deref(), config)?;
-        emulator.wait_ready(Duration::from_secs(20))?;
+        let qemu_port = free_port()?;
+        let (qemu, log_decoder) = spawn(&elf, qemu_port, flash.as_deref(), config, false)?;
+        proxy.set_upstream(qemu_port);
+        let config = config.clone();
+        let mut emulator = Self { qemu, log_decoder, proxy, qemu_port, elf, flash, config };
+        emulator.wait_ready(READY_WITHIN)?;
         Ok(emulator)
     }
 
-    fn spawn(
-        elf: &Path,
-        port: u16,
-        flash: Option<&Path>,
-        config: &EmulatorConfig,
-    ) -> Result<Self, EmulatorError> {
-        let qemu_args = qemu_command_line(elf, port, flash);
-        let mut command = match config.time_limit {
-            Some(limit) => {
-                let mut c = Command::new("timeout");
-                c.args(["--kill-after=5", &format!("{}", limit.as_secs().max(1))]);
-                c.arg("qemu-system-arm").args(&qemu_args);
-                c
-            }
-            None => {
-                let mut c = Command::new("qemu-system-arm");
-                c.args(&qemu_args);
-                c
-            }
-        };
-        let log: Stdio = match &config.log_file {
-            Some(path) => File::create(path)?.into(),
-            None => Stdio::inherit(),
-        };
-        let log_err: Stdio = match &config.log_file {
-            Some(path) => File::options().append(true).open(path)?.into(),
-            None => Stdio::inherit(),
-        };
-        command.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(log_err);
-        let mut qemu = command
-            .spawn()
-            .map_err(|source| EmulatorError::Spawn { program: "qemu-system-arm", source })?;
-        // The firmware's defmt log arrives on QEMU's stdout (semihosting); decode it.
-        let defmt = qemu.stdout.take().expect("piped stdout");
-        let log_decoder = Command::new("defmt-print")
-            .args(["-e"])
-            .arg(elf)
-            .arg("stdin")
-            .stdin(defmt)
-            .stdout(log)
-            .stderr(Stdio::null())
-            .spawn();
-        let log_decoder = match log_decoder {
-            Ok(child) => Some(child),
-            Err(source) => {
-                let _ = qemu.kill();
-                return Err(EmulatorError::Spawn { program: "defmt-print", source });
-            }
-        };
-        Ok(Self { qemu, log_decoder, port })
+    /// Stops QEMU and starts it again on the same image and flash file; the link's port stays
+    /// (connected clients stay connected and get no answers meanwhile). The log is appended to.
+    pub fn restart(&mut self) -> Result<(), EmulatorError> {
+        self.stop_qemu();
+        let qemu_port = free_port()?;
+        let (qemu, log_decoder) =
+            spawn(&self.elf, qemu_port, self.flash.as_deref(), &self.config, true)?;
+        self.qemu = qemu;
+        self.log_decoder = log_decoder;
+        self.qemu_port = qemu_port;
+        self.proxy.set_upstream(qemu_port);
+        self.wait_ready(READY_WITHIN)
+    }
+
+    /// Kills QEMU at once (SIGKILL: no chance to finish a flash write), as a power cut would.
+    /// [`Self::restart`] powers the controller up again.
+    pub fn kill(&mut self) {
+        if matches!(self.qemu.try_wait(), Ok(None)) {
+            let pid = self.qemu.id() as i32;
+            // Under coreutils `timeout`, QEMU is timeout's child in timeout's own process
+            // group: kill the group. Without it, QEMU is our child.
+            let target = if self.config.time_limit.is_some() { -pid } else { pid };
+            let _ = kill(Pid::from_raw(target), Signal::SIGKILL);
+            let _ = self.qemu.wait();
+        }
+        self.stop_log_decoder();
     }
 
     fn wait_ready(&mut self, within: Duration) -> Result<(), EmulatorError> {
@@ -161,15 +173,17 @@ impl Emulator {
             if let Some(status) = self.qemu.try_wait()? {
                 return Err(EmulatorError::EarlyExit(status.to_string()));
             }
-            let attempt = TcpStream::connect(("127.0.0.1", self.port))
+            let attempt = TcpStream::connect(("127.0.0.1", self.port()))
                 .map_err(DeviceError::from)
                 .and_then(|stream| {
-                    let mut client = DeviceClient::from_transport(Box::new(stream));
-                    client.set_timeout(Duration::from_millis(500));
-                    client.ping()
+                    let name = "chladni emulator (start-up check)";
+                    DeviceClient::with_timeout(Box::new(stream), name, Duration::from_millis(500))
                 });
             match attempt {
                 Ok(_) => return Ok(()),
+                Err(e @ DeviceError::VersionMismatch { .. }) => {
+                    return Err(EmulatorError::Incompatible(e));
+                }
                 Err(e) if start.elapsed() > within => {
                     return Err(EmulatorError::NotReady(within, e));
                 }
@@ -178,14 +192,19 @@ impl Emulator {
         }
     }
 
-    /// The TCP port of the controller's link.
+    /// The TCP port of the controller's link (the proxy's).
     pub fn port(&self) -> u16 {
-        self.port
+        self.proxy.port()
+    }
+
+    /// QEMU's own serial socket behind the proxy: one client at a time (experiments only).
+    pub fn qemu_port(&self) -> u16 {
+        self.qemu_port
     }
 
     /// The link address for [`DeviceClient::open`]: `tcp://127.0.0.1:PORT`.
     pub fn address(&self) -> String {
-        format!("tcp://127.0.0.1:{}", self.port)
+        format!("tcp://127.0.0.1:{}", self.port())
     }
 
     /// PID of the QEMU process (or of the `timeout` wrapping it).
@@ -193,9 +212,9 @@ impl Emulator {
         self.qemu.id()
     }
 
-    /// Connects a client to the controller.
-    pub fn connect(&self) -> Result<DeviceClient, DeviceError> {
-        DeviceClient::open(&self.address())
+    /// Connects a client named `client_name` to the controller.
+    pub fn connect(&self, client_name: &str) -> Result<DeviceClient, DeviceError> {
+        DeviceClient::open(&self.address(), client_name)
     }
 
     /// Waits until QEMU exits by itself (the firmware exits, or a signal stops it).
@@ -214,8 +233,14 @@ impl Emulator {
         config.time_limit.is_some() && status.code() == Some(124)
     }
 
-    /// Stops QEMU: SIGTERM (forwarded by `timeout` when present), then SIGKILL after 3 s.
+    /// Stops QEMU (SIGTERM, forwarded by `timeout` when present; SIGKILL after 3 s) and closes
+    /// the link's port.
     pub fn stop(&mut self) {
+        self.stop_qemu();
+        self.proxy.shutdown();
+    }
+
+    fn stop_qemu(&mut self) {
         if matches!(self.qemu.try_wait(), Ok(None)) {
             let _ = kill(Pid::from_raw(self.qemu.id() as i32), Signal::SIGTERM);
             let deadline = Instant::now() + Duration::from_secs(3);
@@ -225,6 +250,10 @@ impl Emulator {
             let _ = self.qemu.kill();
             let _ = self.qemu.wait();
         }
+        self.stop_log_decoder();
+    }
+
+    fn stop_log_decoder(&mut self) {
         if let Some(mut decoder) = self.log_decoder.take() {
             // It ends by itself at EOF on QEMU's stdout; don't hang if it doesn't.
             let deadline = Instant::now() + Duration::from_secs(2);
@@ -233,6 +262,65 @@ impl Emulator {
             }
             let _ = decoder.kill();
             let _ = decoder.wait();
+        }
+    }
+}
+
+/// Starts QEMU on `elf` with its serial socket on `port`, and defmt-print decoding its log
+/// into the log file (created, or appended to when `append`) or stderr.
+fn spawn(
+    elf: &Path,
+    port: u16,
+    flash: Option<&Path>,
+    config: &EmulatorConfig,
+    append: bool,
+) -> Result<(Child, Option<Child>), EmulatorError> {
+    let qemu_args = qemu_command_line(elf, port, flash);
+    let mut command = match config.time_limit {
+        Some(limit) => {
+            let mut c = Command::new("timeout");
+            c.args(["--kill-after=5", &format!("{}", limit.as_secs().max(1))]);
+            c.arg("qemu-system-arm").args(&qemu_args);
+            c
+        }
+        None => {
+            let mut c = Command::new("qemu-system-arm");
+            c.args(&qemu_args);
+            c
+        }
+    };
+    let open_log = |path: &Path, append: bool| -> std::io::Result<Stdio> {
+        let file = if append {
+            File::options().append(true).create(true).open(path)?
+        } else {
+            File::create(path)?
+        };
+        Ok(file.into())
+    };
+    let (log, log_err): (Stdio, Stdio) = match &config.log_file {
+        Some(path) => (open_log(path, append)?, open_log(path, true)?),
+        None => (Stdio::inherit(), Stdio::inherit()),
+    };
+    command.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(log_err);
+    let mut qemu = command
+        .spawn()
+        .map_err(|source| EmulatorError::Spawn { program: "qemu-system-arm", source })?;
+    // The firmware's defmt log arrives on QEMU's stdout (semihosting); decode it.
+    let defmt = qemu.stdout.take().expect("piped stdout");
+    let log_decoder = Command::new("defmt-print")
+        .args(["-e"])
+        .arg(elf)
+        .arg("stdin")
+        .stdin(defmt)
+        .stdout(log)
+        .stderr(Stdio::null())
+        .spawn();
+    match log_decoder {
+        Ok(child) => Ok((qemu, Some(child))),
+        Err(source) => {
+            let _ = qemu.kill();
+            let _ = qemu.wait();
+            Err(EmulatorError::Spawn { program: "defmt-print", source })
         }
     }
 }

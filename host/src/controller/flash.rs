@@ -665,8 +665,11 @@ mod tests {
         let flash = flash_region().unwrap();
         assert_eq!((flash.origin, flash.length), (0x0800_0000, 512 * 1024));
         let regions = parse_memory_x(MEMORY_X).unwrap();
-        assert_eq!(regions.iter().map(|r| r.name.as_str()).collect::<Vec<_>>(), ["FLASH", "RAM"]);
+        let names: Vec<&str> = regions.iter().map(|r| r.name.as_str()).collect();
+        assert_eq!(names, ["FLASH", "RAM", "SRAM2"]);
         assert_eq!((regions[1].origin, regions[1].length), (0x2000_0000, 96 * 1024));
+        // The stack's own region (memory.x puts the stack there).
+        assert_eq!((regions[2].origin, regions[2].length), (0x1000_0000, 32 * 1024));
     }
 
     #[test]

@@ -87,12 +87,18 @@ impl Runner {
 
     /// Starts `plan` at the next sample (replacing whatever runs; the amplitude ramps from its
     /// current value, the phase carries on).
-    pub fn start_plan(&mut self, plan: Plan) -> Result<(), DriveError> {
+    pub fn start_plan(&mut self, mut plan: Plan) -> Result<(), DriveError> {
+        self.start_plan_from(&mut plan)
+    }
+
+    /// [`Runner::start_plan`] taking the plan out of `plan` (which gets the previous plan), so
+    /// a plan of a few KiB changes hands without a copy on a small controller stack.
+    pub fn start_plan_from(&mut self, plan: &mut Plan) -> Result<(), DriveError> {
         if self.mode == Mode::Faulted {
             return Err(DriveError::Faulted);
         }
         plan.validate(&self.limits).map_err(DriveError::Plan)?;
-        self.plan = plan;
+        core::mem::swap(&mut self.plan, plan);
         self.elapsed = 0;
         self.commands = self.commands.wrapping_add(1);
         self.begin_step(0, 0);

@@ -17,7 +17,7 @@ use crc::{CRC_32_ISO_HDLC, Crc};
 use serde::{Deserialize, Serialize};
 
 /// Version of this protocol; bumped on any incompatible change of a message or of framing.
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 
 /// Largest COBS-encoded frame (without delimiters) either side accepts, in bytes.
 pub const MAX_FRAME: usize = 1024;
@@ -342,7 +342,7 @@ mod tests {
             Err(FrameError { session: 3, id: 6, error: LinkError::Malformed })
         );
         assert_eq!(
-            decode::<Msg>(&mut cobs::encode_vec(&[2, 0])),
+            decode::<Msg>(&mut cobs::encode_vec(&[PROTOCOL_VERSION as u8, 0])),
             Err(FrameError::unknown(LinkError::Malformed))
         );
     }

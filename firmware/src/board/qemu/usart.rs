@@ -70,6 +70,12 @@ impl embedded_io_async::Read for Usart1 {
     async fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
         let n = RX.read(buf).await;
         pac::USART1.cr1().modify(|w| w.set_rxneie(true));
+        // A byte the handler left in RDR when the pipe was full is still there: raise the
+        // interrupt for it by hand rather than count on the USART model raising it again
+        // when RXNEIE is set while RXNE already is.
+        if pac::USART1.isr().read().rxne() {
+            cortex_m::peripheral::NVIC::pend(pac::Interrupt::USART1);
+        }
         Ok(n)
     }
 }

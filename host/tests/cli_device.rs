@@ -1,0 +1,204 @@
+//! `chladni device …` through the built binary against the real QEMU controller (behind the
+//! emulator's link proxy): the JSON shapes, a busy controller named at once, the telemetry
+//! monitor, and Ctrl-C.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use chladni::controller::emulator::{Emulator, EmulatorConfig};
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+
+fn emulator(name: &str) -> Emulator {
+    let base =
+        std::env::temp_dir().join(format!("chladni-cli-device-{name}-{}", std::process::id()));
+    let flash = base.with_extension("flash");
+    let _ = std::fs::remove_file(&flash);
+    let config = EmulatorConfig {
+        time_limit: Some(Duration::from_secs(300)),
+        log_file: Some(base.with_extension("log")),
+        flash_file: Some(flash),
+        ..Default::default()
+    };
+    Emulator::start(&config).expect("start the emulator")
+}
+
+fn chladni(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
+}
+
+fn json_of(out: &Output) -> serde_json::Value {
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("{e}: {stdout}"))
+}
+
+fn keys(v: &serde_json::Value) -> Vec<&str> {
+    v.as_object().unwrap().keys().map(|k| k.as_str()).collect()
+}
+
+#[test]
+fn status_info_ping_config_and_list_print_their_json_shapes() {
+    let emu = emulator("json");
+    let port = emu.address();
+    let status = json_of(&chladni(&["device", "status", "--port", &port, "--json"]));
+    assert_eq!(
+        keys(&status),
+        [
+            "amplitude",
+            "elapsed_ms",
+            "fault",
+            "freq_hz",
+            "plan",
+            "remaining_ms",
+            "run",
+            "state",
+            "step",
+            "underruns"
+        ]
+    );
+    assert_eq!(status["state"], "idle");
+    let info = json_of(&chladni(&["device", "info", "--port", &port, "--json"]));
+    // The board's value is checked end to end (tests/e2e.rs); here, the shape.
+    assert_eq!(keys(&info), ["board", "build_id", "firmware_version", "protocol_version"]);
+    assert_eq!(info["protocol_version"], chladni_shared::icd::link::PROTOCOL_VERSION);
+    let ping = json_of(&chladni(&["device", "ping", "--port", &port, "--count", "3", "--json"]));
+    assert_eq!(ping["count"], 3);
+    let config = json_of(&chladni(&["device", "config", "get", "--port", &port, "--json"]));
+    assert_eq!(
+        keys(&config),
+        ["max_amplitude", "max_freq_hz", "max_steps", "max_total_ms", "min_freq_hz"]
+    );
+    assert_eq!(
+        (config["max_steps"].as_u64(), config["max_freq_hz"].as_f64()),
+        (Some(256), Some(2000.0))
+    );
+    let one = chladni(&["device", "config", "get", "min_freq_hz", "--port", &port]);
+    assert_eq!(String::from_utf8_lossy(&one.stdout).trim(), "1");
+    let list = json_of(&chladni(&["device", "list", "--json"]));
+    assert!(list["ports"].is_array(), "{list}");
+
+    let drive = json_of(&chladni(&[
+        "device",
+        "drive",
+        "--port",
+        &port,
+        "--freq",
+        "120",
+        "--amplitude",
+        "0.25",
+        "--json",
+    ]));
+    assert_eq!(keys(&drive), ["amplitude", "freq_hz", "run"]);
+    let stop = json_of(&chladni(&["device", "stop", "--port", &port, "--json"]));
+    assert!(stop["run"].as_u64() > drive["run"].as_u64(), "{stop} after {drive}");
+}
+
+#[test]
+fn a_second_program_is_told_at_once_who_holds_the_controller() {
+    let emu = emulator("busy");
+    let mut owner = emu.connect("the owner in a test").expect("connect");
+    let run = owner.drive(100_000, 2_000).expect("drive");
+    let started = Instant::now();
+    let out = chladni(&[
+        "device",
+        "drive",
+        "--port",
+        &emu.address(),
+        "--freq",
+        "123",
+        "--amplitude",
+        "0.1",
+    ]);
+    let took = started.elapsed();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("the controller is busy: the owner in a test holds it"), "{stderr}");
+    assert!(took < Duration::from_secs(2), "took {took:?}");
+    // Anyone may stop the shaker, even while another program owns the controller.
+    let stop = json_of(&chladni(&["device", "stop", "--port", &emu.address(), "--json"]));
+    assert!(stop["run"].as_u64() > Some(u64::from(run.0)), "{stop}");
+}
+
+/// Starts `chladni device ARGS…` with stdout piped; returns it and a reader of its lines.
+fn spawn(args: &[&str]) -> (std::process::Child, BufReader<std::process::ChildStdout>) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_chladni"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stdout = BufReader::new(child.stdout.take().unwrap());
+    (child, stdout)
+}
+
+#[test]
+fn monitor_prints_one_json_object_per_sample_and_stops_at_count() {
+    let emu = emulator("monitor");
+    let port = emu.address();
+    let out =
+        chladni(&["device", "monitor", "--port", &port, "--rate", "50", "--count", "5", "--json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let seqs: Vec<u64> = lines.iter().map(|v| v["seq"].as_u64().unwrap()).collect();
+    assert_eq!(seqs, [0, 1, 2, 3, 4]);
+    assert_eq!(lines[4]["left"], 0);
+    assert_eq!(lines[0]["state"], "idle");
+    assert_eq!(lines[0].as_object().unwrap().len(), 12, "{}", lines[0]);
+}
+
+#[test]
+fn monitor_runs_until_ctrl_c_and_says_it_stopped() {
+    let emu = emulator("monitor-ctrl-c");
+    let port = emu.address();
+    let mut owner = emu.connect("driving while monitored").unwrap();
+    owner.drive(90_000, 3_000).unwrap();
+    let (child, mut stdout) = spawn(&["device", "monitor", "--port", &port, "--rate", "20"]);
+    // Past the first batch (2 s of samples): the monitor renews its subscription.
+    let mut lines = Vec::new();
+    for _ in 0..60 {
+        let mut line = String::new();
+        stdout.read_line(&mut line).unwrap();
+        lines.push(line);
+    }
+    assert!(lines.iter().all(|l| l.starts_with('#')), "{lines:?}");
+    kill(Pid::from_raw(child.id() as i32), Signal::SIGINT).unwrap();
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    // "monitor stopped; the controller goes on: …" while the drive runs (firmware permitting).
+    assert!(stderr.contains("monitor stopped"), "{stderr}");
+}
+
+#[test]
+fn ctrl_c_during_run_file_wait_stops_the_plan_and_exits_130() {
+    let emu = emulator("run-file-ctrl-c");
+    let port = emu.address();
+    let plan = std::env::temp_dir().join(format!("chladni-ctrl-c-{}.json", std::process::id()));
+    let steps = r#"{"freq_hz": 80.0, "duration_ms": 20000, "amplitude": 0.3, "ramp_ms": 50}"#;
+    std::fs::write(&plan, format!(r#"{{"name": "long", "repeat": 1, "steps": [{steps}]}}"#))
+        .unwrap();
+    let (child, mut stdout) =
+        spawn(&["device", "run-file", "--port", &port, plan.to_str().unwrap(), "--wait"]);
+    let mut line = String::new();
+    while !line.contains("Ctrl-C stops it") {
+        line.clear();
+        assert!(stdout.read_line(&mut line).unwrap() > 0, "run-file ended before running");
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    kill(Pid::from_raw(child.id() as i32), Signal::SIGINT).unwrap();
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("interrupted: stopped plan 'long' (slot 64)"), "{stderr}");
+    let mut client = emu.connect("after ctrl-c").unwrap();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while client.status().unwrap().state.name() != "idle" {
+        assert!(Instant::now() < deadline, "the plan still runs after Ctrl-C");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
