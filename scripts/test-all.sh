@@ -49,7 +49,8 @@ hitl_dir=$(mktemp -d)
 source scripts/lib/emulator.sh
 emu=""
 trap 'kill $emu 2>/dev/null || true; rm -rf "$hitl_dir"' EXIT
-start_emulator target/debug/chladni "$hitl_dir" --time-limit-s 600 --log "$hitl_dir/firmware.log"
+start_emulator target/debug/chladni "$hitl_dir" --time-limit-s 600 --log "$hitl_dir/firmware.log" \
+  --flash-file "$hitl_dir/flash.bin"
 CHLADNI_EXPECT_BOARD=qemu scripts/hitl.sh "$port" --no-flash
 kill $emu
 

@@ -322,7 +322,10 @@ impl core::fmt::Display for StoreError {
             StoreError::Corrupt { slot } => {
                 write!(f, "the plan in slot {slot} does not read back whole (CRC mismatch)")
             }
-            StoreError::Flash => write!(f, "the controller's flash failed or is absent"),
+            StoreError::Flash => write!(
+                f,
+                "the controller's flash failed or is absent (an emulator keeps plans only with --flash-file)"
+            ),
         }
     }
 }
