@@ -17,7 +17,7 @@ use chladni_shared::icd::link::{
 use chladni_shared::icd::plan::{DeviceLimits, Plan, PlanError, Step};
 use chladni_shared::icd::store::{
     CHUNK_STEPS, DeviceConfig, PlanPage, PlanRef, PlanSummary, StoreError, UploadBegin,
-    UploadChunk, UploadError, plan_crc,
+    UploadChunk, UploadError,
 };
 use serde::Serialize;
 
@@ -88,13 +88,7 @@ pub fn chunks_of(plan: &Plan) -> Vec<UploadChunk> {
 
 /// The `UploadBegin` of `plan` into `slot`, with its CRC.
 pub fn begin_of(plan: &Plan, slot: Option<u8>) -> UploadBegin {
-    UploadBegin {
-        slot,
-        name: plan.name.clone(),
-        repeat: plan.repeat,
-        steps: plan.steps.len() as u16,
-        crc: plan_crc(plan),
-    }
+    UploadBegin::of(plan, slot)
 }
 
 /// One valid request of every kind (some twice, with other field shapes). The uploads are

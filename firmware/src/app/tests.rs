@@ -230,14 +230,7 @@ fn call<E: Endpoint>(
 }
 
 fn upload(link: &mut Link<'_, MockFlash>, session: u32, p: &Plan) -> Result<(), Response> {
-    let begin = UploadBegin {
-        slot: None,
-        name: p.name.clone(),
-        repeat: p.repeat,
-        steps: p.steps.len() as u16,
-        crc: plan_crc(p),
-    };
-    call(link, session, begin)?;
+    call(link, session, UploadBegin::of(p, None))?;
     let steps = heapless::Vec::from_slice(&p.steps).unwrap();
     call(link, session, UploadChunk { index: 0, steps })?;
     call(link, session, link::UploadCommit).map(|_| ())
@@ -268,9 +261,7 @@ fn another_session_is_refused_while_the_owner_uploads_but_may_stop() {
     let mut link = link_over(&drive);
     call(&mut link, 1, link::Hello { client: hello("uploader") }).unwrap();
     let p = plan("p", &[(100_000, 10_000, 12, 2)]);
-    let begin =
-        UploadBegin { slot: None, name: p.name.clone(), repeat: 1, steps: 1, crc: plan_crc(&p) };
-    call(&mut link, 1, begin).unwrap();
+    call(&mut link, 1, UploadBegin::of(&p, None)).unwrap();
     let drive_req = link::Drive { freq_mhz: 150_000, amplitude_q15: 100 };
     match call(&mut link, 2, drive_req) {
         Err(Response::Refused(Refusal::Busy { owner, .. })) => assert_eq!(owner, "uploader"),

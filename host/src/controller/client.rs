@@ -29,7 +29,7 @@ use chladni_shared::icd::link::{
     RunNumber, RunPlan, SetConfig, StatusReport, Stop, Subscribe, Telemetry, UploadCommit,
 };
 use chladni_shared::icd::store::{
-    CHUNK_STEPS, DeviceConfig, PlanRef, PlanSummary, UploadBegin, UploadChunk, plan_crc,
+    CHUNK_STEPS, DeviceConfig, PlanRef, PlanSummary, UploadBegin, UploadChunk,
 };
 
 pub use link::Frame;
@@ -401,13 +401,7 @@ impl DeviceClient {
         mut progress: impl FnMut(usize, usize),
     ) -> Result<PlanSummary, DeviceError> {
         let total = plan.steps.len();
-        self.call(UploadBegin {
-            slot,
-            name: plan.name.clone(),
-            repeat: plan.repeat,
-            steps: total as u16,
-            crc: plan_crc(plan),
-        })?;
+        self.call(UploadBegin::of(plan, slot))?;
         progress(0, total);
         for (index, chunk) in plan.steps.chunks(CHUNK_STEPS).enumerate() {
             let steps = heapless::Vec::from_slice(chunk).expect("chunks() yields ≤ CHUNK_STEPS");

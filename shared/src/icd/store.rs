@@ -57,6 +57,20 @@ pub struct UploadBegin {
     pub crc: u32,
 }
 
+impl UploadBegin {
+    /// The `UploadBegin` of `plan` into `slot` (`None`: the controller picks), with its
+    /// [`plan_crc`].
+    pub fn of(plan: &Plan, slot: Option<u8>) -> Self {
+        UploadBegin {
+            slot,
+            name: plan.name.clone(),
+            repeat: plan.repeat,
+            steps: plan.steps.len() as u16,
+            crc: plan_crc(plan),
+        }
+    }
+}
+
 /// One chunk of an upload: steps `index * CHUNK_STEPS ..`, at most [`CHUNK_STEPS`] of them;
 /// every chunk but the last is full.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]

@@ -11,7 +11,7 @@ use chladni_shared::icd::link::{
     Board, ENCODE_BUF, Envelope, FrameError, FrameReader, MAX_FRAME, Request, decode, encode,
 };
 use chladni_shared::icd::plan::Step;
-use chladni_shared::icd::store::{PlanName, PlanPage, UploadError};
+use chladni_shared::icd::store::{PlanName, PlanPage, UploadError, plan_crc};
 
 use super::*;
 

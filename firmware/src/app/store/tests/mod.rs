@@ -75,13 +75,7 @@ fn longest_plan(name: &str, seed: u32) -> Plan {
 }
 
 fn begin_of(plan: &Plan, slot: Option<u8>) -> UploadBegin {
-    UploadBegin {
-        slot,
-        name: plan.name.clone(),
-        repeat: plan.repeat,
-        steps: plan.steps.len() as u16,
-        crc: plan_crc(plan),
-    }
+    UploadBegin::of(plan, slot)
 }
 
 fn chunks_of(plan: &Plan) -> Vec<UploadChunk> {
