@@ -9,11 +9,14 @@
 //!   configuration, plan CRCs.
 //! - [`plan`]: drive plans ([`plan::Plan`], [`plan::Step`]), the device's limits
 //!   ([`plan::DeviceLimits`]) and the validation of plans and setpoints against them.
+//! - [`sense`]: sensing and control: drive levels (open or closed loop), measurements, faults
+//!   with their causes, the monitors' thresholds, reset causes.
 //! - [`units`]: the one conversion for each pair of units: Hz ↔ mHz ([`units::MilliHz`]),
 //!   amplitude ↔ Q15 ([`units::Q15`]), fixed point and binary angles ↔ `f64`.
 
 pub mod frame;
 pub mod link;
 pub mod plan;
+pub mod sense;
 pub mod store;
 pub mod units;
