@@ -201,7 +201,12 @@ mod tests {
         let mut plan =
             Plan { name: heapless::String::new(), repeat: 1, steps: heapless::Vec::new() };
         for (f, d) in [(100_000, 12), (200_000, 8)] {
-            let s = Step { freq_mhz: f, amplitude_q15: 10_000, duration_ms: d, ramp_ms: 2 };
+            let s = Step {
+                freq_mhz: f,
+                level: chladni_shared::icd::plan::Level::Drive(10_000),
+                duration_ms: d,
+                ramp_ms: 2,
+            };
             plan.steps.push(s).unwrap();
         }
         shared.run_plan(&plan).unwrap();

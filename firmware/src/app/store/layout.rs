@@ -193,7 +193,7 @@ mod tests {
     fn the_longest_chunk_fits_the_buffer() {
         let worst = Step {
             freq_mhz: u32::MAX,
-            amplitude_q15: u16::MAX,
+            level: chladni_shared::icd::plan::Level::Drive(u16::MAX),
             duration_ms: u32::MAX,
             ramp_ms: u32::MAX,
         };
