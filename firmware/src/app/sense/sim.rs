@@ -62,6 +62,9 @@ const REGS: usize = 0x80;
 
 /// The simulated LSM6DSL (about 4.2 KiB: the FIFO is 2048 words).
 pub struct SimLsm6dsl {
+    /// Registers, stored as their difference (XOR) from the reset values: a fresh sensor is
+    /// all zeros, so a `static` one lands in .bss rather than costing 4 KiB of initialiser
+    /// in flash.
     regs: [u8; REGS],
     /// Register pointer, kept between transactions as the chip does.
     pointer: u8,
@@ -87,10 +90,8 @@ impl Default for SimLsm6dsl {
 impl SimLsm6dsl {
     /// A chip just powered up: reset values, FIFO in bypass, accelerometer off.
     pub const fn new() -> Self {
-        let mut regs = [0u8; REGS];
-        regs[reg::CTRL3_C as usize] = reg::CTRL3_DEFAULT;
         Self {
-            regs,
+            regs: [0; REGS],
             pointer: 0,
             fifo: [0; FIFO_WORDS as usize],
             head: 0,
@@ -100,6 +101,22 @@ impl SimLsm6dsl {
             overrun: false,
             fault: Fault::None,
         }
+    }
+
+    /// Reset value of register `addr`.
+    const fn reset_value(addr: u8) -> u8 {
+        if addr == reg::CTRL3_C { reg::CTRL3_DEFAULT } else { 0 }
+    }
+
+    /// Register `addr`'s value.
+    fn reg(&self, addr: u8) -> u8 {
+        let addr = addr % REGS as u8;
+        self.regs[usize::from(addr)] ^ Self::reset_value(addr)
+    }
+
+    fn set_reg(&mut self, addr: u8, value: u8) {
+        let addr = addr % REGS as u8;
+        self.regs[usize::from(addr)] = value ^ Self::reset_value(addr);
     }
 
     /// Injects `fault` (or clears it with [`Fault::None`]).
@@ -114,23 +131,23 @@ impl SimLsm6dsl {
 
     /// A register's value as last written (or its reset value).
     pub fn register(&self, addr: u8) -> u8 {
-        self.regs[usize::from(addr) % REGS]
+        self.reg(addr)
     }
 
     /// The accelerometer's rate, or `None` while it is powered down.
     pub fn odr(&self) -> Option<Odr> {
-        Odr::from_code(self.regs[usize::from(reg::CTRL1_XL)] >> reg::ODR_XL_SHIFT)
+        Odr::from_code(self.reg(reg::CTRL1_XL) >> reg::ODR_XL_SHIFT)
     }
 
     /// The accelerometer's full scale.
     pub fn range(&self) -> Range {
-        Range::from_code(self.regs[usize::from(reg::CTRL1_XL)] >> reg::FS_XL_SHIFT)
+        Range::from_code(self.reg(reg::CTRL1_XL) >> reg::FS_XL_SHIFT)
     }
 
     /// The FIFO threshold in words (FIFO_CTRL1/2 FTH).
     pub fn threshold_words(&self) -> u16 {
-        let low = self.regs[usize::from(reg::FIFO_CTRL1)];
-        let high = self.regs[usize::from(reg::FIFO_CTRL2)] & 0b111;
+        let low = self.reg(reg::FIFO_CTRL1);
+        let high = self.reg(reg::FIFO_CTRL2) & 0b111;
         u16::from_le_bytes([low, high])
     }
 
@@ -141,7 +158,7 @@ impl SimLsm6dsl {
 
     /// The FIFO's mode bits (FIFO_CTRL5.FIFO_MODE).
     pub fn fifo_mode(&self) -> u8 {
-        self.regs[usize::from(reg::FIFO_CTRL5)] & reg::FIFO_MODE_MASK
+        self.reg(reg::FIFO_CTRL5) & reg::FIFO_MODE_MASK
     }
 
     /// Words in the FIFO.
@@ -162,7 +179,7 @@ impl SimLsm6dsl {
 
     /// The INT1 line: the threshold flag, when routed to INT1 (INT1_CTRL.INT1_FTH).
     pub fn int1(&self) -> bool {
-        self.regs[usize::from(reg::INT1_CTRL)] & reg::INT1_FTH != 0 && self.at_threshold()
+        self.reg(reg::INT1_CTRL) & reg::INT1_FTH != 0 && self.at_threshold()
     }
 
     /// A new accelerometer sample, raw LSB: it goes to the output registers and, when the
@@ -174,8 +191,8 @@ impl SimLsm6dsl {
         }
         for (i, v) in [x, y, z].into_iter().enumerate() {
             let [l, h] = v.to_le_bytes();
-            self.regs[usize::from(reg::OUTX_L_XL) + 2 * i] = l;
-            self.regs[usize::from(reg::OUTX_L_XL) + 2 * i + 1] = h;
+            self.set_reg(reg::OUTX_L_XL + 2 * i as u8, l);
+            self.set_reg(reg::OUTX_L_XL + 2 * i as u8 + 1, h);
         }
         if self.fifo_collects() {
             for v in [x, y, z] {
@@ -202,8 +219,8 @@ impl SimLsm6dsl {
     /// in the FIFO (DEC_FIFO_XL not 0).
     fn fifo_collects(&self) -> bool {
         let mode = self.fifo_mode();
-        let fifo_odr = self.regs[usize::from(reg::FIFO_CTRL5)] >> reg::FIFO_ODR_SHIFT;
-        let xl_in_fifo = self.regs[usize::from(reg::FIFO_CTRL3)] & 0b111 != 0;
+        let fifo_odr = self.reg(reg::FIFO_CTRL5) >> reg::FIFO_ODR_SHIFT;
+        let xl_in_fifo = self.reg(reg::FIFO_CTRL3) & 0b111 != 0;
         matches!(mode, reg::FIFO_MODE_FIFO | reg::FIFO_MODE_CONTINUOUS)
             && fifo_odr != 0
             && xl_in_fifo
@@ -238,7 +255,6 @@ impl SimLsm6dsl {
     /// temporary on the stack).
     fn reset(&mut self) {
         self.regs = [0; REGS];
-        self.regs[usize::from(reg::CTRL3_C)] = reg::CTRL3_DEFAULT;
         self.pointer = 0;
         self.fifo_clear();
     }
@@ -285,7 +301,7 @@ impl SimLsm6dsl {
                 }
                 high
             }
-            _ => self.regs[usize::from(addr) % REGS],
+            _ => self.reg(addr),
         }
     }
 
@@ -300,18 +316,18 @@ impl SimLsm6dsl {
             reg::WHO_AM_I | 0x1E..=0x3F => {}
             reg::CTRL3_C if value & reg::CTRL3_SW_RESET != 0 => self.reset(),
             reg::FIFO_CTRL5 => {
-                self.regs[usize::from(addr)] = value;
+                self.set_reg(addr, value);
                 if value & reg::FIFO_MODE_MASK == reg::FIFO_MODE_BYPASS {
                     self.fifo_clear();
                 }
             }
-            _ => self.regs[usize::from(addr) % REGS] = value,
+            _ => self.set_reg(addr, value),
         }
     }
 
     /// The next register address after an access at `addr`.
     fn next(&self, addr: u8) -> u8 {
-        if self.regs[usize::from(reg::CTRL3_C)] & reg::CTRL3_IF_INC == 0 {
+        if self.reg(reg::CTRL3_C) & reg::CTRL3_IF_INC == 0 {
             addr
         } else if addr == reg::FIFO_DATA_OUT_H {
             reg::FIFO_DATA_OUT_L
