@@ -8,12 +8,14 @@
 //! - [`executor`]: embassy's executor sleeping with WFI instead of WFE (which QEMU spins on);
 //! - [`flash`]: flash bank 2 kept in a host file through semihosting (QEMU's flash is inert);
 //! - defmt over semihosting, and [`exit`] to end QEMU with a status code;
+//! - [`sensor`]: the LSM6DSL accelerometer, simulated (QEMU has no I2C devices);
 //! - [`failsafe`]: the simulated DAC parks at mid-scale on a panic or HardFault, and the exit
 //!   code says whether it did.
 
 pub mod executor;
 pub mod failsafe;
 pub mod flash;
+pub mod sensor;
 pub mod time_driver;
 pub mod usart;
 
@@ -28,6 +30,8 @@ pub type Link = usart::Usart1;
 /// The drive output: no DAC in QEMU, so a simulated one paced by the time driver, feeding the
 /// simulated shaker + plate, which the fault handlers park.
 pub type DriveOutput = failsafe::ParkableDac;
+
+pub use sensor::{Sensor, SensorBus, SensorIrq};
 
 /// Flash bank 2 for the plan store: a host file (see [`flash`]).
 pub type Flash = flash::FileFlash;
@@ -44,6 +48,8 @@ pub struct Board {
     pub flash: Option<Flash>,
     /// Drive output.
     pub drive: DriveOutput,
+    /// The simulated LSM6DSL accelerometer's bus and INT1 line.
+    pub sensor: Sensor,
     /// This board's own tasks: none in QEMU.
     pub tasks: BoardTasks,
 }
@@ -67,7 +73,13 @@ pub fn init() -> Board {
         }
         opened.ok()
     });
-    Board { link: usart::Usart1::new(), flash, drive: DriveOutput::new(), tasks: BoardTasks }
+    Board {
+        link: usart::Usart1::new(),
+        flash,
+        drive: DriveOutput::new(),
+        sensor: sensor::new(),
+        tasks: BoardTasks,
+    }
 }
 
 pub use executor::run;
