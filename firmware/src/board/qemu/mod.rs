@@ -10,12 +10,16 @@
 //! - defmt over semihosting, and [`exit`] to end QEMU with a status code;
 //! - [`failsafe`]: the simulated DAC parks at mid-scale on a panic or HardFault, and the exit
 //!   code says whether it did.
+//! - [`watchdog`]: a simulated watchdog counted down by the SysTick time driver; when it runs
+//!   out it parks the drive, records the cause in RAM that survives the reset, and resets
+//!   (SYSRESETREQ), so [`reset_cause`] says `Watchdog` on the next boot.
 
 pub mod executor;
 pub mod failsafe;
 pub mod flash;
 pub mod time_driver;
 pub mod usart;
+pub mod watchdog;
 
 use defmt_semihosting as _;
 
@@ -28,6 +32,11 @@ pub type Link = usart::Usart1;
 /// The drive output: no DAC in QEMU, so a simulated one paced by the time driver, feeding the
 /// simulated shaker + plate, which the fault handlers park.
 pub type DriveOutput = failsafe::ParkableDac;
+
+/// The watchdog: simulated, counted down by the time driver (see [`watchdog`]).
+pub type Watchdog = watchdog::Watchdog;
+
+pub use watchdog::reset_cause;
 
 /// Flash bank 2 for the plan store: a host file (see [`flash`]).
 pub type Flash = flash::FileFlash;
@@ -46,6 +55,8 @@ pub struct Board {
     pub drive: DriveOutput,
     /// This board's own tasks: none in QEMU.
     pub tasks: BoardTasks,
+    /// The (simulated) watchdog, not started: `app::watchdog::watchdog_task` starts it.
+    pub watchdog: Watchdog,
 }
 
 /// Background work of the board itself (the real board runs its USB device here).
@@ -67,7 +78,13 @@ pub fn init() -> Board {
         }
         opened.ok()
     });
-    Board { link: usart::Usart1::new(), flash, drive: DriveOutput::new(), tasks: BoardTasks }
+    Board {
+        link: usart::Usart1::new(),
+        flash,
+        drive: DriveOutput::new(),
+        tasks: BoardTasks,
+        watchdog: Watchdog::new(),
+    }
 }
 
 pub use executor::run;
