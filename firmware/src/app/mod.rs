@@ -7,6 +7,7 @@ pub mod drive;
 pub mod link;
 pub mod sense;
 pub mod store;
+pub mod watchdog;
 
 #[cfg(all(test, not(target_os = "none")))]
 mod tests;

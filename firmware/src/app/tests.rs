@@ -9,7 +9,7 @@ use chladni_shared::drive::runner::{BLOCK_LEN, STOP_RAMP_MS};
 use chladni_shared::icd::link::{
     self, DriveError, DriveState, OWNER_LEASE_MS, Refusal, Request, RunNumber, SetpointError,
 };
-use chladni_shared::icd::plan::{DeviceLimits, Plan, PlanError, Step};
+use chladni_shared::icd::plan::{DeviceLimits, Level, Plan, PlanError, Step};
 use embassy_futures::block_on;
 use embassy_time::Instant;
 
@@ -43,7 +43,9 @@ fn play(core: &mut DriveCore<'_>, out: &mut VecOutput, blocks: usize) {
 fn plan(name: &str, steps: &[(u32, u16, u32, u32)]) -> Plan {
     let mut p = Plan { name: name.try_into().unwrap(), repeat: 1, steps: heapless::Vec::new() };
     for &(freq_mhz, amplitude_q15, duration_ms, ramp_ms) in steps {
-        p.steps.push(Step { freq_mhz, amplitude_q15, duration_ms, ramp_ms }).unwrap();
+        p.steps
+            .push(Step { freq_mhz, level: Level::Drive(amplitude_q15), duration_ms, ramp_ms })
+            .unwrap();
     }
     p
 }

@@ -2,8 +2,10 @@
 //!
 //! - [`dds`]: sine synthesis (phase accumulator, interpolated table, 12-bit DAC codes).
 //! - [`runner`]: the plan runner filling sample blocks, step boundaries exact to the sample.
+//! - [`pwm`]: the PWM drive option's duty mapping, carrier plan and reconstruction filter.
 //! - [`plant`]: a simulated shaker + plate (resonant second-order system) for the QEMU board.
 
 pub mod dds;
 pub mod plant;
+pub mod pwm;
 pub mod runner;

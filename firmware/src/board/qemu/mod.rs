@@ -11,6 +11,9 @@
 //! - [`sensor`]: the LSM6DSL accelerometer, simulated (QEMU has no I2C devices);
 //! - [`failsafe`]: the simulated DAC parks at mid-scale on a panic or HardFault, and the exit
 //!   code says whether it did.
+//! - [`watchdog`]: a simulated watchdog counted down by the SysTick time driver; when it runs
+//!   out it parks the drive, records the cause in RAM that survives the reset, and resets
+//!   (SYSRESETREQ), so [`reset_cause`] says `Watchdog` on the next boot.
 
 pub mod executor;
 pub mod failsafe;
@@ -18,6 +21,7 @@ pub mod flash;
 pub mod sensor;
 pub mod time_driver;
 pub mod usart;
+pub mod watchdog;
 
 use defmt_semihosting as _;
 
@@ -32,6 +36,9 @@ pub type Link = usart::Usart1;
 pub type DriveOutput = failsafe::ParkableDac;
 
 pub use sensor::{Sensor, SensorBus, SensorIrq};
+/// The watchdog: simulated, counted down by the time driver (see [`watchdog`]).
+pub type Watchdog = watchdog::Watchdog;
+pub use watchdog::reset_cause;
 
 /// Flash bank 2 for the plan store: a host file (see [`flash`]).
 pub type Flash = flash::FileFlash;
@@ -52,6 +59,8 @@ pub struct Board {
     pub sensor: Sensor,
     /// This board's own tasks: none in QEMU.
     pub tasks: BoardTasks,
+    /// The (simulated) watchdog, not started: `app::watchdog::watchdog_task` starts it.
+    pub watchdog: Watchdog,
 }
 
 /// Background work of the board itself (the real board runs its USB device here).
@@ -79,6 +88,7 @@ pub fn init() -> Board {
         drive: DriveOutput::new(),
         sensor: sensor::new(),
         tasks: BoardTasks,
+        watchdog: Watchdog::new(),
     }
 }
 
