@@ -5,5 +5,7 @@
 //! - [`plant`]: a simulated shaker + plate (resonant second-order system) for the QEMU board.
 
 pub mod dds;
+pub mod lockin;
 pub mod plant;
 pub mod runner;
+pub mod timeline;
