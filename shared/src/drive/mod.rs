@@ -9,3 +9,4 @@ pub mod lockin;
 pub mod plant;
 pub mod runner;
 pub mod timeline;
+pub mod sensor_sim;
