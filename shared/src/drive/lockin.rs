@@ -85,7 +85,7 @@ impl Estimate {
     /// when the acceleration leads.
     pub fn phase_deg(&self) -> f32 {
         use micromath::F32Ext;
-        self.quadrature.atan2(self.in_phase) * (180.0 / core::f32::consts::PI)
+        F32Ext::atan2(self.quadrature, self.in_phase) * (180.0 / core::f32::consts::PI)
     }
 
     /// The wire form.

@@ -4,9 +4,14 @@
 //! - [`runner`]: the plan runner filling sample blocks, step boundaries exact to the sample.
 //! - [`plant`]: a simulated shaker + plate (resonant second-order system) for the QEMU board.
 
+pub mod closed_loop;
+pub mod control;
 pub mod dds;
 pub mod lockin;
+#[cfg(test)]
+mod loop_tests;
+pub mod monitor;
 pub mod plant;
 pub mod runner;
-pub mod timeline;
 pub mod sensor_sim;
+pub mod timeline;
