@@ -210,8 +210,9 @@ mod tests {
         let g_true = 2.0f32;
         let mut c = AmplitudeController::new(1.4, 0, Ramp::new(0, 10_000, 0, 0));
         let mut u = 0u16;
-        for k in 0..30 {
-            u = c.update((g_true * u as f32) as u32, k, k, 32767);
+        for k in 0..60 {
+            let t = 1000 + k * 250;
+            u = c.update((g_true * u as f32) as u32, t, t, 32767);
         }
         let y = g_true * u as f32;
         assert!((y - 10_000.0).abs() < 20.0, "y {y}");
@@ -222,7 +223,8 @@ mod tests {
         // The plant is disconnected for 100 updates (no response), then answers with y = u.
         let mut c = AmplitudeController::new(1.0, 0, Ramp::new(0, 15_000, 0, 0));
         for k in 0..100 {
-            assert!(c.update(0, k, k, 20_000) <= 20_000);
+            let t = 1000 + k * 250;
+            assert!(c.update(0, t, t, 20_000) <= 20_000);
         }
         assert_eq!(c.effort(), 20_000);
         assert!(c.demand_q15() > 20_000);
@@ -230,8 +232,9 @@ mod tests {
         // the ceiling at once instead of unwinding for a hundred updates.
         let mut u = c.effort();
         let mut at_ceiling = 0;
-        for k in 100..130 {
-            u = c.update(u as u32, k, k, 20_000);
+        for k in 100..160 {
+            let t = 1000 + k * 250;
+            u = c.update(u as u32, t, t, 20_000);
             at_ceiling += (u == 20_000) as u32;
         }
         assert!(at_ceiling <= 2, "{at_ceiling} updates at the ceiling");

@@ -15,8 +15,9 @@
 //!
 //! # The timebase estimator and its error
 //!
-//! A batch of n samples stamped S says only that its newest sample was taken in (S − P, S]
-//! (plus < 1 DAC sample because the stamp is a whole sample). The estimator uses that bound,
+//! A batch of n samples stamped S (S DAC samples output, so the read happened in [S − 1, S))
+//! says only that its newest sample was taken in (S − 1 − P, S); the estimator takes S − ½ as
+//! the read's instant. The estimator uses that bound,
 //! which holds whatever the read jitter, rather than an average, which would depend on it:
 //!
 //! - **Period**: P̂ = (S − S_a)/(N − N_a), the slope between an anchor batch and the newest
@@ -25,13 +26,13 @@
 //!   Two anchors leapfrog every window, so the baseline stays between one and two windows and a
 //!   drifting sensor clock is followed. Until the first anchor is two batches old, P̂ is the
 //!   nominal one (the ODR's, up to a few % off).
-//! - **Offset**: the newest sample's time is the tightest upper bound the stamps give,
-//!   t̂ = min(S, t̂_prev + n·(P̂ + leak)): the previous bound carried forward, or the new stamp
-//!   if that is tighter. Because true times never exceed the stamps, t̂ ≥ t − (P̂ error·n) and
-//!   it touches the truth whenever a batch is read just after its newest sample (the read
-//!   cadence beats with the sensor clock, so that happens every few batches). The leak
-//!   (P̂/baseline per sample, the slope's own error bound) keeps the carried bound from falling
-//!   below the truth when P̂ is a little short.
+//! - **Offset**: the newest sample's time is the tightest upper bound the recent stamps give,
+//!   t̂ = min over the last [`BOUND_BATCHES`] batches j of S_j + (N − N_j)·P̂: each stamp
+//!   carried forward to the newest sample by the period. True times never exceed the stamps,
+//!   so each term is an upper bound (up to P̂'s error times N − N_j), and the minimum touches
+//!   the truth whenever one of those batches was read just after its newest sample (the read
+//!   cadence beats with the sensor clock, so with random read delays that is 1 batch in P).
+//!   Keeping only recent batches forgets bounds that a slightly wrong P̂ would carry too far.
 //!
 //! Error (measured in the tests with ±2 % clock offsets and random read jitter of up to one
 //! sensor period): a few tenths of a DAC sample once the period window has filled, at worst one
@@ -81,6 +82,9 @@ impl PhaseMark {
     }
 }
 
+/// Batches whose stamps bound the newest sample's instant.
+pub const BOUND_BATCHES: usize = 32;
+
 /// Sensor samples per leapfrog window of the period estimate (≈ 1.2 s at 6.66 kHz).
 pub const PERIOD_WINDOW: u64 = 8192;
 
@@ -108,26 +112,34 @@ pub struct SensorTimebase {
     count: u64,
     older: Option<Anchor>,
     newer: Option<Anchor>,
+    recent: [Anchor; BOUND_BATCHES],
+    recent_len: usize,
+    recent_next: usize,
 }
 
 impl SensorTimebase {
     /// A timebase starting from the nominal output data rate `odr_mhz` (e.g. 6 660 000).
     pub const fn new(odr_mhz: u32) -> Self {
         let p = nominal_period_q16(odr_mhz);
-        Self { nominal_q16: p, period_q16: p, newest: None, count: 0, older: None, newer: None }
-    }
-
-    /// Forgets everything but the nominal rate (after lost samples: a FIFO overrun, a restart).
-    pub fn reset(&mut self) {
-        let p = self.nominal_q16;
-        *self = Self {
+        Self {
             nominal_q16: p,
             period_q16: p,
             newest: None,
             count: 0,
             older: None,
             newer: None,
-        };
+            recent: [Anchor { stamp: 0, count: 0 }; BOUND_BATCHES],
+            recent_len: 0,
+            recent_next: 0,
+        }
+    }
+
+    /// Forgets everything but the nominal rate (after lost samples: a FIFO overrun, a restart).
+    pub fn reset(&mut self) {
+        let nominal = self.nominal_q16;
+        *self = Self::new(0);
+        self.nominal_q16 = nominal;
+        self.period_q16 = nominal;
     }
 
     /// The current period estimate, DAC samples per sensor sample, Q16.16.
@@ -147,14 +159,19 @@ impl SensorTimebase {
         if n == 0 {
             return None;
         }
-        let s = dac_time(stamp);
+        // S samples output: the read happened in [S − 1, S); centre the bound at S − ½.
+        let s = dac_time(stamp).saturating_sub(1 << (TIME_FRAC_BITS - 1));
         self.count += n as u64;
         self.update_period(s);
-        let step = self.period_q16 as u64 + self.leak_q16() as u64;
-        let t = match self.newest {
-            None => s,
-            Some(prev) => s.min(prev + n as u64 * step),
-        };
+        self.recent[self.recent_next] = Anchor { stamp: s, count: self.count };
+        self.recent_next = (self.recent_next + 1) % BOUND_BATCHES;
+        self.recent_len = (self.recent_len + 1).min(BOUND_BATCHES);
+        let p = self.period_q16 as u64;
+        let t = self.recent[..self.recent_len]
+            .iter()
+            .map(|a| a.stamp + (self.count - a.count) * p)
+            .min()
+            .unwrap_or(s);
         self.newest = Some(t);
         Some(t)
     }
@@ -163,15 +180,6 @@ impl SensorTimebase {
     pub fn sample_time(&self, newest: DacTime, n: usize, i: usize) -> DacTime {
         let back = n.saturating_sub(1).saturating_sub(i) as u64;
         newest.saturating_sub(back * self.period_q16 as u64)
-    }
-
-    /// Per-sample leak of the carried bound: the slope's error bound P/baseline (P/32 at start).
-    fn leak_q16(&self) -> u32 {
-        let baseline = match self.older {
-            Some(a) => self.count - a.count,
-            None => 0,
-        };
-        (self.period_q16 as u64 / baseline.max(32)) as u32
     }
 
     fn update_period(&mut self, s: DacTime) {
@@ -245,7 +253,8 @@ mod tests {
             let read_at = b as f64 * 250.0 + jitter;
             let available = ((read_at - t0) / period).floor() as u64 + 1;
             let n = (available - taken) as usize;
-            let newest = tb.push_batch(n, read_at.floor() as u64).unwrap();
+            // S samples output: the read happened in [S − 1, S).
+            let newest = tb.push_batch(n, read_at.floor() as u64 + 1).unwrap();
             if b > batches / 2 {
                 for i in 0..n {
                     let k = taken + i as u64;
@@ -285,7 +294,7 @@ mod tests {
         assert!((p - 50_000.0 / 3330.0).abs() < 1e-4);
         let mut tb = SensorTimebase::new(6_660_000);
         assert_eq!(tb.push_batch(0, 5), None);
-        assert_eq!(tb.push_batch(3, 250), Some(dac_time(250)));
+        assert_eq!(tb.push_batch(3, 250), Some(dac_time(250) - (1 << 15)));
         tb.reset();
         assert_eq!(tb.period_q16(), nominal_period_q16(6_660_000));
     }
