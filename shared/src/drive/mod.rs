@@ -5,7 +5,15 @@
 //! - [`pwm`]: the PWM drive option's duty mapping, carrier plan and reconstruction filter.
 //! - [`plant`]: a simulated shaker + plate (resonant second-order system) for the QEMU board.
 
+pub mod closed_loop;
+pub mod control;
 pub mod dds;
+pub mod lockin;
+#[cfg(test)]
+mod loop_tests;
+pub mod monitor;
 pub mod plant;
 pub mod pwm;
 pub mod runner;
+pub mod sensor_sim;
+pub mod timeline;

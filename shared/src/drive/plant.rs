@@ -5,6 +5,9 @@
 //! (stable for ω₀·Δt < 2; ω₀·Δt ≈ 0.02 here), in f32: IEEE single precision gives the same
 //! bits on the host and on the Cortex-M4F's FPU, so the QEMU board's plant is deterministic.
 //! The sensing issue will read [`Plant::acceleration`] through a simulated accelerometer.
+//!
+//! [`PlantFault`] breaks the simulated rig on purpose, for the fault monitors' tests and the
+//! QEMU board: a disconnected shaker (no force at all) or an amplifier that clips its output.
 
 use crate::drive::dds::{DAC_MID, SAMPLE_RATE};
 
@@ -25,9 +28,23 @@ impl PlantParams {
     pub const DEFAULT: PlantParams = PlantParams { f0_hz: 180.0, zeta: 0.05, gain: 20.0 };
 }
 
+/// A deliberate failure of the simulated rig.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PlantFault {
+    /// Everything works.
+    #[default]
+    None,
+    /// The shaker is disconnected: the drive produces no force (gain 0).
+    Disconnected,
+    /// The amplifier clips: the drive's deviation from mid-scale is limited to this many DAC
+    /// codes (of 2047).
+    Saturated(u16),
+}
+
 /// State of the simulated plant.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Plant {
+    fault: PlantFault,
     w2: f32,
     c: f32,
     gain: f32,
@@ -42,6 +59,7 @@ impl Plant {
     pub fn new(p: PlantParams) -> Self {
         let w0 = 2.0 * core::f32::consts::PI * p.f0_hz;
         Self {
+            fault: PlantFault::None,
             w2: w0 * w0,
             c: 2.0 * p.zeta * w0,
             gain: p.gain / DAC_MID as f32,
@@ -52,10 +70,26 @@ impl Plant {
         }
     }
 
+    /// Breaks (or mends) the rig from the next sample on.
+    pub fn set_fault(&mut self, fault: PlantFault) {
+        self.fault = fault;
+    }
+
+    /// The rig's current failure.
+    pub fn fault(&self) -> PlantFault {
+        self.fault
+    }
+
     /// Advances one sample with DAC code `code`; returns the acceleration, m/s².
     #[inline]
     pub fn step(&mut self, code: u16) -> f32 {
-        let u = (code as i32 - DAC_MID as i32) as f32;
+        let mut d = code as i32 - DAC_MID as i32;
+        match self.fault {
+            PlantFault::None => {}
+            PlantFault::Disconnected => d = 0,
+            PlantFault::Saturated(limit) => d = d.clamp(-(limit as i32), limit as i32),
+        }
+        let u = d as f32;
         self.a = self.gain * u - self.c * self.v - self.w2 * self.x;
         self.v += self.a * self.dt;
         self.x += self.v * self.dt;
@@ -109,6 +143,29 @@ mod tests {
         // At resonance the gain is ≈ 1/(2ζ) = 10 times the static response (10 m/s² here).
         assert!((80.0..=120.0).contains(&at), "peak at resonance {at}");
         assert!(at > 5.0 * below && at > 5.0 * above, "{below} {at} {above}");
+    }
+
+    #[test]
+    fn faults_cut_or_clip_the_drive() {
+        let run = |fault| {
+            let mut plant = Plant::new(PlantParams::DEFAULT);
+            plant.set_fault(fault);
+            assert_eq!(plant.fault(), fault);
+            let mut dds = Dds::new(tuning_word(180_000));
+            let mut buf = [0u16; 250];
+            let mut peak = 0.0f32;
+            for _ in 0..200 {
+                dds.fill_steady(&mut buf, gain_of_q15(16384));
+                peak = plant.run(&buf);
+            }
+            peak
+        };
+        let whole = run(PlantFault::None);
+        assert_eq!(run(PlantFault::Disconnected), 0.0);
+        // Clipped at a tenth of the drive's 1024-code peak: a square-ish wave of ≤ 1/10 the
+        // force, so the response falls to between 1/10 and 4/π·1/10 of the whole one.
+        let clipped = run(PlantFault::Saturated(102));
+        assert!(clipped > 0.09 * whole && clipped < 0.14 * whole, "{clipped} of {whole}");
     }
 
     #[test]

@@ -187,8 +187,8 @@ impl ControlConfig {
     /// Factory thresholds, sized for the simulated plate (about 200 m/s² at resonance at full
     /// drive; see the docs on control).
     pub const DEFAULT: ControlConfig = ControlConfig {
-        open_loop_mmps2: 200,
-        open_loop_effort_q15: 1_600,
+        open_loop_mmps2: 50,
+        open_loop_effort_q15: 4_000,
         open_loop_ms: 100,
         warn_band_mdb: 1_000,
         abort_band_mdb: 3_000,
@@ -196,9 +196,9 @@ impl ControlConfig {
         max_accel_mmps2: 150_000,
         no_data_ms: 50,
         saturation_ms: 300,
-        check_effort_q15: 1_600,
+        check_effort_q15: 3_200,
         check_ms: 60,
-        check_min_mmps2: 300,
+        check_min_mmps2: 100,
     };
 }
 
