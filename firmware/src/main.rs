@@ -1,4 +1,6 @@
-//! Controller firmware entry point: bring the board up, then run one task per concern.
+//! Controller firmware entry point: bring the board up, then run one task per concern: the
+//! link (requests, store, telemetry), the drive (samples, closed loop, faults), the sense task
+//! (the accelerometer) and the watchdog (fed only while the other three check in).
 //!
 //! The image exists only for the controller (`target_os = "none"`); a host build of this
 //! binary says where to build it instead.
@@ -12,10 +14,18 @@ fn main() {
 
 #[cfg(target_os = "none")]
 mod image {
+    use chladni_firmware::app::watchdog::{Supervisor, Task, TaskSet};
     use chladni_firmware::{app, board};
+    use embassy_time::Duration;
 
-    /// Shared by the link task (commands in, status out) and the drive task.
+    /// Shared by the link task (commands in, status out), the sense task (samples in) and
+    /// the drive task.
     static DRIVE: app::drive::DriveShared = app::drive::DriveShared::new();
+    /// The tasks the watchdog waits for.
+    static SUPERVISOR: Supervisor =
+        Supervisor::new(TaskSet::of(&[Task::Link, Task::Drive, Task::Sense]));
+    /// How often the watchdog task looks at the check-ins (the dog's timeout is 1 s).
+    const WATCHDOG_POLL: Duration = Duration::from_millis(250);
 
     #[embassy_executor::task]
     async fn link_task(mut port: board::Link, flash: Option<board::Flash>) -> ! {
@@ -29,31 +39,48 @@ mod image {
         if store.is_none() {
             defmt::warn!("no flash: plans and configuration cannot be stored");
         }
-        let identity = app::link::Identity { board: board::BOARD };
+        let identity = app::link::Identity { board: board::BOARD, inject: board::INJECT };
         let mut link = app::link::Link::new(identity, &DRIVE, store);
         link.load_config().await;
-        app::link::serve(&mut link, &mut port).await
+        app::link::serve(&mut link, &mut port, &SUPERVISOR).await
     }
 
     #[embassy_executor::task]
     async fn drive_task(mut output: board::DriveOutput) -> ! {
-        app::drive::run(&DRIVE, &mut output).await
+        app::drive::run(&DRIVE, &SUPERVISOR, &mut output).await
+    }
+
+    #[embassy_executor::task]
+    async fn sense_task(sensor: board::Sensor) -> ! {
+        let board::Sensor { bus, mut irq } = sensor;
+        app::sense::task::run(&DRIVE, &SUPERVISOR, bus, &mut irq).await
+    }
+
+    #[embassy_executor::task]
+    async fn watchdog_task(dog: board::Watchdog) -> ! {
+        app::watchdog::watchdog_task(&SUPERVISOR, dog, WATCHDOG_POLL).await
     }
 
     #[cortex_m_rt::entry]
     fn main() -> ! {
         let board = board::init();
+        let cause = board::reset_cause();
+        DRIVE.set_reset_cause(cause);
         defmt::info!(
-            "chladni firmware {} ({}) build {=u32:08x}",
+            "chladni firmware {} ({}) build {=u32:08x}, reset cause {}",
             chladni_firmware::FIRMWARE_VERSION,
             board::BOARD.name(),
-            chladni_firmware::BUILD_ID
+            chladni_firmware::BUILD_ID,
+            cause
         );
         board::run(|spawner| {
             spawner.spawn(
                 link_task(board.link, board.flash).expect("link task: spawn pool exhausted"),
             );
             spawner.spawn(drive_task(board.drive).expect("drive task: spawn pool exhausted"));
+            spawner.spawn(sense_task(board.sensor).expect("sense task: spawn pool exhausted"));
+            spawner
+                .spawn(watchdog_task(board.watchdog).expect("watchdog task: spawn pool exhausted"));
             board::spawn_tasks(spawner, board.tasks);
         })
     }

@@ -63,7 +63,7 @@ async fn timer_task() {
 fn answer(request: chladni_shared::icd::link::Request) -> chladni_shared::icd::link::Response {
     use chladni_firmware::app::link::{Identity, Link};
     let drive = chladni_firmware::app::drive::DriveShared::new();
-    let identity = Identity { board: chladni_shared::icd::link::Board::Qemu };
+    let identity = Identity { board: chladni_shared::icd::link::Board::Qemu, inject: None };
     // ~17 KiB on the 32 KiB stack, and the request's future beside it.
     let mut link =
         Link::<chladni_firmware::board::qemu::flash::FileFlash>::new(identity, &drive, None);

@@ -12,9 +12,9 @@
 //! client cannot hold it for ever). `Stop` is taken from anyone.
 
 use chladni_shared::icd::link::{
-    self, Board, DeviceInfo, Endpoint, Envelope, FrameReader, LinkError, MAX_CLIENT_NAME,
-    MAX_FRAME, MAX_TELEMETRY_HZ, OWNER_LEASE_MS, PROTOCOL_VERSION, Refusal, Request, Response,
-    Telemetry,
+    self, Board, DeviceInfo, Endpoint, Envelope, FrameReader, InjectFault, LinkError,
+    MAX_CLIENT_NAME, MAX_FRAME, MAX_TELEMETRY_HZ, OWNER_LEASE_MS, PROTOCOL_VERSION, Refusal,
+    Request, Response, Telemetry, TestFault,
 };
 use chladni_shared::icd::plan::Plan;
 use chladni_shared::icd::store::{self, DeviceConfig, StoreError};
@@ -23,8 +23,9 @@ use embassy_time::{Duration, Instant, Timer};
 use embedded_io_async::{Read, Write};
 use embedded_storage_async::nor_flash::NorFlash;
 
-use super::drive::{Command, DriveShared};
+use super::drive::{CheckedSweep, Command, DriveShared};
 use super::store::PlanStore;
+use super::watchdog::{Supervisor, Task};
 
 /// Pause after a failed read before trying again, ms (short enough not to lose a UART byte
 /// burst behind a framing error: the port's RX buffer keeps receiving meanwhile).
@@ -38,6 +39,9 @@ const NAMES: usize = 4;
 pub struct Identity {
     /// The board this image runs on.
     pub board: Board,
+    /// Simulates a fault (the QEMU board's test hook); `None` on real hardware, which
+    /// answers `InjectFault` with `Unsupported`.
+    pub inject: Option<fn(TestFault)>,
 }
 
 impl Identity {
@@ -181,6 +185,7 @@ impl<'a, F: NorFlash> Link<'a, F> {
             self.config = store.load_config().await;
         }
         self.drive.set_limits(self.config.limits);
+        self.drive.set_control(self.config.control);
     }
 
     /// The response to one frame from [`FrameReader::push`]: the answer to its request, or the
@@ -255,8 +260,16 @@ impl<'a, F: NorFlash> Link<'a, F> {
                 level: d.level,
             })?),
             Request::ClearFault(_) => link::ClearFault::respond(drive(Command::ClearFault)?),
-            Request::Sweep(_) | Request::GetSweep(_) | Request::InjectFault(_) => {
-                return Err(Refusal::Unsupported);
+            Request::Sweep(sweep) => {
+                let sweep = CheckedSweep::new(sweep).map_err(Refusal::Sweep)?;
+                link::Sweep::respond(drive(Command::Sweep(sweep))?)
+            }
+            Request::GetSweep(get) => link::GetSweep::respond(self.drive.sweep_page(get.from)),
+            Request::InjectFault(InjectFault(fault)) => {
+                let inject = self.identity.inject.ok_or(Refusal::Unsupported)?;
+                defmt::warn!("link: simulating {}", fault);
+                inject(fault);
+                link::InjectFault::respond(())
             }
             Request::Stop(_) => link::Stop::respond(drive(Command::Stop)?),
             Request::Status(_) => link::GetStatus::respond(self.drive.status()),
@@ -293,6 +306,7 @@ impl<'a, F: NorFlash> Link<'a, F> {
                 set.0.validate().map_err(Refusal::Config)?;
                 self.config = self.store()?.set_config(set.0).await?;
                 self.drive.set_limits(self.config.limits);
+                self.drive.set_control(self.config.control);
                 link::SetConfig::respond(self.config)
             }
         })
@@ -360,23 +374,27 @@ async fn send<P: Write>(port: &mut P, envelope: &Envelope<Response>, tx: &mut [u
     }
 }
 
-/// Runs the link forever on `port`.
+/// Longest the link waits for a byte before checking in with the watchdog's supervisor.
+const CHECK_IN: Duration = Duration::from_millis(100);
+
+/// Runs the link forever on `port`, checking in with `supervisor` at least every
+/// [`CHECK_IN`] (an idle link is a live link; a link stuck in a request is not).
 ///
 /// Reading waits alongside the next telemetry sample; the read is the only future ever
 /// cancelled (a byte stream read loses nothing when dropped), never a store operation.
-pub async fn serve<F: NorFlash, P: Read + Write>(link: &mut Link<'_, F>, port: &mut P) -> ! {
+pub async fn serve<F: NorFlash, P: Read + Write>(
+    link: &mut Link<'_, F>,
+    port: &mut P,
+    supervisor: &Supervisor,
+) -> ! {
     let mut reader = FrameReader::<MAX_FRAME>::new();
     let mut rx = [0u8; 64];
     let mut tx = [0u8; link::ENCODE_BUF];
     loop {
-        let due = link.next_sample_at();
-        let tick = async {
-            match due {
-                Some(at) => Timer::at(at).await,
-                None => core::future::pending().await,
-            }
-        };
-        let n = match select(port.read(&mut rx), tick).await {
+        supervisor.check_in(Task::Link);
+        let check_in = Instant::now() + CHECK_IN;
+        let due = link.next_sample_at().map_or(check_in, |at| at.min(check_in));
+        let n = match select(port.read(&mut rx), Timer::at(due)).await {
             Either::First(Ok(n)) => n,
             Either::First(Err(_)) => {
                 defmt::warn!("link: read error");

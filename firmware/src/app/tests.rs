@@ -238,7 +238,7 @@ use chladni_shared::icd::store::{PlanRef, UploadBegin, UploadChunk, UploadError,
 /// A link over a store of 16 pages of mock flash.
 fn link_over(drive: &DriveShared) -> Link<'_, MockFlash> {
     let store = PlanStore::new(MockFlash::new(16), 0..16 * 2048);
-    let mut link = Link::new(Identity { board: Board::Qemu }, drive, Some(store));
+    let mut link = Link::new(Identity { board: Board::Qemu, inject: None }, drive, Some(store));
     block_on(link.load_config());
     link
 }

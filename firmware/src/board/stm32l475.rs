@@ -79,6 +79,9 @@ const _: () = {
     assert!(STORE_RANGE.start.is_multiple_of(2048) && STORE_RANGE.end.is_multiple_of(2048));
 };
 
+/// No fault injection on real hardware (`InjectFault` is answered `Unsupported`).
+pub const INJECT: Option<fn(chladni_shared::icd::link::TestFault)> = None;
+
 /// The drive output: DAC1 ch1 fed by circular DMA, paced by TIM6.
 #[cfg(not(feature = "drive-pwm"))]
 pub type DriveOutput = dac::DacOutput;

@@ -8,16 +8,18 @@
 //! clear it.
 //!
 //! Closed loop: a setpoint whose level is an acceleration ([`Level::Accel`]) does not set the
-//! amplitude itself. The runner ramps the target ([`Runner::setpoint`] gives the target now)
-//! and takes the amplitude from the controller ([`Runner::set_effort`], once per block, ramped
-//! over the next block). Every frequency change leaves a [`PhaseMark`]: the DDS phase at a
-//! sample of the runner's sample clock, the reference the lock-in needs.
+//! amplitude itself: [`Runner::setpoint`] gives the target and its ramp to the closed loop
+//! (which ramps it), and the runner takes the amplitude from the controller
+//! ([`Runner::set_effort`], once per block, ramped over the next block). Every frequency
+//! change leaves a [`PhaseMark`]: the DDS phase at a sample of the runner's sample clock, the
+//! reference the lock-in needs.
 //!
 //! A block is split into segments in which nothing changes but the phase (and, in a ramp, the
 //! gain); each segment is one call of the DDS's tight loop ([`Dds::fill_steady`] /
 //! [`Dds::fill_ramp`]), so the per-sample cost carries no state-machine branches.
 
 use crate::drive::dds::{self, DAC_MID, Dds, SAMPLE_RATE, SAMPLES_PER_MS};
+use crate::drive::timeline::PhaseMark;
 use crate::icd::link::{DriveError, DriveState, StatusReport};
 use crate::icd::plan::{DeviceLimits, Level, Plan, Step};
 use crate::icd::sense::Fault;
@@ -29,47 +31,16 @@ pub const STOP_RAMP_MS: u32 = 20;
 /// Ramp of the amplitude when a manual setpoint ([`Runner::drive`]) changes.
 pub const MANUAL_RAMP_MS: u32 = 20;
 
-/// The DDS phase at one sample of the runner's sample clock, and the tuning word from there
-/// on: the phase of any later sample, until the next frequency change, is
-/// `phase + (sample' − sample)·tuning_word` (mod 2³²).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct PhaseMark {
-    /// Sample clock (samples filled since the runner was made) of the mark.
-    pub sample: u64,
-    /// DDS phase of that sample (one turn = 2³²).
-    pub phase: u32,
-    /// Phase increment per sample from that sample on.
-    pub tuning_word: u32,
-}
-
-/// What the runner is asked to output now: frequency and level (an acceleration target is
-/// given as ramped so far).
+/// What the runner is asked to output now: frequency and level, and over how long a new
+/// level is reached.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Setpoint {
     /// Frequency, mHz.
     pub freq_mhz: u32,
-    /// Level now.
+    /// Level (an acceleration target is given whole: the closed loop ramps it).
     pub level: Level,
-}
-
-/// A linear ramp of the closed-loop acceleration target, mm/s².
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct AccelRamp {
-    from: u32,
-    to: u32,
-    total: u32,
-    left: u32,
-}
-
-impl AccelRamp {
-    const fn now(&self) -> u32 {
-        if self.total == 0 || self.left == 0 {
-            return self.to;
-        }
-        let done = (self.total - self.left) as i64;
-        let d = self.to as i64 - self.from as i64;
-        (self.from as i64 + d * done / self.total as i64) as u32
-    }
+    /// Ramp to this level, ms (the plan step's, or [`MANUAL_RAMP_MS`]).
+    pub ramp_ms: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -96,8 +67,10 @@ pub struct Runner {
     elapsed: u64,
     underruns: u32,
     commands: u32,
-    /// Closed loop: the acceleration target's ramp (`None`: open loop).
-    accel: Option<AccelRamp>,
+    /// Closed loop: the acceleration target, mm/s² (`None`: open loop).
+    accel: Option<u32>,
+    /// Ramp of the current setpoint, ms.
+    ramp_ms: u32,
     fault: Option<Fault>,
     clock: u64,
     mark: PhaseMark,
@@ -120,6 +93,7 @@ impl Runner {
             underruns: 0,
             commands: 0,
             accel: None,
+            ramp_ms: 0,
             fault: None,
             clock: 0,
             mark: PhaseMark { sample: 0, phase: 0, tuning_word: 0 },
@@ -142,10 +116,15 @@ impl Runner {
             return None;
         }
         let level = match self.accel {
-            Some(r) => Level::Accel(r.now()),
+            Some(a) => Level::Accel(a),
             None => Level::Drive(dds::q15_of_gain(self.target)),
         };
-        Some(Setpoint { freq_mhz: self.freq_mhz, level })
+        Some(Setpoint { freq_mhz: self.freq_mhz, level, ramp_ms: self.ramp_ms })
+    }
+
+    /// The device limits commands are checked against.
+    pub fn limits(&self) -> &DeviceLimits {
+        &self.limits
     }
 
     /// The latched fault, if any.
@@ -216,7 +195,7 @@ impl Runner {
         }
         self.mode = Mode::Manual;
         self.set_freq(freq_mhz);
-        self.set_level(level, MANUAL_RAMP_MS * SAMPLES_PER_MS);
+        self.set_level(level, MANUAL_RAMP_MS);
         self.commands = self.commands.wrapping_add(1);
         Ok(())
     }
@@ -279,13 +258,9 @@ impl Runner {
             Mode::Idle => DriveState::Idle,
             Mode::Faulted => DriveState::Faulted,
             Mode::Stopping { .. } => DriveState::Stopping,
-            // Closed loop: the controller moves the amplitude every block; what ramps is the
-            // acceleration target.
-            Mode::Plan { .. } | Mode::Manual if self.accel.is_some() => match self.accel {
-                Some(r) if r.left > 0 && r.to > r.from => DriveState::RampUp,
-                Some(r) if r.left > 0 && r.to < r.from => DriveState::RampDown,
-                _ => DriveState::Running,
-            },
+            // Closed loop: the controller moves the amplitude every block (its ramps are
+            // not the plan's).
+            Mode::Plan { .. } | Mode::Manual if self.accel.is_some() => DriveState::Running,
             Mode::Plan { .. } | Mode::Manual => {
                 if self.ramp_left == 0 || self.inc == 0 {
                     DriveState::Running
@@ -353,17 +328,17 @@ impl Runner {
         };
     }
 
-    /// Moves to `level` over `samples`: the amplitude (open loop) or the acceleration target
+    /// Moves to `level` over `ramp_ms`: the amplitude (open loop) or the acceleration target
     /// (closed loop; the amplitude then follows [`Runner::set_effort`]).
-    fn set_level(&mut self, level: Level, samples: u32) {
+    fn set_level(&mut self, level: Level, ramp_ms: u32) {
+        self.ramp_ms = ramp_ms;
         match level {
             Level::Drive(q15) => {
                 self.accel = None;
-                self.ramp_to(dds::gain_of_q15(q15), samples);
+                self.ramp_to(dds::gain_of_q15(q15), ramp_ms * SAMPLES_PER_MS);
             }
             Level::Accel(to) => {
-                let from = self.accel.map_or(0, |r| r.now());
-                self.accel = Some(AccelRamp { from, to, total: samples, left: samples });
+                self.accel = Some(to);
                 // Hold the amplitude until the controller speaks.
                 self.ramp_to(self.gain, 0);
             }
@@ -386,7 +361,7 @@ impl Runner {
         let s = self.plan.steps[step as usize];
         self.mode = Mode::Plan { step, run, step_left: s.duration_samples() };
         self.set_freq(s.freq_mhz);
-        self.set_level(s.level, s.ramp_samples());
+        self.set_level(s.level, s.ramp_ms);
     }
 
     fn end_of_step(&mut self, step: u16, run: u16) {
@@ -437,9 +412,6 @@ impl Runner {
             pos += n as usize;
             self.elapsed += n as u64;
             self.clock += n as u64;
-            if let Some(r) = &mut self.accel {
-                r.left = r.left.saturating_sub(n);
-            }
             match self.mode {
                 Mode::Plan { step, run, step_left } => {
                     if step_left == n {
@@ -655,13 +627,13 @@ mod tests {
         let mut r = Runner::new(DeviceLimits::DEFAULT);
         r.drive(180_000, Level::Accel(20_000)).unwrap();
         let mut buf = [0u16; BLOCK_LEN];
-        // No effort yet: silent, the target ramps from 0 over the manual ramp.
+        // No effort yet: silent; the closed loop gets the target and its ramp.
         r.fill(&mut buf);
         assert!(buf.iter().all(|&c| c == DAC_MID));
-        assert_eq!(r.state(), DriveState::RampUp);
+        assert_eq!(r.state(), DriveState::Running);
         let ramp = MANUAL_RAMP_MS * SAMPLES_PER_MS;
-        let want = (20_000u64 * BLOCK_LEN as u64 / ramp as u64) as u32;
-        assert_eq!(r.setpoint().unwrap().level, Level::Accel(want));
+        let want = Setpoint { freq_mhz: 180_000, level: Level::Accel(20_000), ramp_ms: 20 };
+        assert_eq!(r.setpoint(), Some(want));
         // An effort is reached linearly over the next block, and clamped to the limit.
         r.set_effort(10_000);
         r.fill(&mut buf);
@@ -672,7 +644,6 @@ mod tests {
         for _ in 0..ramp as usize / BLOCK_LEN {
             r.fill(&mut buf);
         }
-        assert_eq!(r.setpoint().unwrap().level, Level::Accel(20_000));
         assert_eq!(r.state(), DriveState::Running);
         // Open loop again: the effort is ignored.
         r.drive(180_000, Level::Drive(5000)).unwrap();

@@ -16,6 +16,7 @@
 //! docs/sensor.md has the sequence and what is verified only against the simulation
 //! ([`super::sim`]).
 
+use chladni_shared::icd::sense::SensorFault;
 use embedded_hal_async::i2c::{ErrorKind, I2c};
 
 /// 7-bit I2C address of the LSM6DSL on the B-L475E-IOT01A (SA0/SDO low).
@@ -282,6 +283,18 @@ impl SensorError {
         }
     }
 
+    /// The failure as the link reports it.
+    pub const fn fault(self) -> SensorFault {
+        match self {
+            SensorError::Nack => SensorFault::Nack,
+            SensorError::WrongId(id) => SensorFault::WrongId(id),
+            SensorError::Overrun => SensorFault::Overrun,
+            SensorError::Bus | SensorError::BadThreshold(_) | SensorError::ResetStuck => {
+                SensorFault::Bus
+            }
+        }
+    }
+
     fn from_bus<E: embedded_hal_async::i2c::Error>(e: E) -> Self {
         match e.kind() {
             ErrorKind::NoAcknowledge(_) => SensorError::Nack,
@@ -382,6 +395,15 @@ impl<I: I2c> Lsm6dsl<I> {
         self.write(&[reg::INT1_CTRL, reg::INT1_FTH]).await?;
         self.config = Some(cfg);
         Ok(())
+    }
+
+    /// Reads WHO_AM_I again: `WrongId` if the device at the address is no longer an LSM6DSL
+    /// (replaced, or answering garbage), so a running controller notices.
+    pub async fn check_id(&mut self) -> Result<(), SensorError> {
+        match self.read_reg(reg::WHO_AM_I).await? {
+            WHO_AM_I_ID => Ok(()),
+            id => Err(SensorError::WrongId(id)),
+        }
     }
 
     /// Reads the Z samples waiting in the FIFO, oldest first: as many whole sets as are there

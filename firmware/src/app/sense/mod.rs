@@ -3,6 +3,7 @@
 //! - [`lsm6dsl`]: the driver, generic over any async I2C bus (`embedded_hal_async`): set-up
 //!   (range, rate, FIFO threshold on INT1) and FIFO reads of the Z axis, the one the feeder's
 //!   plate moves along.
+//! - [`task`]: the sense task: set-up, reads on INT1, errors, all handed to the drive task.
 //! - [`sim`]: a simulated LSM6DSL register map and FIFO behind the same I2C trait, with
 //!   injectable faults, for the host tests and for the QEMU board (QEMU models no I2C).
 //!
@@ -11,6 +12,7 @@
 
 pub mod lsm6dsl;
 pub mod sim;
+pub mod task;
 
 #[cfg(all(test, not(target_os = "none")))]
 mod tests;

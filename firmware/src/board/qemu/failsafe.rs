@@ -27,15 +27,22 @@ static OUTPUT_CODE: AtomicU16 = AtomicU16::new(DAC_MID);
 static PARKED: AtomicBool = AtomicBool::new(false);
 
 /// The QEMU board's drive output: [`SimulatedDac`], publishing its output code, parkable.
-#[derive(Default)]
 pub struct ParkableDac {
     dac: SimulatedDac,
 }
 
+impl Default for ParkableDac {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl ParkableDac {
-    /// A plant at rest, output at mid-scale.
+    /// A plant at rest, output at mid-scale, feeding the simulated accelerometer.
     pub fn new() -> Self {
-        Self::default()
+        let dac =
+            SimulatedDac::new().with_sensor(super::sensor::sim(), &super::sensor::PLANT_FAULTS);
+        Self { dac }
     }
 
     /// The simulated DAC and plant.

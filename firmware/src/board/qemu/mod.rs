@@ -40,6 +40,9 @@ pub use sensor::{Sensor, SensorBus, SensorIrq};
 pub type Watchdog = watchdog::Watchdog;
 pub use watchdog::reset_cause;
 
+/// The link's fault injection: the simulated plant and sensor break on request.
+pub const INJECT: Option<fn(chladni_shared::icd::link::TestFault)> = Some(sensor::inject);
+
 /// Flash bank 2 for the plan store: a host file (see [`flash`]).
 pub type Flash = flash::FileFlash;
 

@@ -12,7 +12,14 @@ use core::cell::RefCell;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_time::Timer;
 
-use crate::app::sense::sim::{SharedSim, SimCell, SimLsm6dsl};
+use core::cell::Cell;
+use core::sync::atomic::{AtomicBool, Ordering};
+
+use chladni_shared::drive::plant::PlantFault;
+use chladni_shared::icd::link::TestFault;
+
+use crate::app::drive::simulated::SimFaults;
+use crate::app::sense::sim::{Fault, SharedSim, SimCell, SimLsm6dsl};
 
 /// The simulated sensor: registers and FIFO (about 4.2 KiB of RAM).
 static SIM: SimCell = Mutex::new(RefCell::new(SimLsm6dsl::new()));
@@ -44,6 +51,43 @@ impl SensorIrq {
     /// INT1's level now.
     pub fn is_high(&self) -> bool {
         self.sim.lock(|sim| sim.borrow().int1())
+    }
+}
+
+impl crate::app::sense::task::DataReady for SensorIrq {
+    async fn wait(&mut self) {
+        if STALL.load(Ordering::Acquire) {
+            // A task stuck in its driver (the fault `StallTask` simulates): it never yields,
+            // so no task checks in and the watchdog resets the controller.
+            loop {
+                cortex_m::asm::nop();
+            }
+        }
+        self.wait_threshold().await
+    }
+}
+
+/// Set by the injected fault `StallTask`: the sense task hangs in its next wait.
+static STALL: AtomicBool = AtomicBool::new(false);
+
+/// The plant's injected fault, read by the simulated DAC every block.
+pub static PLANT_FAULTS: SimFaults = Mutex::new(Cell::new(PlantFault::None));
+
+/// Simulates `fault` (the link's `InjectFault`, for the fault monitors' end-to-end tests).
+pub fn inject(fault: TestFault) {
+    let set_sensor = |f: Fault| SIM.lock(|s| s.borrow_mut().set_fault(f));
+    match fault {
+        TestFault::ShakerDisconnected => PLANT_FAULTS.lock(|p| p.set(PlantFault::Disconnected)),
+        // A tenth of the DAC's swing: the amplifier's rail.
+        TestFault::AmplifierSaturated => PLANT_FAULTS.lock(|p| p.set(PlantFault::Saturated(205))),
+        TestFault::SensorSilent => set_sensor(Fault::Silent),
+        // 0x69: the id of another ST part (LSM6DS3 answers 0x69), as a swapped board would.
+        TestFault::SensorWrongId => set_sensor(Fault::WrongId(0x69)),
+        TestFault::StallTask => STALL.store(true, Ordering::Release),
+        TestFault::Heal => {
+            PLANT_FAULTS.lock(|p| p.set(PlantFault::None));
+            set_sensor(Fault::None);
+        }
     }
 }
 

@@ -35,6 +35,12 @@ impl SensorIrq {
     }
 }
 
+impl crate::app::sense::task::DataReady for SensorIrq {
+    async fn wait(&mut self) {
+        self.wait_threshold().await
+    }
+}
+
 /// The accelerometer's bus and interrupt line.
 pub struct Sensor {
     /// I2C2 at 400 kHz.
