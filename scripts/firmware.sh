@@ -11,13 +11,20 @@
 #                                                  log over RTT (installs probe-rs-tools if missing)
 #   scripts/firmware.sh bench  qemu             -> per-sample cost of the drive (QEMU -icount)
 #   scripts/firmware.sh build-bin qemu NAME     -> builds firmware/src/bin/NAME, prints its ELF path
+# BOARD stm32l475-pwm is the B-L475E-IOT01A with the PWM drive (features board-stm32l475 +
+# drive-pwm: TIM3 ch3 on PB0 instead of the DAC; docs/pwm.md); build, clippy, size and run
+# take it like stm32l475.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cmd=${1:?usage: firmware.sh build|clippy|test|size|run|bench BOARD}
 board=${2:?usage: firmware.sh build|clippy|test|size|run|bench BOARD}
-case "$board" in qemu|stm32l475) ;; *) echo "unknown board '$board' (qemu or stm32l475)" >&2; exit 2 ;; esac
+case "$board" in
+  qemu|stm32l475) features="board-$board" ;;
+  stm32l475-pwm) features="board-stm32l475,drive-pwm" ;;
+  *) echo "unknown board '$board' (qemu, stm32l475 or stm32l475-pwm)" >&2; exit 2 ;;
+esac
 args=(-p chladni-firmware --target thumbv7em-none-eabihf --profile firmware
-      --features "board-$board" --target-dir target/firmware)
+      --features "$features" --target-dir target/firmware)
 elf=target/firmware/thumbv7em-none-eabihf/firmware/chladni-firmware
 case "$cmd" in
   build)

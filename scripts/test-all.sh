@@ -22,7 +22,7 @@ step "format + clippy (fuzz crate)"
 cargo fmt --manifest-path fuzz/Cargo.toml -- --check
 cargo clippy --manifest-path fuzz/Cargo.toml --all-targets --no-default-features -- -D warnings
 
-for board in qemu stm32l475; do
+for board in qemu stm32l475 stm32l475-pwm; do
   step "clippy + build firmware ($board)"
   scripts/firmware.sh clippy "$board"
   scripts/firmware.sh size "$board"

@@ -26,9 +26,24 @@ fn start(name: &str) -> (Controller, DeviceClient) {
 fn plan_runs_step_by_step_to_idle() {
     let (_emulator, mut client) = start("plan");
     let steps = [
-        Step { freq_mhz: 120_000, amplitude_q15: 16_000, duration_ms: 600, ramp_ms: 20 },
-        Step { freq_mhz: 181_500, amplitude_q15: 24_000, duration_ms: 700, ramp_ms: 10 },
-        Step { freq_mhz: 1_234_567, amplitude_q15: 8_000, duration_ms: 600, ramp_ms: 30 },
+        Step {
+            freq_mhz: 120_000,
+            level: chladni_shared::icd::plan::Level::Drive(16_000),
+            duration_ms: 600,
+            ramp_ms: 20,
+        },
+        Step {
+            freq_mhz: 181_500,
+            level: chladni_shared::icd::plan::Level::Drive(24_000),
+            duration_ms: 700,
+            ramp_ms: 10,
+        },
+        Step {
+            freq_mhz: 1_234_567,
+            level: chladni_shared::icd::plan::Level::Drive(8_000),
+            duration_ms: 600,
+            ramp_ms: 30,
+        },
     ];
     // Steps last ≥ 600 ms so that a poller stalled by a loaded host still sees each of them.
     let before = client.status().expect("status");
@@ -82,7 +97,7 @@ fn manual_drive_stop_and_refusals() {
     let (_emulator, mut client) = start("manual");
 
     // An invalid setpoint is refused by the controller itself with the typed error.
-    match client.drive(440_000, 40_000) {
+    match client.drive(440_000, chladni_shared::icd::plan::Level::Drive(40_000)) {
         Err(DeviceError::Refused(Refusal::Drive(DriveError::Setpoint(e)))) => {
             assert!(matches!(e, SetpointError::AmplitudeTooHigh { amplitude_q15: 40_000, .. }))
         }
@@ -90,7 +105,9 @@ fn manual_drive_stop_and_refusals() {
     }
     assert_eq!(client.status().unwrap().state, DriveState::Idle);
 
-    let run = client.drive(440_500, 16_384).expect("drive accepted");
+    let run = client
+        .drive(440_500, chladni_shared::icd::plan::Level::Drive(16_384))
+        .expect("drive accepted");
     let seen = poll_until(&mut client, Duration::from_secs(60), |s| {
         s.run == run && s.state == DriveState::Running && s.amplitude_q15 == 16_384
     });

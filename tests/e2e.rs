@@ -111,7 +111,9 @@ fn the_controller_names_itself_and_garbage_does_not_disturb_the_drive() {
 /// Garbage while the shaker is driven: the drive carries on undisturbed (same frequency and
 /// amplitude, samples still counting), and stops with a ramp when asked.
 fn garbage_does_not_disturb_the_drive(client: &mut DeviceClient) {
-    let run = client.drive(120_000, 8_192).expect("manual drive accepted");
+    let run = client
+        .drive(120_000, chladni_shared::icd::plan::Level::Drive(8_192))
+        .expect("manual drive accepted");
     let seen = poll_until(client, Duration::from_secs(60), |s| {
         s.run == run && s.state == DriveState::Running && s.amplitude_q15 == 8_192
     });
@@ -120,7 +122,7 @@ fn garbage_does_not_disturb_the_drive(client: &mut DeviceClient) {
         client.send_raw(&pseudo_random_bytes(seed, 1024)).unwrap();
     }
     // A corrupted drive command among the garbage: refused, never executed.
-    let drive = Drive { freq_mhz: 130_000, amplitude_q15: 8_192 };
+    let drive = Drive { freq_mhz: 130_000, level: chladni_shared::icd::plan::Level::Drive(8_192) };
     client.send_tampered(drive, Tamper::CorruptCrc).unwrap();
     let after = client.status().expect("status after garbage");
     assert_eq!(after.state, DriveState::Running, "garbage disturbed the drive: {after:?}");

@@ -174,7 +174,7 @@ pub fn steps(count: usize, base_mhz: u32, duration_ms: u32) -> Vec<Step> {
     (0..count)
         .map(|i| Step {
             freq_mhz: base_mhz + 1_000 * i as u32,
-            amplitude_q15: 4_000 + (i as u16 % 8) * 1_000,
+            level: chladni_shared::icd::plan::Level::Drive(4_000 + (i as u16 % 8) * 1_000),
             duration_ms,
             ramp_ms: duration_ms.min(5),
         })

@@ -21,12 +21,14 @@ fn defect_1_a_second_client_is_told_busy_at_once_and_its_command_never_runs_late
     let controller = start("busy");
     let mut first = controller.connect("first client").expect("first client");
     first.set_timeout(Duration::from_secs(10));
-    let run = first.drive(100_000, 4_000).expect("first client drives");
+    let run = first
+        .drive(100_000, chladni_shared::icd::plan::Level::Drive(4_000))
+        .expect("first client drives");
 
     let mut second = controller.connect("second client").expect("second client connects");
     second.set_timeout(Duration::from_secs(10));
     let asked = Instant::now();
-    let refused = second.drive(123_000, 4_000);
+    let refused = second.drive(123_000, chladni_shared::icd::plan::Level::Drive(4_000));
     let waited = asked.elapsed();
     match refused {
         Err(DeviceError::Refused(Refusal::Busy { owner, .. })) => {
@@ -45,7 +47,9 @@ fn defect_1_a_second_client_is_told_busy_at_once_and_its_command_never_runs_late
     let status = second.status().unwrap();
     assert_eq!((status.run, status.freq_mhz), (run, 100_000), "{status:?}");
     // Now the second client may drive (ownership was released), and stop.
-    let mine = second.drive(123_000, 4_000).expect("drive after the owner left");
+    let mine = second
+        .drive(123_000, chladni_shared::icd::plan::Level::Drive(4_000))
+        .expect("drive after the owner left");
     poll_until(&mut second, Duration::from_secs(30), |s| s.run == mine && s.freq_mhz == 123_000);
     second.stop().expect("stop");
 }
@@ -63,7 +67,7 @@ fn defect_2_wait_never_reports_done_from_the_previous_runs_status() {
 
     // A new command: the statuses that still show the earlier run (idle) must not end the
     // wait. A manual drive never idles, so the wait only ends when we say so.
-    let run = client.drive(150_000, 2_000).expect("drive");
+    let run = client.drive(150_000, chladni_shared::icd::plan::Level::Drive(2_000)).expect("drive");
     let started = Instant::now();
     let mut seen_earlier_idle = 0;
     let outcome = client
@@ -120,7 +124,8 @@ fn defect_4_a_drive_with_a_corrupted_crc_is_not_executed() {
     // Flip single bits of the frequency's first byte (body bit 8 on: the variant is byte 0),
     // so that the damaged frame still decodes as a Drive of another frequency.
     for bit in 8..16 {
-        let drive = Drive { freq_mhz: 123_000, amplitude_q15: 6_000 };
+        let drive =
+            Drive { freq_mhz: 123_000, level: chladni_shared::icd::plan::Level::Drive(6_000) };
         let id = client.send_tampered(drive, Tamper::FlipBodyBit(bit)).unwrap();
         let is_answer = |f: &chladni::controller::client::Frame| matches!(f, Ok(env) if env.id == id && env.body == Response::Error(LinkError::BadCrc));
         let frames = chladni_e2e::frames_until(&mut client, Duration::from_secs(20), is_answer);

@@ -201,7 +201,12 @@ mod tests {
         let mut plan =
             Plan { name: heapless::String::new(), repeat: 1, steps: heapless::Vec::new() };
         for (f, d) in [(100_000, 12), (200_000, 8)] {
-            let s = Step { freq_mhz: f, amplitude_q15: 10_000, duration_ms: d, ramp_ms: 2 };
+            let s = Step {
+                freq_mhz: f,
+                level: chladni_shared::icd::plan::Level::Drive(10_000),
+                duration_ms: d,
+                ramp_ms: 2,
+            };
             plan.steps.push(s).unwrap();
         }
         shared.run_plan(&plan).unwrap();
@@ -223,5 +228,55 @@ mod tests {
         assert_eq!(steps_seen, [true, true]);
         // 20 ms of steps + the 20 ms ramp to zero at 50 samples/ms.
         assert_eq!(s.elapsed_samples, 40 * 50);
+    }
+
+    #[test]
+    fn sensor_driver_reads_the_boards_simulated_lsm6dsl() {
+        use chladni_firmware::app::sense::lsm6dsl::{Config, Lsm6dsl, Odr, Range, SensorError};
+        use chladni_firmware::app::sense::sim::{Fault, OdrPacer};
+        use chladni_firmware::board::qemu::sensor;
+        use embassy_futures::block_on;
+
+        let sim = sensor::sim();
+        let with = |f: &mut dyn FnMut(&mut chladni_firmware::app::sense::sim::SimLsm6dsl)| {
+            sim.lock(|s| f(&mut s.borrow_mut()))
+        };
+        let mut dev_sensor = sensor::new();
+        let mut dev = Lsm6dsl::new(dev_sensor.bus);
+        let cfg = Config { range: Range::G8, odr: Odr::Hz3330, fifo_threshold: 100 };
+        block_on(dev.init(cfg)).unwrap();
+        with(&mut |s| {
+            assert_eq!(
+                (s.range(), s.odr(), s.threshold_sets()),
+                (Range::G8, Some(Odr::Hz3330), 100)
+            )
+        });
+
+        // 30 ms of a 50 kHz plant in 250-sample blocks: 99.9 sensor samples due, 99 whole.
+        let mut pacer = OdrPacer::new(50_000);
+        let mut pushed = 0i16;
+        for _ in 0..6 {
+            for _ in 0..pacer.advance(250, cfg.odr) {
+                with(&mut |s| s.push(0, 0, pushed * 3 - 150));
+                pushed += 1;
+            }
+        }
+        assert_eq!(pushed, 99);
+        assert!(!dev_sensor.irq.is_high(), "99 sets: below the threshold of 100");
+        with(&mut |s| s.push_accel(-9.80665));
+        assert!(dev_sensor.irq.is_high());
+        block_on(dev_sensor.irq.wait_threshold()); // already high: returns at once
+
+        let mut out = [0i16; 128];
+        assert_eq!(block_on(dev.read_z(&mut out)), Ok(100));
+        for (i, &z) in out[..99].iter().enumerate() {
+            assert_eq!(z, i as i16 * 3 - 150);
+        }
+        assert_eq!(out[99], -4098, "-1 g at 0.244 mg/LSB");
+        assert!(!dev_sensor.irq.is_high());
+
+        with(&mut |s| s.set_fault(Fault::Nack));
+        assert_eq!(block_on(dev.read_z(&mut out)), Err(SensorError::Nack));
+        with(&mut |s| s.set_fault(Fault::None));
     }
 }

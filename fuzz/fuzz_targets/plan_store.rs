@@ -127,7 +127,7 @@ fn plan_from(c: &mut Choices<'_>) -> Plan {
             let duration_ms = 1 + next() % 500;
             Step {
                 freq_mhz: if invalid && i == count / 2 { 0 } else { 1_000 + next() % 1_999_000 },
-                amplitude_q15: (next() % 32_768) as u16,
+                level: chladni_shared::icd::plan::Level::Drive((next() % 32_768) as u16),
                 duration_ms,
                 ramp_ms: next() % (duration_ms + 1),
             }

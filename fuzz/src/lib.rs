@@ -66,7 +66,7 @@ fn name<const N: usize>(s: &str) -> heapless::String<N> {
 fn step(i: u32) -> Step {
     Step {
         freq_mhz: 100_000 + i * 1_001,
-        amplitude_q15: (i * 97 % 32_768) as u16,
+        level: chladni_shared::icd::plan::Level::Drive((i * 97 % 32_768) as u16),
         duration_ms: 10 + i,
         ramp_ms: i % 11,
     }
@@ -102,7 +102,7 @@ pub fn sample_requests() -> Vec<Request> {
         Request::Ping(Ping { nonce: 0xdead_beef }),
         Request::GetInfo(GetInfo),
         Request::Release(Release),
-        Request::Drive(Drive { freq_mhz: 123_000, amplitude_q15: 16_384 }),
+        Request::Drive(Drive { freq_mhz: 123_000, level: chladni_shared::icd::plan::Level::Drive(16_384) }),
         Request::RunPlan(RunPlan { plan: PlanRef::Slot(4), repeat: None }),
         Request::RunPlan(RunPlan { plan: PlanRef::Name(name("square-45")), repeat: Some(2) }),
         Request::Stop(Stop),

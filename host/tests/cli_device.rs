@@ -99,7 +99,7 @@ fn status_info_ping_config_and_list_print_their_json_shapes() {
 fn a_second_program_is_told_at_once_who_holds_the_controller() {
     let emu = emulator("busy");
     let mut owner = emu.connect("the owner in a test").expect("connect");
-    let run = owner.drive(100_000, 2_000).expect("drive");
+    let run = owner.drive(100_000, chladni_shared::icd::plan::Level::Drive(2_000)).expect("drive");
     let started = Instant::now();
     let out = chladni(&[
         "device",
@@ -156,7 +156,7 @@ fn monitor_runs_until_ctrl_c_and_says_it_stopped() {
     let emu = emulator("monitor-ctrl-c");
     let port = emu.address();
     let mut owner = emu.connect("driving while monitored").unwrap();
-    owner.drive(90_000, 3_000).unwrap();
+    owner.drive(90_000, chladni_shared::icd::plan::Level::Drive(3_000)).unwrap();
     let (child, mut stdout) = spawn(&["device", "monitor", "--port", &port, "--rate", "20"]);
     // Past the first batch (2 s of samples): the monitor renews its subscription.
     let mut lines = Vec::new();

@@ -16,7 +16,7 @@ use crate::drive::plant::{Plant, PlantParams};
 use crate::drive::runner::{BLOCK_LEN, Runner};
 use crate::icd::link::DriveState;
 use crate::icd::link::{self, Envelope, Request, Response};
-use crate::icd::plan::{DeviceLimits, Plan, Step};
+use crate::icd::plan::{DeviceLimits, Level, Plan, Step};
 
 /// FNV-1a, 64-bit: small, dependency-free, and plenty to tell two bit patterns apart.
 #[derive(Debug, Clone, Copy)]
@@ -155,7 +155,7 @@ fn drive_link_frames() -> Result<u64, &'static str> {
         crc: crate::icd::store::plan_crc(&plan),
     };
     let requests = [
-        Request::Drive(link::Drive { freq_mhz: 123_456, amplitude_q15: 20_000 }),
+        Request::Drive(link::Drive { freq_mhz: 123_456, level: Level::Drive(20_000) }),
         Request::UploadBegin(begin),
         Request::UploadChunk(chunk),
         Request::UploadCommit(link::UploadCommit),
@@ -168,7 +168,7 @@ fn drive_link_frames() -> Result<u64, &'static str> {
         d.bytes(link::encode(&env, &mut buf).map_err(|_| "encode failed")?);
     }
     let mut runner = Runner::new(DeviceLimits::DEFAULT);
-    runner.drive(55_000, 1000).map_err(|_| "drive refused")?;
+    runner.drive(55_000, Level::Drive(1000)).map_err(|_| "drive refused")?;
     let responses = [
         Response::Status(runner.status()),
         Response::Drive(link::RunNumber(4)),
@@ -201,9 +201,9 @@ fn plant_response() -> Result<u64, &'static str> {
 
 fn vector_plan() -> Plan {
     let steps = [
-        Step { freq_mhz: 100_000, amplitude_q15: 16384, duration_ms: 40, ramp_ms: 10 },
-        Step { freq_mhz: 250_500, amplitude_q15: 26000, duration_ms: 60, ramp_ms: 5 },
-        Step { freq_mhz: 1_234_567, amplitude_q15: 8000, duration_ms: 30, ramp_ms: 3 },
+        Step { freq_mhz: 100_000, level: Level::Drive(16384), duration_ms: 40, ramp_ms: 10 },
+        Step { freq_mhz: 250_500, level: Level::Drive(26000), duration_ms: 60, ramp_ms: 5 },
+        Step { freq_mhz: 1_234_567, level: Level::Drive(8000), duration_ms: 30, ramp_ms: 3 },
     ];
     let mut plan = Plan { name: heapless::String::new(), repeat: 2, steps: heapless::Vec::new() };
     let _ = plan.name.push_str("vector");

@@ -16,7 +16,7 @@ use chladni_shared::icd::store::SCRATCH_SLOT;
 fn plan(seed: u32) -> Plan {
     let step = |i: u32| Step {
         freq_mhz: 50_000 + (i * 7_919 + seed * 104_729) % 1_900_000,
-        amplitude_q15: ((i * 131 + seed) % 30_000) as u16,
+        level: chladni_shared::icd::plan::Level::Drive(((i * 131 + seed) % 30_000) as u16),
         duration_ms: 5 + i % 40,
         ramp_ms: i % 5,
     };
@@ -95,7 +95,7 @@ fn main() {
 
     // While the drive runs: the drive must not run dry because of the store.
     let before = client.status().expect("status").underruns;
-    client.drive(180_000, 8_000).expect("drive");
+    client.drive(180_000, chladni_shared::icd::plan::Level::Drive(8_000)).expect("drive");
     let mut driving = Vec::new();
     for i in 0..20u32 {
         let t = Instant::now();

@@ -15,8 +15,8 @@ use core::future::Future;
 
 use chladni_shared::drive::plant::{Plant, PlantParams};
 use chladni_shared::drive::runner::{BLOCK_LEN, Runner};
-use chladni_shared::icd::link::{DriveError, DriveState, RunNumber, StatusReport};
-use chladni_shared::icd::plan::{DeviceLimits, Plan};
+use chladni_shared::icd::link::{DriveError, RunNumber, StatusReport};
+use chladni_shared::icd::plan::{DeviceLimits, Level, Plan};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
@@ -29,11 +29,13 @@ pub enum Command {
     Drive {
         /// Frequency, mHz.
         freq_mhz: u32,
-        /// Amplitude, Q15.
-        amplitude_q15: u16,
+        /// Amplitude (open loop) or acceleration target (closed loop).
+        level: Level,
     },
     /// Ramp to zero and idle.
     Stop,
+    /// Clear a latched fault.
+    ClearFault,
 }
 
 /// What the command queue carries.
@@ -51,23 +53,6 @@ struct Staged {
     plan: Plan,
     waiting: bool,
 }
-
-/// Status of a runner that has never run.
-const IDLE: StatusReport = StatusReport {
-    state: DriveState::Idle,
-    step: None,
-    repetition: 0,
-    run: RunNumber(0),
-    plan: None,
-    remaining_samples: 0,
-    fault: None,
-    elapsed_samples: 0,
-    sample_rate: chladni_shared::drive::dds::SAMPLE_RATE,
-    freq_mhz: 0,
-    amplitude_q15: 0,
-    underruns: 0,
-    commands: 0,
-};
 
 /// What the link task and the drive task share.
 pub struct DriveShared {
@@ -97,7 +82,7 @@ impl DriveShared {
                 },
                 waiting: false,
             })),
-            status: Mutex::new(RefCell::new(IDLE)),
+            status: Mutex::new(RefCell::new(StatusReport::IDLE)),
             limits: Mutex::new(Cell::new(DeviceLimits::DEFAULT)),
             last_run: Mutex::new(Cell::new(0)),
         }
@@ -136,20 +121,20 @@ impl DriveShared {
     /// anything but a stop, so the caller can answer with the precise error.
     pub fn submit(&self, command: Command) -> Result<RunNumber, DriveError> {
         match command {
-            Command::Drive { freq_mhz, amplitude_q15 } => {
+            Command::Drive { freq_mhz, level } => {
                 let limits = self.limits();
-                limits.check_setpoint(freq_mhz, amplitude_q15).map_err(DriveError::Setpoint)?;
+                limits.check_setpoint(freq_mhz, level).map_err(DriveError::Setpoint)?;
                 self.check_not_faulted()?;
             }
-            Command::Stop => {}
+            Command::Stop | Command::ClearFault => {}
         }
         critical_section::with(|cs| self.queue(cs, Queued::Command(command)))
     }
 
     fn check_not_faulted(&self) -> Result<(), DriveError> {
-        match self.status.lock(|s| s.borrow().state) {
-            DriveState::Faulted => Err(DriveError::Faulted),
-            _ => Ok(()),
+        match self.status.lock(|s| s.borrow().fault) {
+            Some(_) => Err(DriveError::Faulted),
+            None => Ok(()),
         }
     }
 
@@ -204,11 +189,17 @@ impl<'a> DriveCore<'a> {
                     );
                     self.runner.start_plan_from(&mut staged.plan)
                 }),
-                Queued::Command(Command::Drive { freq_mhz, amplitude_q15 }) => {
-                    self.runner.drive(freq_mhz, amplitude_q15)
+                Queued::Command(Command::Drive { freq_mhz, level }) => {
+                    self.runner.drive(freq_mhz, level)
                 }
                 Queued::Command(Command::Stop) => {
                     self.runner.stop();
+                    Ok(())
+                }
+                Queued::Command(Command::ClearFault) => {
+                    if let Some(f) = self.runner.clear_fault() {
+                        defmt::info!("drive: fault cleared: {}", f);
+                    }
                     Ok(())
                 }
             };

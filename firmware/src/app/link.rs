@@ -252,8 +252,12 @@ impl<'a, F: NorFlash> Link<'a, F> {
             }
             Request::Drive(d) => link::Drive::respond(drive(Command::Drive {
                 freq_mhz: d.freq_mhz,
-                amplitude_q15: d.amplitude_q15,
+                level: d.level,
             })?),
+            Request::ClearFault(_) => link::ClearFault::respond(drive(Command::ClearFault)?),
+            Request::Sweep(_) | Request::GetSweep(_) | Request::InjectFault(_) => {
+                return Err(Refusal::Unsupported);
+            }
             Request::Stop(_) => link::Stop::respond(drive(Command::Stop)?),
             Request::Status(_) => link::GetStatus::respond(self.drive.status()),
             Request::RunPlan(run) => {

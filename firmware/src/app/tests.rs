@@ -9,7 +9,7 @@ use chladni_shared::drive::runner::{BLOCK_LEN, STOP_RAMP_MS};
 use chladni_shared::icd::link::{
     self, DriveError, DriveState, OWNER_LEASE_MS, Refusal, Request, RunNumber, SetpointError,
 };
-use chladni_shared::icd::plan::{DeviceLimits, Plan, PlanError, Step};
+use chladni_shared::icd::plan::{DeviceLimits, Level, Plan, PlanError, Step};
 use embassy_futures::block_on;
 use embassy_time::Instant;
 
@@ -43,7 +43,9 @@ fn play(core: &mut DriveCore<'_>, out: &mut VecOutput, blocks: usize) {
 fn plan(name: &str, steps: &[(u32, u16, u32, u32)]) -> Plan {
     let mut p = Plan { name: name.try_into().unwrap(), repeat: 1, steps: heapless::Vec::new() };
     for &(freq_mhz, amplitude_q15, duration_ms, ramp_ms) in steps {
-        p.steps.push(Step { freq_mhz, amplitude_q15, duration_ms, ramp_ms }).unwrap();
+        p.steps
+            .push(Step { freq_mhz, level: Level::Drive(amplitude_q15), duration_ms, ramp_ms })
+            .unwrap();
     }
     p
 }
@@ -56,11 +58,15 @@ fn a_bad_setpoint_or_plan_is_refused_with_its_typed_error_and_never_queued() {
         min_mhz: 1_000,
         max_mhz: 2_000_000,
     };
-    let too_fast = Command::Drive { freq_mhz: 5_000_000, amplitude_q15: 100 };
+    let too_fast =
+        Command::Drive { freq_mhz: 5_000_000, level: chladni_shared::icd::plan::Level::Drive(100) };
     assert_eq!(drive.submit(too_fast), Err(DriveError::Setpoint(refused)));
     let message = std::format!("{}", DriveError::Setpoint(refused));
     assert_eq!(message, "invalid setpoint: frequency 5000.000 Hz outside 1.000..=2000.000 Hz");
-    let too_loud = Command::Drive { freq_mhz: 440_000, amplitude_q15: 40_000 };
+    let too_loud = Command::Drive {
+        freq_mhz: 440_000,
+        level: chladni_shared::icd::plan::Level::Drive(40_000),
+    };
     assert_eq!(
         drive.submit(too_loud),
         Err(DriveError::Setpoint(SetpointError::AmplitudeTooHigh {
@@ -86,13 +92,21 @@ fn narrower_limits_apply_to_the_next_command() {
     let drive = DriveShared::new();
     let narrow = DeviceLimits { max_freq_mhz: 300_000, ..DeviceLimits::DEFAULT };
     drive.set_limits(narrow);
-    let err = drive.submit(Command::Drive { freq_mhz: 400_000, amplitude_q15: 1 }).unwrap_err();
+    let err = drive
+        .submit(Command::Drive {
+            freq_mhz: 400_000,
+            level: chladni_shared::icd::plan::Level::Drive(1),
+        })
+        .unwrap_err();
     assert!(matches!(
         err,
         DriveError::Setpoint(SetpointError::FrequencyOutOfRange { max_mhz: 300_000, .. })
     ));
     assert_eq!(
-        drive.submit(Command::Drive { freq_mhz: 250_000, amplitude_q15: 1 }),
+        drive.submit(Command::Drive {
+            freq_mhz: 250_000,
+            level: chladni_shared::icd::plan::Level::Drive(1)
+        }),
         Ok(RunNumber(1))
     );
 }
@@ -135,7 +149,10 @@ fn a_submitted_plan_shows_up_in_status_with_its_run_number_and_remaining_time() 
 #[test]
 fn manual_drive_stop_underruns_and_a_full_queue() {
     let drive = DriveShared::new();
-    let go = Command::Drive { freq_mhz: 440_500, amplitude_q15: 16_384 };
+    let go = Command::Drive {
+        freq_mhz: 440_500,
+        level: chladni_shared::icd::plan::Level::Drive(16_384),
+    };
     assert_eq!(drive.submit(go.clone()), Ok(RunNumber(1)));
     assert_eq!(drive.submit(Command::Stop), Ok(RunNumber(2)));
     // The queue holds two commands until the drive core takes them; a refused one takes
@@ -166,7 +183,10 @@ fn hello(name: &str) -> heapless::String<{ link::MAX_CLIENT_NAME }> {
 #[test]
 fn one_session_owns_the_controller_and_others_are_told_who_at_once() {
     let mut sessions = Sessions::new();
-    let drive = Request::Drive(link::Drive { freq_mhz: 100_000, amplitude_q15: 1 });
+    let drive = Request::Drive(link::Drive {
+        freq_mhz: 100_000,
+        level: chladni_shared::icd::plan::Level::Drive(1),
+    });
     let stop = Request::Stop(link::Stop);
     let status = Request::Status(link::GetStatus);
     sessions.hello(0xa, hello("run --wait (pid 1)"));
@@ -191,7 +211,10 @@ fn one_session_owns_the_controller_and_others_are_told_who_at_once() {
 #[test]
 fn a_silent_owner_loses_the_controller_after_its_lease() {
     let mut sessions = Sessions::new();
-    let drive = Request::Drive(link::Drive { freq_mhz: 100_000, amplitude_q15: 1 });
+    let drive = Request::Drive(link::Drive {
+        freq_mhz: 100_000,
+        level: chladni_shared::icd::plan::Level::Drive(1),
+    });
     assert_eq!(sessions.admit(1, &drive, at(0)), Ok(()));
     let lease = OWNER_LEASE_MS as u64;
     assert!(sessions.admit(2, &drive, at(lease)).is_err());
@@ -262,7 +285,8 @@ fn another_session_is_refused_while_the_owner_uploads_but_may_stop() {
     call(&mut link, 1, link::Hello { client: hello("uploader") }).unwrap();
     let p = plan("p", &[(100_000, 10_000, 12, 2)]);
     call(&mut link, 1, UploadBegin::of(&p, None)).unwrap();
-    let drive_req = link::Drive { freq_mhz: 150_000, amplitude_q15: 100 };
+    let drive_req =
+        link::Drive { freq_mhz: 150_000, level: chladni_shared::icd::plan::Level::Drive(100) };
     match call(&mut link, 2, drive_req) {
         Err(Response::Refused(Refusal::Busy { owner, .. })) => assert_eq!(owner, "uploader"),
         other => panic!("expected Busy, got {other:?}"),
@@ -305,7 +329,10 @@ fn frames_are_answered_with_their_session_and_id_and_corrupt_ones_never_act() {
     let drive = DriveShared::new();
     let mut link = link_over(&drive);
     let mut buf = [0u8; link::ENCODE_BUF];
-    let go = Request::Drive(link::Drive { freq_mhz: 123_000, amplitude_q15: 100 });
+    let go = Request::Drive(link::Drive {
+        freq_mhz: 123_000,
+        level: chladni_shared::icd::plan::Level::Drive(100),
+    });
     let env = Envelope { version: PROTOCOL_VERSION, session: 9, id: 77, body: go };
     let wire = link::encode(&env, &mut buf).unwrap().to_vec();
     // A flipped bit in the frequency: the CRC catches it, nothing is queued.

@@ -74,7 +74,12 @@ fn main() -> ! {
     for (f, a, d, r) in
         [(120_000, 16_000, 37, 7), (181_500, 24_000, 53, 3), (1_234_567, 8_000, 41, 11)]
     {
-        let _ = plan.steps.push(Step { freq_mhz: f, amplitude_q15: a, duration_ms: d, ramp_ms: r });
+        let _ = plan.steps.push(Step {
+            freq_mhz: f,
+            level: chladni_shared::icd::plan::Level::Drive(a),
+            duration_ms: d,
+            ramp_ms: r,
+        });
     }
     let mut runner = Runner::new(DeviceLimits::DEFAULT);
     runner.start_plan(plan).expect("bench plan is valid");

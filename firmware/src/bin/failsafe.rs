@@ -19,7 +19,8 @@ use embassy_time::{Duration, Instant, Timer};
 const EXIT_SETUP_FAILED: i32 = 2;
 
 /// The drive before the crash: 150 Hz at half amplitude, well inside the device limits.
-const DRIVE: Command = Command::Drive { freq_mhz: 150_000, amplitude_q15: 16_384 };
+const DRIVE: Command =
+    Command::Drive { freq_mhz: 150_000, level: chladni_shared::icd::plan::Level::Drive(16_384) };
 
 /// How far from mid-scale the output must be before the crash: clearly driven, not a ramp's
 /// first steps (half amplitude swings about ±1000 codes).

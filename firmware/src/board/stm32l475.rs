@@ -5,7 +5,13 @@
 //!   a task of its own ([`spawn_tasks`]).
 //! - Debug console: USART1 on the ST-LINK virtual COM port, 115200 8N1, a boot banner only
 //!   ([`console`]); defmt logs go over RTT.
-//! - Drive ([`DriveOutput`]): DAC1 ch1 on PA4, TIM6-paced, fed by circular DMA ([`dac`]).
+//! - Sensor ([`Sensor`]): the LSM6DSL accelerometer on I2C2 (PB10/PB11, 400 kHz, DMA1 ch4/5)
+//!   with its INT1 on PD11 ([`sensor`]); set up here, read by the app's sense driver.
+//! - Drive ([`DriveOutput`]): DAC1 ch1 on PA4, TIM6-paced, fed by circular DMA ([`dac`]); or,
+//!   with the cargo feature `drive-pwm`, TIM3 ch3 PWM on PB0 (Arduino D3), its duty fed by
+//!   circular DMA ([`pwm`], docs/pwm.md; not yet run on a board).
+//! - Watchdog ([`Watchdog`], [`reset_cause`]): the IWDG, 1 s nominal, and the reset cause
+//!   from RCC_CSR ([`watchdog`]).
 //! - Plan store ([`Flash`]): flash bank 2 (0x0808_0000, 512 KiB), async through the FLASH
 //!   interrupt ([`bank2`]: with the L47x data cache erratum worked around and ECC errors read
 //!   as data). The program is linked into bank 1 only (memory.x: FLASH = 512 KiB at
@@ -20,25 +26,31 @@
 //! task only wakes on bus events (an interrupt) and handles each in microseconds (descriptor
 //! copies, at most 64-byte FIFO transfers), as do the link's reads and writes; flash operations
 //! wait for the FLASH interrupt instead of spinning. The interrupt handlers (OTG_FS, FLASH,
-//! DMA1_CHANNEL3) all keep embassy-stm32's default priority, so they never preempt each other,
-//! and each does a bounded amount of work (OTG_FS: drain the RX FIFO, at most a few packets).
+//! DMA1_CHANNEL3..5, I2C2_EV/ER, EXTI15_10) all keep embassy-stm32's default priority, so
+//! they never preempt each other, and each does a bounded amount of work (OTG_FS: drain the RX
+//! FIFO, at most a few packets; I2C2 and its DMA: wake the waiting task).
 //! The DMA keeps playing the ring whatever the CPU does.
 //!
 //! Hardware status: everything USB and flash-related here is built and checked against the
 //! embassy sources but not yet run on a board (QEMU models neither); docs/firmware.md has the
-//! bring-up checklist.
+//! bring-up checklist. The same holds for the sensor's I2C2 and INT1 (docs/sensor.md).
 
 pub mod bank2;
 pub mod clocks;
 pub mod console;
+#[cfg(not(feature = "drive-pwm"))]
 pub mod dac;
 pub mod failsafe;
+#[cfg(feature = "drive-pwm")]
+pub mod pwm;
+pub mod sensor;
 pub mod usb;
+pub mod watchdog;
 
 use core::ops::Range;
 
 use defmt_rtt as _;
-use embassy_stm32::{bind_interrupts, dma, flash, peripherals};
+use embassy_stm32::{bind_interrupts, dma, exti, flash, i2c, interrupt, peripherals};
 use embedded_storage_async::nor_flash::NorFlash;
 use stm32_metapac as pac;
 
@@ -68,7 +80,18 @@ const _: () = {
 };
 
 /// The drive output: DAC1 ch1 fed by circular DMA, paced by TIM6.
+#[cfg(not(feature = "drive-pwm"))]
 pub type DriveOutput = dac::DacOutput;
+/// The drive output: TIM3 ch3 PWM on PB0, its duty fed by circular DMA (feature `drive-pwm`).
+#[cfg(feature = "drive-pwm")]
+pub type DriveOutput = pwm::PwmOutput;
+
+/// The watchdog: the IWDG, configured by [`init`], started by the watchdog task.
+pub type Watchdog = watchdog::Watchdog;
+
+pub use watchdog::reset_cause;
+
+pub use sensor::{Sensor, SensorBus, SensorIrq};
 
 /// The initialised board.
 pub struct Board {
@@ -78,8 +101,12 @@ pub struct Board {
     pub flash: Option<Flash>,
     /// Drive output.
     pub drive: DriveOutput,
+    /// The LSM6DSL accelerometer's bus and INT1 line.
+    pub sensor: Sensor,
     /// This board's background work, for [`spawn_tasks`].
     pub tasks: BoardTasks,
+    /// The independent watchdog, not started: `app::watchdog::watchdog_task` starts it.
+    pub watchdog: Watchdog,
 }
 
 /// What this board runs in the background: the USB device.
@@ -88,14 +115,24 @@ pub struct BoardTasks {
 }
 
 bind_interrupts!(struct Irqs {
+    #[cfg(not(feature = "drive-pwm"))]
     DMA1_CHANNEL3 => dma::InterruptHandler<peripherals::DMA1_CH3>;
+    #[cfg(feature = "drive-pwm")]
+    DMA1_CHANNEL2 => dma::InterruptHandler<peripherals::DMA1_CH2>;
     OTG_FS => embassy_stm32::usb::InterruptHandler<peripherals::USB_OTG_FS>;
     FLASH => flash::InterruptHandler;
+    I2C2_EV => i2c::EventInterruptHandler<peripherals::I2C2>;
+    I2C2_ER => i2c::ErrorInterruptHandler<peripherals::I2C2>;
+    DMA1_CHANNEL4 => dma::InterruptHandler<peripherals::DMA1_CH4>;
+    DMA1_CHANNEL5 => dma::InterruptHandler<peripherals::DMA1_CH5>;
+    EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
 });
 
 /// Brings the board up: clocks, the debug console's banner, USB, flash bank 2, then the drive
 /// output (last, so that nothing blocking runs once its DMA plays).
 pub fn init() -> Board {
+    // The reset flags first, whoever asks for them later: reading also clears them.
+    let cause = reset_cause();
     let p = embassy_stm32::init(clocks::config());
     clocks::check();
     // A debugger halting the core (breakpoint, or a fault caught before its handler runs)
@@ -104,8 +141,14 @@ pub fn init() -> Board {
     console::start(p.USART1, p.PB6);
     let (link, usb) = usb::new(p.USB_OTG_FS, p.PA12, p.PA11);
     let flash = bank2::Bank2::new(flash::Flash::new(p.FLASH, Irqs).into_regions().bank2_region);
+    let sensor = sensor::new(p.I2C2, p.PB10, p.PB11, p.DMA1_CH4, p.DMA1_CH5, p.PD11, p.EXTI11);
+    let watchdog = watchdog::Watchdog::new(p.IWDG);
+    defmt::info!("reset cause: {}", cause);
+    #[cfg(not(feature = "drive-pwm"))]
     let drive = dac::DacOutput::new(p.DAC1, p.PA4, p.DMA1_CH3, p.TIM6);
-    Board { link, flash: Some(flash), drive, tasks: BoardTasks { usb } }
+    #[cfg(feature = "drive-pwm")]
+    let drive = pwm::PwmOutput::new(p.TIM3, p.PB0, p.DMA1_CH2);
+    Board { link, flash: Some(flash), drive, sensor, tasks: BoardTasks { usb }, watchdog }
 }
 
 /// Spawns this board's background tasks: the USB device ([`usb::run`]). Call once.

@@ -290,9 +290,10 @@ fn ping(port: &PortArg, count: u32, json: bool) -> anyhow::Result<ExitCode> {
 
 fn drive(port: &PortArg, freq: u32, amplitude: u16, json: bool) -> anyhow::Result<ExitCode> {
     DeviceLimits::DEFAULT
-        .check_setpoint(freq, amplitude)
+        .check_setpoint(freq, chladni_shared::icd::plan::Level::Drive(amplitude))
         .map_err(|e| InputError(format!("drive refused: {e}")))?;
-    let run = port.open("drive")?.drive(freq, amplitude)?;
+    let run =
+        port.open("drive")?.drive(freq, chladni_shared::icd::plan::Level::Drive(amplitude))?;
     render::driving(freq, amplitude, run, json)
 }
 

@@ -24,9 +24,10 @@ use std::ops::ControlFlow;
 use std::time::{Duration, Instant};
 
 use chladni_shared::icd::link::{
-    DeletePlan, DeviceInfo, DriveState, Endpoint, GetConfig, GetInfo, GetStatus, Hello, LinkError,
-    ListPlans, MAX_CLIENT_NAME, PROTOCOL_VERSION, Ping, Plan, Refusal, Release, Response,
-    RunNumber, RunPlan, SetConfig, StatusReport, Stop, Subscribe, Telemetry, UploadCommit,
+    DeletePlan, DeviceInfo, DriveState, Endpoint, GetConfig, GetInfo, GetStatus, Hello, Level,
+    LinkError, ListPlans, MAX_CLIENT_NAME, PROTOCOL_VERSION, Ping, Plan, Refusal, Release,
+    Response, RunNumber, RunPlan, SetConfig, StatusReport, Stop, Subscribe, Telemetry,
+    UploadCommit,
 };
 use chladni_shared::icd::store::{
     CHUNK_STEPS, DeviceConfig, PlanRef, PlanSummary, UploadBegin, UploadChunk,
@@ -354,9 +355,9 @@ impl DeviceClient {
         self.call(GetInfo)
     }
 
-    /// Manual drive: a steady sine at `freq_mhz` with amplitude `amplitude_q15`.
-    pub fn drive(&mut self, freq_mhz: u32, amplitude_q15: u16) -> Result<RunNumber, DeviceError> {
-        self.call(chladni_shared::icd::link::Drive { freq_mhz, amplitude_q15 })
+    /// Manual drive: a steady sine at `freq_mhz` at `level` (amplitude or acceleration).
+    pub fn drive(&mut self, freq_mhz: u32, level: Level) -> Result<RunNumber, DeviceError> {
+        self.call(chladni_shared::icd::link::Drive { freq_mhz, level })
     }
 
     /// Runs a stored plan, `repeat` times instead of its stored count if given.

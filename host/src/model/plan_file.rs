@@ -10,7 +10,7 @@
 //! runs): frequency Hz → mHz and amplitude 0..1 → Q15 rounded to nearest, then validated
 //! against [`DeviceLimits`].
 
-use chladni_shared::icd::plan::{DeviceLimits, MAX_NAME, MAX_STEPS, Plan, PlanError, Step};
+use chladni_shared::icd::plan::{DeviceLimits, Level, MAX_NAME, MAX_STEPS, Plan, PlanError, Step};
 use chladni_shared::icd::units::{FrequencyError, MilliHz, Q15, round_half_away};
 use serde::{Deserialize, Serialize};
 
@@ -129,7 +129,7 @@ impl PlanFile {
                 .map_err(|_| PlanFileError::Amplitude { step: i, value: s.amplitude })?;
             let step = Step {
                 freq_mhz,
-                amplitude_q15: amplitude.0,
+                level: Level::Drive(amplitude.0),
                 duration_ms: s.duration_ms,
                 ramp_ms: s.ramp_ms,
             };
@@ -154,7 +154,10 @@ impl PlanFile {
                 .map(|s| StepJson {
                     freq_hz: MilliHz(s.freq_mhz).to_hz(),
                     duration_ms: s.duration_ms,
-                    amplitude: (Q15(s.amplitude_q15).to_fraction() * 1e6).round() / 1e6,
+                    amplitude: match s.level {
+                        Level::Drive(q15) => (Q15(q15).to_fraction() * 1e6).round() / 1e6,
+                        Level::Accel(_) => 0.0,
+                    },
                     ramp_ms: s.ramp_ms,
                 })
                 .collect(),
@@ -186,9 +189,9 @@ mod tests {
         let p = f.to_plan(&DeviceLimits::DEFAULT).unwrap();
         assert_eq!(p.repeat, 1);
         assert_eq!(p.steps[0].freq_mhz, 60_000);
-        assert_eq!(p.steps[0].amplitude_q15, 16384);
+        assert_eq!(p.steps[0].level, Level::Drive(16384));
         assert_eq!(p.steps[1].ramp_ms, 0);
-        assert_eq!(p.steps[1].amplitude_q15, 32767);
+        assert_eq!(p.steps[1].level, Level::Drive(32767));
         let back = PlanFile::from_plan(&p);
         assert_eq!(back.steps[1].freq_hz, 181.5);
         assert_eq!(back.to_plan(&DeviceLimits::DEFAULT).unwrap(), p);

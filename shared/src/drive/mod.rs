@@ -3,6 +3,7 @@
 //!
 //! - [`dds`]: sine synthesis (phase accumulator, interpolated table, 12-bit DAC codes).
 //! - [`runner`]: the plan runner filling sample blocks, step boundaries exact to the sample.
+//! - [`pwm`]: the PWM drive option's duty mapping, carrier plan and reconstruction filter.
 //! - [`plant`]: a simulated shaker + plate (resonant second-order system) for the QEMU board,
 //!   with deliberate faults (disconnected, clipping amplifier).
 //! - [`timeline`]: the DDS's phase at any instant ([`timeline::PhaseMark`]) and each sensor
@@ -25,6 +26,7 @@ pub mod lockin;
 mod loop_tests;
 pub mod monitor;
 pub mod plant;
+pub mod pwm;
 pub mod resonance;
 pub mod runner;
 pub mod sensor_sim;

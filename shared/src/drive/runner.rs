@@ -3,7 +3,15 @@
 //!
 //! The board calls [`Runner::fill`] with each free half of its sample buffer; commands
 //! ([`Runner::start_plan`], [`Runner::drive`], [`Runner::stop`], [`Runner::fault`]) take effect
-//! at the next sample filled. Stopping always ramps the amplitude to zero, never cuts it.
+//! at the next sample filled. Stopping always ramps the amplitude to zero, never cuts it. A
+//! fault latches with its cause until [`Runner::clear_fault`]; a stop or a new run does not
+//! clear it.
+//!
+//! Closed loop: a setpoint whose level is an acceleration ([`Level::Accel`]) does not set the
+//! amplitude itself. The runner ramps the target ([`Runner::setpoint`] gives the target now)
+//! and takes the amplitude from the controller ([`Runner::set_effort`], once per block, ramped
+//! over the next block). Every frequency change leaves a [`PhaseMark`]: the DDS phase at a
+//! sample of the runner's sample clock, the reference the lock-in needs.
 //!
 //! A block is split into segments in which nothing changes but the phase (and, in a ramp, the
 //! gain); each segment is one call of the DDS's tight loop ([`Dds::fill_steady`] /
@@ -11,7 +19,8 @@
 
 use crate::drive::dds::{self, DAC_MID, Dds, SAMPLE_RATE, SAMPLES_PER_MS};
 use crate::icd::link::{DriveError, DriveState, StatusReport};
-use crate::icd::plan::{DeviceLimits, Plan, Step};
+use crate::icd::plan::{DeviceLimits, Level, Plan, Step};
+use crate::icd::sense::Fault;
 
 /// Samples per block: one DMA half-buffer on the board, one tick of the QEMU pacer (5 ms).
 pub const BLOCK_LEN: usize = 250;
@@ -19,6 +28,49 @@ pub const BLOCK_LEN: usize = 250;
 pub const STOP_RAMP_MS: u32 = 20;
 /// Ramp of the amplitude when a manual setpoint ([`Runner::drive`]) changes.
 pub const MANUAL_RAMP_MS: u32 = 20;
+
+/// The DDS phase at one sample of the runner's sample clock, and the tuning word from there
+/// on: the phase of any later sample, until the next frequency change, is
+/// `phase + (sample' − sample)·tuning_word` (mod 2³²).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PhaseMark {
+    /// Sample clock (samples filled since the runner was made) of the mark.
+    pub sample: u64,
+    /// DDS phase of that sample (one turn = 2³²).
+    pub phase: u32,
+    /// Phase increment per sample from that sample on.
+    pub tuning_word: u32,
+}
+
+/// What the runner is asked to output now: frequency and level (an acceleration target is
+/// given as ramped so far).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Setpoint {
+    /// Frequency, mHz.
+    pub freq_mhz: u32,
+    /// Level now.
+    pub level: Level,
+}
+
+/// A linear ramp of the closed-loop acceleration target, mm/s².
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct AccelRamp {
+    from: u32,
+    to: u32,
+    total: u32,
+    left: u32,
+}
+
+impl AccelRamp {
+    const fn now(&self) -> u32 {
+        if self.total == 0 || self.left == 0 {
+            return self.to;
+        }
+        let done = (self.total - self.left) as i64;
+        let d = self.to as i64 - self.from as i64;
+        (self.from as i64 + d * done / self.total as i64) as u32
+    }
+}
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Mode {
@@ -44,6 +96,11 @@ pub struct Runner {
     elapsed: u64,
     underruns: u32,
     commands: u32,
+    /// Closed loop: the acceleration target's ramp (`None`: open loop).
+    accel: Option<AccelRamp>,
+    fault: Option<Fault>,
+    clock: u64,
+    mark: PhaseMark,
 }
 
 impl Runner {
@@ -62,7 +119,49 @@ impl Runner {
             elapsed: 0,
             underruns: 0,
             commands: 0,
+            accel: None,
+            fault: None,
+            clock: 0,
+            mark: PhaseMark { sample: 0, phase: 0, tuning_word: 0 },
         }
+    }
+
+    /// The sample clock: samples filled since the runner was made (idle ones included).
+    pub fn clock(&self) -> u64 {
+        self.clock
+    }
+
+    /// The reference phase since the last frequency change.
+    pub fn phase_mark(&self) -> PhaseMark {
+        self.mark
+    }
+
+    /// What the drive is asked to output now; `None` when idle, stopping or faulted.
+    pub fn setpoint(&self) -> Option<Setpoint> {
+        if !matches!(self.mode, Mode::Plan { .. } | Mode::Manual) {
+            return None;
+        }
+        let level = match self.accel {
+            Some(r) => Level::Accel(r.now()),
+            None => Level::Drive(dds::q15_of_gain(self.target)),
+        };
+        Some(Setpoint { freq_mhz: self.freq_mhz, level })
+    }
+
+    /// The latched fault, if any.
+    pub fn latched_fault(&self) -> Option<Fault> {
+        self.fault
+    }
+
+    /// Closed loop: the controller's drive amplitude (Q15, clamped to the device's limit),
+    /// reached by a linear ramp over the next [`BLOCK_LEN`] samples. Ignored in open loop and
+    /// while stopping.
+    pub fn set_effort(&mut self, effort_q15: u16) {
+        if self.accel.is_none() || !matches!(self.mode, Mode::Plan { .. } | Mode::Manual) {
+            return;
+        }
+        let effort = effort_q15.min(self.limits.max_amplitude_q15);
+        self.ramp_to(dds::gain_of_q15(effort), BLOCK_LEN as u32);
     }
 
     /// Phase of the next sample (one turn = 2³²).
@@ -94,7 +193,7 @@ impl Runner {
     /// [`Runner::start_plan`] taking the plan out of `plan` (which gets the previous plan), so
     /// a plan of a few KiB changes hands without a copy on a small controller stack.
     pub fn start_plan_from(&mut self, plan: &mut Plan) -> Result<(), DriveError> {
-        if self.mode == Mode::Faulted {
+        if self.fault.is_some() {
             return Err(DriveError::Faulted);
         }
         plan.validate(&self.limits).map_err(DriveError::Plan)?;
@@ -106,39 +205,45 @@ impl Runner {
     }
 
     /// Drives a steady sine (manual mode): the frequency changes at the next sample (phase
-    /// kept), the amplitude ramps over [`MANUAL_RAMP_MS`].
-    pub fn drive(&mut self, freq_mhz: u32, amplitude_q15: u16) -> Result<(), DriveError> {
-        if self.mode == Mode::Faulted {
+    /// kept), the level ramps over [`MANUAL_RAMP_MS`].
+    pub fn drive(&mut self, freq_mhz: u32, level: Level) -> Result<(), DriveError> {
+        if self.fault.is_some() {
             return Err(DriveError::Faulted);
         }
-        self.limits.check_setpoint(freq_mhz, amplitude_q15).map_err(DriveError::Setpoint)?;
+        self.limits.check_setpoint(freq_mhz, level).map_err(DriveError::Setpoint)?;
         if self.mode != Mode::Manual {
             self.elapsed = 0;
         }
         self.mode = Mode::Manual;
         self.set_freq(freq_mhz);
-        self.ramp_to(dds::gain_of_q15(amplitude_q15), MANUAL_RAMP_MS * SAMPLES_PER_MS);
+        self.set_level(level, MANUAL_RAMP_MS * SAMPLES_PER_MS);
         self.commands = self.commands.wrapping_add(1);
         Ok(())
     }
 
-    /// Ramps to zero over [`STOP_RAMP_MS`], then idles. Clears a latched fault.
+    /// Ramps to zero over [`STOP_RAMP_MS`], then idles (or stays faulted: only
+    /// [`Runner::clear_fault`] clears a fault).
     pub fn stop(&mut self) {
         self.commands = self.commands.wrapping_add(1);
         match self.mode {
-            Mode::Idle => {}
-            Mode::Faulted => self.mode = Mode::Idle,
-            Mode::Stopping { .. } => self.mode = Mode::Stopping { fault: false },
+            Mode::Idle | Mode::Faulted => {}
+            Mode::Stopping { .. } => {}
             Mode::Plan { .. } | Mode::Manual => {
                 self.mode = Mode::Stopping { fault: false };
+                self.accel = None;
                 self.ramp_to(0, STOP_RAMP_MS * SAMPLES_PER_MS);
             }
         }
     }
 
-    /// Ramps to zero over [`STOP_RAMP_MS`] and latches [`DriveState::Faulted`].
-    pub fn fault(&mut self) {
+    /// Ramps to zero over [`STOP_RAMP_MS`] and latches `fault` ([`DriveState::Faulted`]).
+    /// A second fault while one is latched keeps the first (the cause that started it).
+    pub fn fault(&mut self, fault: Fault) {
         self.commands = self.commands.wrapping_add(1);
+        if self.fault.is_none() {
+            self.fault = Some(fault);
+        }
+        self.accel = None;
         match self.mode {
             Mode::Faulted => {}
             Mode::Idle => self.mode = Mode::Faulted,
@@ -148,6 +253,19 @@ impl Runner {
                 self.ramp_to(0, STOP_RAMP_MS * SAMPLES_PER_MS);
             }
         }
+    }
+
+    /// Clears a latched fault: the drive idles (it is already silent, or finishing its ramp to
+    /// zero). Returns the fault that was latched.
+    pub fn clear_fault(&mut self) -> Option<Fault> {
+        let fault = self.fault.take()?;
+        self.commands = self.commands.wrapping_add(1);
+        match self.mode {
+            Mode::Faulted => self.mode = Mode::Idle,
+            Mode::Stopping { .. } => self.mode = Mode::Stopping { fault: false },
+            _ => {}
+        }
+        Some(fault)
     }
 
     /// Counts one missed refill (the output ran ahead of the runner).
@@ -161,6 +279,13 @@ impl Runner {
             Mode::Idle => DriveState::Idle,
             Mode::Faulted => DriveState::Faulted,
             Mode::Stopping { .. } => DriveState::Stopping,
+            // Closed loop: the controller moves the amplitude every block; what ramps is the
+            // acceleration target.
+            Mode::Plan { .. } | Mode::Manual if self.accel.is_some() => match self.accel {
+                Some(r) if r.left > 0 && r.to > r.from => DriveState::RampUp,
+                Some(r) if r.left > 0 && r.to < r.from => DriveState::RampDown,
+                _ => DriveState::Running,
+            },
             Mode::Plan { .. } | Mode::Manual => {
                 if self.ramp_left == 0 || self.inc == 0 {
                     DriveState::Running
@@ -183,6 +308,7 @@ impl Runner {
         };
         let silent = matches!(self.mode, Mode::Idle | Mode::Faulted);
         let in_plan = step.is_some();
+        let level = self.setpoint().map(|s| s.level);
         StatusReport {
             state: self.state(),
             step,
@@ -191,7 +317,13 @@ impl Runner {
             run: crate::icd::link::RunNumber(0),
             plan: if in_plan { Some(self.plan.name.clone()) } else { None },
             remaining_samples,
-            fault: (self.mode == Mode::Faulted).then_some(crate::icd::link::Fault::Latched),
+            fault: self.fault,
+            level,
+            // The drive task adds what the sensing side knows.
+            measured: None,
+            warning: false,
+            reset_cause: crate::icd::sense::ResetCause::PowerOn,
+            clock: self.clock,
             elapsed_samples: self.elapsed,
             sample_rate: SAMPLE_RATE,
             freq_mhz: if silent { 0 } else { self.freq_mhz },
@@ -214,6 +346,28 @@ impl Runner {
     fn set_freq(&mut self, freq_mhz: u32) {
         self.freq_mhz = freq_mhz;
         self.dds.tuning_word = dds::tuning_word(freq_mhz);
+        self.mark = PhaseMark {
+            sample: self.clock,
+            phase: self.dds.phase,
+            tuning_word: self.dds.tuning_word,
+        };
+    }
+
+    /// Moves to `level` over `samples`: the amplitude (open loop) or the acceleration target
+    /// (closed loop; the amplitude then follows [`Runner::set_effort`]).
+    fn set_level(&mut self, level: Level, samples: u32) {
+        match level {
+            Level::Drive(q15) => {
+                self.accel = None;
+                self.ramp_to(dds::gain_of_q15(q15), samples);
+            }
+            Level::Accel(to) => {
+                let from = self.accel.map_or(0, |r| r.now());
+                self.accel = Some(AccelRamp { from, to, total: samples, left: samples });
+                // Hold the amplitude until the controller speaks.
+                self.ramp_to(self.gain, 0);
+            }
+        }
     }
 
     fn ramp_to(&mut self, target: i32, samples: u32) {
@@ -232,7 +386,7 @@ impl Runner {
         let s = self.plan.steps[step as usize];
         self.mode = Mode::Plan { step, run, step_left: s.duration_samples() };
         self.set_freq(s.freq_mhz);
-        self.ramp_to(dds::gain_of_q15(s.amplitude_q15), s.ramp_samples());
+        self.set_level(s.level, s.ramp_samples());
     }
 
     fn end_of_step(&mut self, step: u16, run: u16) {
@@ -243,6 +397,7 @@ impl Runner {
         } else {
             let ramp = self.plan.steps[step as usize].ramp_ms.max(STOP_RAMP_MS);
             self.mode = Mode::Stopping { fault: false };
+            self.accel = None;
             self.ramp_to(0, ramp * SAMPLES_PER_MS);
         }
     }
@@ -259,6 +414,7 @@ impl Runner {
             }
             if matches!(self.mode, Mode::Idle | Mode::Faulted) {
                 out[pos..].fill(DAC_MID);
+                self.clock += (out.len() - pos) as u64;
                 return;
             }
             let mut n = (out.len() - pos) as u32;
@@ -280,6 +436,10 @@ impl Runner {
             }
             pos += n as usize;
             self.elapsed += n as u64;
+            self.clock += n as u64;
+            if let Some(r) = &mut self.accel {
+                r.left = r.left.saturating_sub(n);
+            }
             match self.mode {
                 Mode::Plan { step, run, step_left } => {
                     if step_left == n {
@@ -303,6 +463,7 @@ mod tests {
     extern crate std;
     use super::*;
     use crate::icd::plan::{PlanError, Step};
+    use crate::icd::sense::Fault;
     use std::vec::Vec;
 
     fn plan(steps: &[Step], repeat: u16) -> Plan {
@@ -314,9 +475,9 @@ mod tests {
     }
 
     const STEPS: [Step; 3] = [
-        Step { freq_mhz: 100_000, amplitude_q15: 16384, duration_ms: 40, ramp_ms: 10 },
-        Step { freq_mhz: 250_500, amplitude_q15: 26000, duration_ms: 60, ramp_ms: 5 },
-        Step { freq_mhz: 1_234_567, amplitude_q15: 8000, duration_ms: 30, ramp_ms: 3 },
+        Step { freq_mhz: 100_000, level: Level::Drive(16384), duration_ms: 40, ramp_ms: 10 },
+        Step { freq_mhz: 250_500, level: Level::Drive(26000), duration_ms: 60, ramp_ms: 5 },
+        Step { freq_mhz: 1_234_567, level: Level::Drive(8000), duration_ms: 30, ramp_ms: 3 },
     ];
 
     /// Runs `runner` block by block until idle; records codes, gains, phases and statuses per
@@ -412,7 +573,8 @@ mod tests {
         let mut idx = 0usize;
         let mut prev_target = 0i32;
         for s in STEPS {
-            let target = dds::gain_of_q15(s.amplitude_q15);
+            let Level::Drive(q15) = s.level else { unreachable!("open-loop steps") };
+            let target = dds::gain_of_q15(q15);
             let ramp = s.ramp_samples() as usize;
             let g = &t.gain[idx..idx + ramp];
             if target > prev_target {
@@ -437,7 +599,7 @@ mod tests {
     #[test]
     fn stop_ramps_to_zero_then_idles() {
         let mut r = Runner::new(DeviceLimits::DEFAULT);
-        r.drive(440_000, 30000).unwrap();
+        r.drive(440_000, Level::Drive(30000)).unwrap();
         let mut buf = [0u16; 5000];
         r.fill(&mut buf);
         assert_eq!(r.state(), DriveState::Running);
@@ -459,26 +621,95 @@ mod tests {
         assert_eq!(r.status().commands, 2);
     }
 
+    const LOOP_OPEN: Fault =
+        Fault { cause: crate::icd::sense::FaultCause::LoopOpen, value: 12, at_sample: 2000 };
+
     #[test]
-    fn fault_latches_until_stop() {
+    fn fault_latches_until_cleared() {
         let mut r = Runner::new(DeviceLimits::DEFAULT);
-        r.drive(100_000, 10000).unwrap();
+        r.drive(100_000, Level::Drive(10000)).unwrap();
         let mut buf = [0u16; 2000];
         r.fill(&mut buf);
-        r.fault();
+        r.fault(LOOP_OPEN);
+        r.fill(&mut buf);
         r.fill(&mut buf);
         assert_eq!(r.state(), DriveState::Faulted);
-        assert_eq!(r.drive(100_000, 1), Err(DriveError::Faulted));
+        assert!(buf.iter().all(|&c| c == DAC_MID), "silent once ramped down");
+        assert_eq!(r.drive(100_000, Level::Drive(1)), Err(DriveError::Faulted));
         assert_eq!(r.start_plan(plan(&STEPS, 1)), Err(DriveError::Faulted));
+        // Neither a stop nor a second fault changes what is latched.
         r.stop();
+        let later = Fault { at_sample: 9999, ..LOOP_OPEN };
+        r.fault(later);
+        assert_eq!(r.state(), DriveState::Faulted);
+        assert_eq!(r.status().fault, Some(LOOP_OPEN));
+        assert_eq!(r.clear_fault(), Some(LOOP_OPEN));
+        assert_eq!(r.clear_fault(), None);
         assert_eq!(r.state(), DriveState::Idle);
-        assert_eq!(r.drive(100_000, 1), Ok(()));
+        assert_eq!(r.status().fault, None);
+        assert_eq!(r.drive(100_000, Level::Drive(1)), Ok(()));
+    }
+
+    #[test]
+    fn closed_loop_takes_its_amplitude_from_the_controller() {
+        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        r.drive(180_000, Level::Accel(20_000)).unwrap();
+        let mut buf = [0u16; BLOCK_LEN];
+        // No effort yet: silent, the target ramps from 0 over the manual ramp.
+        r.fill(&mut buf);
+        assert!(buf.iter().all(|&c| c == DAC_MID));
+        assert_eq!(r.state(), DriveState::RampUp);
+        let ramp = MANUAL_RAMP_MS * SAMPLES_PER_MS;
+        let want = (20_000u64 * BLOCK_LEN as u64 / ramp as u64) as u32;
+        assert_eq!(r.setpoint().unwrap().level, Level::Accel(want));
+        // An effort is reached linearly over the next block, and clamped to the limit.
+        r.set_effort(10_000);
+        r.fill(&mut buf);
+        assert_eq!(r.gain(), dds::gain_of_q15(10_000));
+        r.set_effort(40_000);
+        r.fill(&mut buf);
+        assert_eq!(r.gain(), dds::gain_of_q15(32767));
+        for _ in 0..ramp as usize / BLOCK_LEN {
+            r.fill(&mut buf);
+        }
+        assert_eq!(r.setpoint().unwrap().level, Level::Accel(20_000));
+        assert_eq!(r.state(), DriveState::Running);
+        // Open loop again: the effort is ignored.
+        r.drive(180_000, Level::Drive(5000)).unwrap();
+        r.set_effort(30_000);
+        for _ in 0..ramp as usize / BLOCK_LEN + 1 {
+            r.fill(&mut buf);
+        }
+        assert_eq!(r.gain(), dds::gain_of_q15(5000));
+    }
+
+    #[test]
+    fn phase_marks_follow_frequency_changes() {
+        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        let mut buf = [0u16; 333];
+        r.fill(&mut buf);
+        r.start_plan(plan(&STEPS, 1)).unwrap();
+        let mut seen = Vec::new();
+        while r.state() != DriveState::Idle {
+            // Sample by sample: the mark must predict the phase of every sample.
+            let m = r.phase_mark();
+            let want =
+                m.phase.wrapping_add(((r.clock() - m.sample) as u32).wrapping_mul(m.tuning_word));
+            assert_eq!(r.phase(), want, "sample {}", r.clock());
+            if seen.last() != Some(&m) {
+                seen.push(m);
+            }
+            r.fill(&mut buf[..1]);
+        }
+        assert_eq!(seen.len(), STEPS.len());
+        assert_eq!(seen[0].sample, 333);
+        assert_eq!(seen[1].sample, 333 + STEPS[0].duration_samples() as u64);
     }
 
     #[test]
     fn invalid_commands_are_refused() {
         let mut r = Runner::new(DeviceLimits::DEFAULT);
-        assert!(matches!(r.drive(5_000_000, 1), Err(DriveError::Setpoint(_))));
+        assert!(matches!(r.drive(5_000_000, Level::Drive(1)), Err(DriveError::Setpoint(_))));
         assert!(matches!(r.start_plan(plan(&[], 1)), Err(DriveError::Plan(PlanError::Empty))));
         assert_eq!(r.state(), DriveState::Idle);
         assert_eq!(r.status().commands, 0);

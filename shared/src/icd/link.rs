@@ -22,7 +22,8 @@ pub use crate::icd::frame::{
     CRC_LEN, ENCODE_BUF, Envelope, FrameError, FrameReader, LinkError, MAX_FRAME, PROTOCOL_VERSION,
     decode, encode,
 };
-pub use crate::icd::plan::{Plan, PlanError, SetpointError};
+pub use crate::icd::plan::{Level, Plan, PlanError, SetpointError};
+pub use crate::icd::sense::{Fault, FaultCause, Measurement, ResetCause, SensorFault};
 use crate::icd::store::{
     ConfigError, DeviceConfig, PlanName, PlanPage, PlanRef, PlanSummary, StoreError, UploadBegin,
     UploadChunk, UploadError,
@@ -154,15 +155,100 @@ pub struct GetInfo;
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Release;
 
-/// Manual drive: a steady sine at `freq_mhz`, amplitude ramped to `amplitude_q15`.
+/// Manual drive: a steady sine at `freq_mhz`, ramped to `level` (a drive amplitude, or an
+/// acceleration the controller holds after a loop check).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Drive {
     /// Frequency, millihertz.
     pub freq_mhz: u32,
-    /// Amplitude, Q15 fraction of the DAC's full scale.
-    pub amplitude_q15: u16,
+    /// Amplitude (open loop) or acceleration target (closed loop).
+    pub level: Level,
 }
+
+/// Clears a latched fault (nothing else does: not a stop, not a new run).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ClearFault;
+
+/// Most points of one sweep.
+pub const MAX_SWEEP_POINTS: u16 = 200;
+/// Points per [`SweepPage`].
+pub const SWEEP_PAGE: usize = 32;
+
+/// Steps the drive over a frequency range at one level and measures the plate's response at
+/// each point (lock-in amplitude and phase at the end of the point's dwell). Points are spaced
+/// geometrically from `from_mhz` to `to_mhz` (both included).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Sweep {
+    /// First frequency, mHz.
+    pub from_mhz: u32,
+    /// Last frequency, mHz (above `from_mhz`).
+    pub to_mhz: u32,
+    /// Number of points, 2..=[`MAX_SWEEP_POINTS`].
+    pub points: u16,
+    /// Drive amplitude, Q15 (open loop: a sweep measures the plate, it does not hold it).
+    pub amplitude_q15: u16,
+    /// Time at each point before its measurement is taken, ms (the plate settles).
+    pub dwell_ms: u32,
+}
+
+/// Asks for the points of the last sweep from index `from` on (one page).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct GetSweep {
+    /// First point to return.
+    pub from: u16,
+}
+
+/// One measured sweep point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SweepPoint {
+    /// Drive frequency, mHz.
+    pub freq_mhz: u32,
+    /// The response; `None` if the sensor gave none at this point.
+    pub measured: Option<Measurement>,
+}
+
+/// A page of sweep points.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SweepPage {
+    /// The sweep's run number (0: no sweep since reset).
+    pub run: RunNumber,
+    /// Points the sweep has.
+    pub total: u16,
+    /// Points measured so far (the sweep is complete when `done == total`).
+    pub done: u16,
+    /// Points from the requested index on.
+    pub points: heapless::Vec<SweepPoint, SWEEP_PAGE>,
+}
+
+/// A fault to simulate, for tests of the fault monitors (the QEMU board only; a real board
+/// refuses it with [`Refusal::Unsupported`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TestFault {
+    /// The shaker's wires are cut: the plate gets no force.
+    ShakerDisconnected,
+    /// The amplifier clips at a tenth of full scale.
+    AmplifierSaturated,
+    /// The accelerometer stops producing samples.
+    SensorSilent,
+    /// The accelerometer answers with another device's id (seen at its next initialisation).
+    SensorWrongId,
+    /// A task stops checking in with the watchdog.
+    StallTask,
+    /// Undo every simulated fault.
+    Heal,
+}
+
+/// Injects a simulated fault (QEMU only).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct InjectFault(pub TestFault);
 
 /// Runs a stored plan.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -264,6 +350,14 @@ endpoints! {
     GetConfig(GetConfig) => DeviceConfig;
     /// Sets the configuration → the configuration now in effect.
     SetConfig(SetConfig) => DeviceConfig;
+    /// Clears a latched fault → its run number.
+    ClearFault(ClearFault) => RunNumber;
+    /// Starts a frequency sweep → its run number.
+    Sweep(Sweep) => RunNumber;
+    /// A page of the last sweep's points.
+    GetSweep(GetSweep) => SweepPage;
+    /// Simulates a fault (QEMU only).
+    InjectFault(InjectFault) => ();
 }
 
 impl Request {
@@ -279,6 +373,9 @@ impl Request {
                 | Request::UploadCommit(_)
                 | Request::DeletePlan(_)
                 | Request::SetConfig(_)
+                | Request::ClearFault(_)
+                | Request::Sweep(_)
+                | Request::InjectFault(_)
         )
     }
 }
@@ -308,6 +405,113 @@ pub enum Refusal {
         /// The rate asked for.
         rate_hz: u16,
     },
+    /// The sweep was refused.
+    Sweep(SweepError),
+    /// This controller cannot do that (e.g. simulated faults on a real board).
+    Unsupported,
+}
+
+/// Why a sweep was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SweepError {
+    /// Fewer than 2 or more than [`MAX_SWEEP_POINTS`] points.
+    Points {
+        /// Points asked for.
+        points: u16,
+    },
+    /// The range is empty (`from` not below `to`).
+    Range {
+        /// From, mHz.
+        from_mhz: u32,
+        /// To, mHz.
+        to_mhz: u32,
+    },
+    /// The dwell is outside 10..=10 000 ms.
+    Dwell {
+        /// Dwell asked for, ms.
+        dwell_ms: u32,
+    },
+}
+
+impl core::fmt::Display for SweepError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            SweepError::Points { points } => {
+                write!(f, "{points} sweep points: give 2..={MAX_SWEEP_POINTS}")
+            }
+            SweepError::Range { from_mhz, to_mhz } => write!(
+                f,
+                "sweep from {}.{:03} Hz to {}.{:03} Hz: the start must be below the end",
+                from_mhz / 1000,
+                from_mhz % 1000,
+                to_mhz / 1000,
+                to_mhz % 1000
+            ),
+            SweepError::Dwell { dwell_ms } => {
+                write!(f, "dwell {dwell_ms} ms per point: give 10..=10000 ms")
+            }
+        }
+    }
+}
+
+impl Sweep {
+    /// Checks the sweep's shape (the device limits are checked on each point's setpoint).
+    pub fn check(&self) -> Result<(), SweepError> {
+        if self.points < 2 || self.points > MAX_SWEEP_POINTS {
+            return Err(SweepError::Points { points: self.points });
+        }
+        if self.from_mhz >= self.to_mhz {
+            return Err(SweepError::Range { from_mhz: self.from_mhz, to_mhz: self.to_mhz });
+        }
+        if !(10..=10_000).contains(&self.dwell_ms) {
+            return Err(SweepError::Dwell { dwell_ms: self.dwell_ms });
+        }
+        Ok(())
+    }
+
+    /// Frequency of point `i`, mHz: geometric spacing (equal steps on the Bode plot's log
+    /// axis), computed in f32 and rounded; the first and last are exact.
+    pub fn freq_mhz(&self, i: u16) -> u32 {
+        if i == 0 {
+            return self.from_mhz;
+        }
+        if i + 1 >= self.points {
+            return self.to_mhz;
+        }
+        let ratio = self.to_mhz as f32 / self.from_mhz as f32;
+        let t = i as f32 / (self.points - 1) as f32;
+        (self.from_mhz as f32 * pow_f32(ratio, t) + 0.5) as u32
+    }
+}
+
+/// `base^t` for `base` ≥ 1 and 0 ≤ `t` ≤ 1, to f32 precision, from binary digits of `t`
+/// (base^(1/2), base^(1/4), … by square roots), so no libm is needed on the controller.
+fn pow_f32(base: f32, t: f32) -> f32 {
+    let mut result = 1.0f32;
+    let mut root = base;
+    let mut frac = t;
+    for _ in 0..24 {
+        root = sqrt_f32(root);
+        frac *= 2.0;
+        if frac >= 1.0 {
+            result *= root;
+            frac -= 1.0;
+        }
+    }
+    result
+}
+
+/// Square root by Newton's method (a handful of iterations from a bit-level first guess).
+fn sqrt_f32(x: f32) -> f32 {
+    if x <= 0.0 {
+        return 0.0;
+    }
+    let mut y = f32::from_bits((x.to_bits() >> 1) + 0x1fc0_0000);
+    for _ in 0..4 {
+        y = 0.5 * (y + x / y);
+    }
+    y
 }
 
 impl core::fmt::Display for Refusal {
@@ -327,6 +531,8 @@ impl core::fmt::Display for Refusal {
             Refusal::TelemetryRate { rate_hz } => {
                 write!(f, "telemetry rate {rate_hz} Hz is outside 1..={MAX_TELEMETRY_HZ} Hz")
             }
+            Refusal::Sweep(e) => write!(f, "sweep refused: {e}"),
+            Refusal::Unsupported => write!(f, "this controller does not support that request"),
         }
     }
 }
@@ -392,8 +598,20 @@ pub struct StatusReport {
     pub plan: Option<PlanName>,
     /// Samples left until the plan's last step ends (0 outside a plan).
     pub remaining_samples: u64,
-    /// The latched fault, while [`DriveState::Faulted`].
+    /// The latched fault: set when the drive faulted, kept until a `ClearFault`.
     pub fault: Option<Fault>,
+    /// The setpoint in effect now (an acceleration target as ramped so far); `None` when the
+    /// drive is idle, stopping or faulted.
+    pub level: Option<Level>,
+    /// The plate's response at the drive frequency (lock-in), when the sensor has one.
+    pub measured: Option<Measurement>,
+    /// The closed-loop response is outside the warning band around its target.
+    pub warning: bool,
+    /// Why the controller last started.
+    pub reset_cause: ResetCause,
+    /// The drive's sample clock (samples since the controller started), the time base of
+    /// [`Fault::at_sample`].
+    pub clock: u64,
     /// Samples output since the current plan or manual drive started (kept when idle).
     pub elapsed_samples: u64,
     /// Samples per second, to turn `elapsed_samples` into time.
@@ -409,6 +627,28 @@ pub struct StatusReport {
 }
 
 impl StatusReport {
+    /// The status of a controller that has not driven since it started.
+    pub const IDLE: StatusReport = StatusReport {
+        state: DriveState::Idle,
+        step: None,
+        repetition: 0,
+        run: RunNumber(0),
+        plan: None,
+        remaining_samples: 0,
+        fault: None,
+        level: None,
+        measured: None,
+        warning: false,
+        reset_cause: ResetCause::PowerOn,
+        clock: 0,
+        elapsed_samples: 0,
+        sample_rate: crate::drive::dds::SAMPLE_RATE,
+        freq_mhz: 0,
+        amplitude_q15: 0,
+        underruns: 0,
+        commands: 0,
+    };
+
     /// `elapsed_samples` in milliseconds.
     pub fn elapsed_ms(&self) -> f64 {
         self.elapsed_samples as f64 * 1000.0 / self.sample_rate as f64
@@ -428,27 +668,10 @@ pub enum DriveError {
     Plan(PlanError),
     /// The manual setpoint does not fit the device's limits.
     Setpoint(SetpointError),
-    /// The drive is faulted; send a stop to clear it first.
+    /// A fault is latched; clear it (`ClearFault`) first.
     Faulted,
     /// The drive's command queue is full; try again.
     QueueFull,
-}
-
-/// Why the drive latched a fault.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Fault {
-    /// The fault latch was set by the firmware (the sensing work names its causes).
-    Latched,
-}
-
-impl Fault {
-    /// Lowercase name as printed by the CLI.
-    pub const fn name(self) -> &'static str {
-        match self {
-            Fault::Latched => "latched",
-        }
-    }
 }
 
 impl core::fmt::Display for DriveError {
@@ -456,7 +679,9 @@ impl core::fmt::Display for DriveError {
         match self {
             DriveError::Plan(e) => write!(f, "invalid plan: {e}"),
             DriveError::Setpoint(e) => write!(f, "invalid setpoint: {e}"),
-            DriveError::Faulted => write!(f, "drive is faulted (send stop to clear)"),
+            DriveError::Faulted => {
+                write!(f, "a fault is latched (clear it first: chladni device clear-fault)")
+            }
             DriveError::QueueFull => write!(f, "drive command queue full (try again)"),
         }
     }
@@ -537,8 +762,8 @@ mod tests {
         assert_eq!(
             wire,
             [
-                0x00, 0x11, 0x03, 0xf8, 0xac, 0xd1, 0x91, 0x01, 0x01, 0x01, 0x84, 0x86, 0x88, 0x08,
-                0x72, 0xb4, 0x30, 0x46, 0x00
+                0x00, 0x11, 0x04, 0xf8, 0xac, 0xd1, 0x91, 0x01, 0x01, 0x01, 0x84, 0x86, 0x88, 0x08,
+                0xfd, 0x5d, 0xa8, 0x32, 0x00
             ]
         );
         // Variant numbers are the table's order: a client in another language relies on them.
@@ -547,7 +772,7 @@ mod tests {
             Request::Ping(Ping { nonce: 0 }),
             Request::GetInfo(GetInfo),
             Request::Release(Release),
-            Request::Drive(Drive { freq_mhz: 0, amplitude_q15: 0 }),
+            Request::Drive(Drive { freq_mhz: 0, level: Level::Drive(0) }),
             Request::RunPlan(RunPlan { plan: crate::icd::store::PlanRef::Slot(0), repeat: None }),
             Request::Stop(Stop),
             Request::Status(GetStatus),
@@ -555,14 +780,19 @@ mod tests {
             Request::ListPlans(ListPlans { from_slot: 0 }),
             Request::Subscribe(Subscribe { rate_hz: 1, count: 1 }),
             Request::GetConfig(GetConfig),
+            Request::ClearFault(ClearFault),
+            Request::GetSweep(GetSweep { from: 0 }),
+            Request::InjectFault(InjectFault(TestFault::Heal)),
         ];
         let numbers: std::vec::Vec<u8> =
             requests.iter().map(|r| postcard::to_stdvec(r).unwrap()[0]).collect();
-        assert_eq!(numbers, [0, 1, 2, 3, 4, 5, 6, 7, 10, 11, 13, 14]);
+        assert_eq!(numbers, [0, 1, 2, 3, 4, 5, 6, 7, 10, 11, 13, 14, 16, 18, 19]);
         let error = postcard::to_stdvec(&Response::Error(LinkError::BadCrc)).unwrap();
         let refused =
             postcard::to_stdvec(&Response::Refused(Refusal::TelemetryRate { rate_hz: 0 }));
-        assert_eq!((error[0], refused.unwrap()[0]), (16, 17));
+        assert_eq!((error[0], refused.unwrap()[0]), (20, 21));
+        let level = postcard::to_stdvec(&Level::Accel(1)).unwrap();
+        assert_eq!(level, [1, 1]);
     }
 
     #[test]
@@ -573,8 +803,33 @@ mod tests {
         // Another request's answer is handed back, not misread.
         assert_eq!(GetStatus::reply(Response::Ping(1)), Err(Response::Ping(1)));
         assert_eq!(Ping { nonce: 1 }.into_request().name(), "Ping");
-        assert!(Drive { freq_mhz: 1, amplitude_q15: 1 }.into_request().needs_owner());
+        assert!(Drive { freq_mhz: 1, level: Level::Drive(1) }.into_request().needs_owner());
         assert!(!Stop.into_request().needs_owner());
         assert!(!GetStatus.into_request().needs_owner());
+        assert!(ClearFault.into_request().needs_owner());
+    }
+
+    #[test]
+    fn sweep_points_are_geometric_and_end_exactly() {
+        let s = Sweep {
+            from_mhz: 50_000,
+            to_mhz: 500_000,
+            points: 101,
+            amplitude_q15: 1,
+            dwell_ms: 50,
+        };
+        assert_eq!(s.check(), Ok(()));
+        assert_eq!((s.freq_mhz(0), s.freq_mhz(100)), (50_000, 500_000));
+        for i in 1..100 {
+            let want = 50_000.0 * 10f64.powf(i as f64 / 100.0);
+            let got = s.freq_mhz(i) as f64;
+            assert!((got - want).abs() / want < 1e-5, "point {i}: {got} vs {want}");
+        }
+        let bad = Sweep { points: 1, ..s };
+        assert_eq!(bad.check(), Err(SweepError::Points { points: 1 }));
+        let bad = Sweep { from_mhz: 500_000, ..s };
+        assert!(matches!(bad.check(), Err(SweepError::Range { .. })));
+        let bad = Sweep { dwell_ms: 5, ..s };
+        assert_eq!(bad.check(), Err(SweepError::Dwell { dwell_ms: 5 }));
     }
 }

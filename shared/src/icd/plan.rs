@@ -4,33 +4,37 @@
 //! A plan is the same value on the host (written as JSON by the planner, read by
 //! `chladni device run-file`) and on the wire ([`crate::icd::link::Request::RunPlan`]). Units are
 //! integers so that both sides compute the same sample counts: frequency in millihertz,
-//! amplitude in Q15 (32767 ≈ full scale of the DAC), times in milliseconds.
+//! level either a drive amplitude in Q15 (32767 ≈ full scale of the output, open loop) or a
+//! plate acceleration in mm/s² that the controller holds (closed loop), times in milliseconds.
 //!
 //! JSON form:
 //! ```json
 //! {"name": "square-45", "repeat": 1,
-//!  "steps": [{"freq_mhz": 120000, "amplitude_q15": 16384, "duration_ms": 500, "ramp_ms": 20}]}
+//!  "steps": [{"freq_mhz": 120000, "level": {"Drive": 16384}, "duration_ms": 500, "ramp_ms": 20},
+//!            {"freq_mhz": 180000, "level": {"Accel": 20000}, "duration_ms": 500, "ramp_ms": 20}]}
 //! ```
 
 use serde::{Deserialize, Serialize};
 
 use crate::drive::dds::SAMPLES_PER_MS;
+pub use crate::icd::sense::Level;
 
 /// Most steps a plan may hold (it is uploaded in chunks, see [`crate::icd::store`]).
 pub const MAX_STEPS: usize = 256;
 /// Longest plan name, in bytes.
 pub const MAX_NAME: usize = 32;
 
-/// One step: drive at `freq_mhz` with `amplitude_q15` for `duration_ms`; the amplitude moves
-/// from its previous value to this step's over the first `ramp_ms` (linearly, per sample).
+/// One step: drive at `freq_mhz` at `level` for `duration_ms`; the amplitude (open loop) or
+/// the acceleration target (closed loop) moves from its previous value to this step's over the
+/// first `ramp_ms` (linearly).
 /// The frequency switches at the step's first sample, keeping the phase.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Step {
     /// Drive frequency, millihertz.
     pub freq_mhz: u32,
-    /// Drive amplitude, Q15 fraction of the DAC's full scale (0..=32767).
-    pub amplitude_q15: u16,
+    /// Drive amplitude (open loop) or acceleration target (closed loop).
+    pub level: Level,
     /// Step length, milliseconds (ramp included).
     pub duration_ms: u32,
     /// Amplitude ramp at the start of the step, milliseconds (≤ `duration_ms`).
@@ -85,8 +89,10 @@ pub struct DeviceLimits {
     pub min_freq_mhz: u32,
     /// Highest drive frequency, millihertz.
     pub max_freq_mhz: u32,
-    /// Highest amplitude, Q15.
+    /// Highest amplitude, Q15 (also the closed loop's effort ceiling).
     pub max_amplitude_q15: u16,
+    /// Highest closed-loop acceleration target, mm/s².
+    pub max_accel_mmps2: u32,
     /// Most steps per plan.
     pub max_steps: u16,
     /// Longest plan (all repeats), milliseconds.
@@ -94,17 +100,18 @@ pub struct DeviceLimits {
 }
 
 impl DeviceLimits {
-    /// The controller's limits: 1–2000 Hz, full DAC scale, [`MAX_STEPS`] steps, one hour.
+    /// The controller's limits: 1–2000 Hz, full DAC scale, 100 m/s², [`MAX_STEPS`] steps, one hour.
     pub const DEFAULT: DeviceLimits = DeviceLimits {
         min_freq_mhz: 1_000,
         max_freq_mhz: 2_000_000,
         max_amplitude_q15: 32767,
+        max_accel_mmps2: 100_000,
         max_steps: MAX_STEPS as u16,
         max_total_ms: 3_600_000,
     };
 
-    /// Checks a setpoint (frequency and amplitude), a manual drive's or a plan step's.
-    pub fn check_setpoint(&self, freq_mhz: u32, amplitude_q15: u16) -> Result<(), SetpointError> {
+    /// Checks a setpoint (frequency and level), a manual drive's or a plan step's.
+    pub fn check_setpoint(&self, freq_mhz: u32, level: Level) -> Result<(), SetpointError> {
         if freq_mhz < self.min_freq_mhz || freq_mhz > self.max_freq_mhz {
             return Err(SetpointError::FrequencyOutOfRange {
                 freq_mhz,
@@ -112,20 +119,25 @@ impl DeviceLimits {
                 max_mhz: self.max_freq_mhz,
             });
         }
-        if amplitude_q15 > self.max_amplitude_q15 {
-            return Err(SetpointError::AmplitudeTooHigh {
-                amplitude_q15,
-                max_q15: self.max_amplitude_q15,
-            });
+        match level {
+            Level::Drive(amplitude_q15) if amplitude_q15 > self.max_amplitude_q15 => {
+                Err(SetpointError::AmplitudeTooHigh {
+                    amplitude_q15,
+                    max_q15: self.max_amplitude_q15,
+                })
+            }
+            Level::Accel(accel_mmps2) if accel_mmps2 > self.max_accel_mmps2 => {
+                Err(SetpointError::AccelTooHigh { accel_mmps2, max_mmps2: self.max_accel_mmps2 })
+            }
+            _ => Ok(()),
         }
-        Ok(())
     }
 }
 
 impl DeviceLimits {
     /// Checks plan step number `index`: its setpoint, a non-zero length, a ramp within it.
     pub fn check_step(&self, index: u16, s: &Step) -> Result<(), PlanError> {
-        self.check_setpoint(s.freq_mhz, s.amplitude_q15).map_err(|e| e.at_step(index))?;
+        self.check_setpoint(s.freq_mhz, s.level).map_err(|e| e.at_step(index))?;
         if s.duration_ms == 0 {
             return Err(PlanError::ZeroDuration { step: index });
         }
@@ -189,6 +201,15 @@ pub enum PlanError {
         /// Highest allowed, Q15.
         max_q15: u16,
     },
+    /// A step's acceleration target is above the device's maximum.
+    AccelTooHigh {
+        /// Step index.
+        step: u16,
+        /// The target asked for, mm/s².
+        accel_mmps2: u32,
+        /// Highest allowed, mm/s².
+        max_mmps2: u32,
+    },
     /// A step lasts 0 ms.
     ZeroDuration {
         /// Step index.
@@ -233,6 +254,13 @@ pub enum SetpointError {
         /// Highest allowed, Q15.
         max_q15: u16,
     },
+    /// The acceleration target is above the device's maximum.
+    AccelTooHigh {
+        /// The target asked for, mm/s².
+        accel_mmps2: u32,
+        /// Highest allowed, mm/s².
+        max_mmps2: u32,
+    },
 }
 
 impl SetpointError {
@@ -245,11 +273,15 @@ impl SetpointError {
             SetpointError::AmplitudeTooHigh { amplitude_q15, max_q15 } => {
                 PlanError::AmplitudeTooHigh { step, amplitude_q15, max_q15 }
             }
+            SetpointError::AccelTooHigh { accel_mmps2, max_mmps2 } => {
+                PlanError::AccelTooHigh { step, accel_mmps2, max_mmps2 }
+            }
         }
     }
 }
 
-/// `mhz` as `Hz.mmm` (exact: no float formatting on the controller).
+/// A milli-unit (mHz as Hz, mm/s² as m/s²) as `X.mmm` (exact: no float formatting on the
+/// controller).
 struct Hz(u32);
 
 impl core::fmt::Display for Hz {
@@ -271,6 +303,12 @@ impl core::fmt::Display for SetpointError {
             SetpointError::AmplitudeTooHigh { amplitude_q15, max_q15 } => {
                 write!(f, "amplitude {amplitude_q15}/32768 above the maximum {max_q15}/32768")
             }
+            SetpointError::AccelTooHigh { accel_mmps2, max_mmps2 } => write!(
+                f,
+                "acceleration target {} m/s² above the maximum {} m/s²",
+                Hz(accel_mmps2),
+                Hz(max_mmps2)
+            ),
         }
     }
 }
@@ -293,6 +331,10 @@ impl core::fmt::Display for PlanError {
                 let e = SetpointError::AmplitudeTooHigh { amplitude_q15, max_q15 };
                 write!(f, "step {step}: {e}")
             }
+            PlanError::AccelTooHigh { step, accel_mmps2, max_mmps2 } => {
+                let e = SetpointError::AccelTooHigh { accel_mmps2, max_mmps2 };
+                write!(f, "step {step}: {e}")
+            }
             PlanError::ZeroDuration { step } => write!(f, "step {step}: duration is 0 ms"),
             PlanError::RampLongerThanStep { step, ramp_ms, duration_ms } => {
                 write!(f, "step {step}: ramp {ramp_ms} ms longer than the step ({duration_ms} ms)")
@@ -309,7 +351,7 @@ mod tests {
     use super::*;
 
     fn step(freq_mhz: u32, amplitude_q15: u16, duration_ms: u32, ramp_ms: u32) -> Step {
-        Step { freq_mhz, amplitude_q15, duration_ms, ramp_ms }
+        Step { freq_mhz, level: Level::Drive(amplitude_q15), duration_ms, ramp_ms }
     }
 
     fn plan(steps: &[Step]) -> Plan {
@@ -376,8 +418,8 @@ mod tests {
     #[test]
     fn setpoint_errors_name_the_value_and_range_and_no_step() {
         let l = DeviceLimits::DEFAULT;
-        assert_eq!(l.check_setpoint(2_000_000, 32767), Ok(()));
-        let fast = l.check_setpoint(5_000_000, 1).unwrap_err();
+        assert_eq!(l.check_setpoint(2_000_000, Level::Drive(32767)), Ok(()));
+        let fast = l.check_setpoint(5_000_000, Level::Drive(1)).unwrap_err();
         assert_eq!(
             fast,
             SetpointError::FrequencyOutOfRange {
@@ -387,7 +429,7 @@ mod tests {
             }
         );
         assert_eq!(std::format!("{fast}"), "frequency 5000.000 Hz outside 1.000..=2000.000 Hz");
-        let loud = l.check_setpoint(440_000, 40_000).unwrap_err();
+        let loud = l.check_setpoint(440_000, Level::Drive(40_000)).unwrap_err();
         assert_eq!(std::format!("{loud}"), "amplitude 40000/32768 above the maximum 32767/32768");
         // In a plan, the same problem names its step.
         assert_eq!(

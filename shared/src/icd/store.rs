@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::icd::frame::CRC32;
 use crate::icd::plan::{DeviceLimits, MAX_NAME, MAX_STEPS, Plan, PlanError, Step};
+use crate::icd::sense::ControlConfig;
 
 /// Plans the store holds: slots `0..PLAN_SLOTS`.
 pub const PLAN_SLOTS: u8 = 65;
@@ -122,11 +123,14 @@ pub struct DeviceConfig {
     /// What plans and manual drives are checked against (within the hardware's
     /// [`DeviceLimits::DEFAULT`]).
     pub limits: DeviceLimits,
+    /// Thresholds of the fault monitors and the loop check.
+    pub control: ControlConfig,
 }
 
 impl DeviceConfig {
     /// The factory configuration: the hardware's limits.
-    pub const DEFAULT: DeviceConfig = DeviceConfig { limits: DeviceLimits::DEFAULT };
+    pub const DEFAULT: DeviceConfig =
+        DeviceConfig { limits: DeviceLimits::DEFAULT, control: ControlConfig::DEFAULT };
 
     /// Checks that the configuration narrows the hardware's limits and is usable.
     pub fn validate(&self) -> Result<(), ConfigError> {
@@ -151,6 +155,43 @@ impl DeviceConfig {
         }
         if l.max_total_ms == 0 || l.max_total_ms > hw.max_total_ms {
             return Err(ConfigError::Length { max_ms: l.max_total_ms });
+        }
+        if l.max_accel_mmps2 == 0 || l.max_accel_mmps2 > hw.max_accel_mmps2 {
+            return Err(ConfigError::Accel { max_mmps2: l.max_accel_mmps2 });
+        }
+        self.validate_control()
+    }
+
+    /// The monitors' thresholds: each within a range that keeps the fault checks meaningful.
+    fn validate_control(&self) -> Result<(), ConfigError> {
+        let c = &self.control;
+        let bad = |field, value: u32| Err(ConfigError::Control { field, value });
+        if c.warn_band_mdb == 0 || c.warn_band_mdb >= c.abort_band_mdb {
+            return bad(ControlField::WarnBand, c.warn_band_mdb);
+        }
+        if c.abort_band_mdb > 20_000 {
+            return bad(ControlField::AbortBand, c.abort_band_mdb);
+        }
+        if c.max_accel_mmps2 <= self.limits.max_accel_mmps2 {
+            return bad(ControlField::MaxAccel, c.max_accel_mmps2);
+        }
+        let times = [
+            (ControlField::OpenLoopMs, c.open_loop_ms),
+            (ControlField::BandMs, c.band_ms),
+            (ControlField::NoDataMs, c.no_data_ms),
+            (ControlField::SaturationMs, c.saturation_ms),
+            (ControlField::CheckMs, c.check_ms),
+        ];
+        for (field, ms) in times {
+            if !(10..=10_000).contains(&ms) {
+                return bad(field, ms);
+            }
+        }
+        if c.check_effort_q15 == 0 || c.check_effort_q15 > self.limits.max_amplitude_q15 {
+            return bad(ControlField::CheckEffort, c.check_effort_q15 as u32);
+        }
+        if c.open_loop_effort_q15 == 0 {
+            return bad(ControlField::OpenLoopEffort, 0);
         }
         Ok(())
     }
@@ -189,6 +230,74 @@ pub enum ConfigError {
         /// The limit asked for, ms.
         max_ms: u64,
     },
+    /// The acceleration limit is 0 or above the hardware's.
+    Accel {
+        /// The limit asked for, mm/s².
+        max_mmps2: u32,
+    },
+    /// A threshold of the fault monitors is out of its range.
+    Control {
+        /// Which.
+        field: ControlField,
+        /// The value asked for (the field's unit).
+        value: u32,
+    },
+}
+
+/// A field of [`ControlConfig`], to name it in a [`ConfigError`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ControlField {
+    /// `warn_band_mdb`: above 0 and below the abort band.
+    WarnBand,
+    /// `abort_band_mdb`: at most 20 dB.
+    AbortBand,
+    /// `max_accel_mmps2`: above the largest acceleration target allowed.
+    MaxAccel,
+    /// `open_loop_ms`: 10..=10 000.
+    OpenLoopMs,
+    /// `open_loop_effort_q15`: above 0.
+    OpenLoopEffort,
+    /// `band_ms`: 10..=10 000.
+    BandMs,
+    /// `no_data_ms`: 10..=10 000.
+    NoDataMs,
+    /// `saturation_ms`: 10..=10 000.
+    SaturationMs,
+    /// `check_ms`: 10..=10 000.
+    CheckMs,
+    /// `check_effort_q15`: above 0, at most the amplitude limit.
+    CheckEffort,
+}
+
+impl ControlField {
+    /// The field's name in the configuration (as `chladni device config set` takes it).
+    pub const fn name(self) -> &'static str {
+        match self {
+            ControlField::WarnBand => "warn_band_mdb",
+            ControlField::AbortBand => "abort_band_mdb",
+            ControlField::MaxAccel => "max_accel_mmps2",
+            ControlField::OpenLoopMs => "open_loop_ms",
+            ControlField::OpenLoopEffort => "open_loop_effort_q15",
+            ControlField::BandMs => "band_ms",
+            ControlField::NoDataMs => "no_data_ms",
+            ControlField::SaturationMs => "saturation_ms",
+            ControlField::CheckMs => "check_ms",
+            ControlField::CheckEffort => "check_effort_q15",
+        }
+    }
+
+    /// The rule the field must follow.
+    pub const fn rule(self) -> &'static str {
+        match self {
+            ControlField::WarnBand => "above 0 and below abort_band_mdb",
+            ControlField::AbortBand => "at most 20000 (20 dB)",
+            ControlField::MaxAccel => "above the acceleration target limit max_accel_mmps2",
+            ControlField::OpenLoopEffort => "above 0",
+            ControlField::CheckEffort => "above 0 and at most the amplitude limit",
+            _ => "10..=10000 ms",
+        }
+    }
 }
 
 impl core::fmt::Display for ConfigError {
@@ -212,6 +321,14 @@ impl core::fmt::Display for ConfigError {
             }
             ConfigError::Length { max_ms } => {
                 write!(f, "plan length limit {max_ms} ms must be 1..={} ms", hw.max_total_ms)
+            }
+            ConfigError::Accel { max_mmps2 } => write!(
+                f,
+                "acceleration limit {max_mmps2} mm/s² must be 1..={} mm/s²",
+                hw.max_accel_mmps2
+            ),
+            ConfigError::Control { field, value } => {
+                write!(f, "{} = {value} must be {}", field.name(), field.rule())
             }
         }
     }
@@ -406,7 +523,7 @@ mod tests {
     fn plan(steps: usize) -> Plan {
         let step = |i: usize| Step {
             freq_mhz: 100_000 + i as u32 * 1_001,
-            amplitude_q15: (i * 97 % 32768) as u16,
+            level: crate::icd::plan::Level::Drive((i * 97 % 32768) as u16),
             duration_ms: 10 + i as u32,
             ramp_ms: i as u32 % 11,
         };
@@ -431,7 +548,7 @@ mod tests {
         use crate::icd::frame::{ENCODE_BUF, Envelope, PROTOCOL_VERSION, encode};
         let worst = Step {
             freq_mhz: u32::MAX,
-            amplitude_q15: u16::MAX,
+            level: crate::icd::plan::Level::Drive(u16::MAX),
             duration_ms: u32::MAX,
             ramp_ms: u32::MAX,
         };

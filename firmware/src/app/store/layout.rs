@@ -163,8 +163,9 @@ impl Geometry {
 }
 
 /// Largest value the store writes or reads: a full chunk of steps at their longest encoding
-/// (four varints of at most 5, 3, 5 and 5 bytes), with the option tag and the vector length.
-pub const MAX_VALUE: usize = 1 + 1 + CHUNK_STEPS * 18;
+/// (frequency, duration and ramp as varints of at most 5 bytes; the level a variant tag and a
+/// varint of at most 5), with the option tag and the vector length.
+pub const MAX_VALUE: usize = 1 + 1 + CHUNK_STEPS * 21;
 
 const _: () = assert!(MAX_VALUE + 2 <= super::ITEM_BUFFER);
 
@@ -193,7 +194,7 @@ mod tests {
     fn the_longest_chunk_fits_the_buffer() {
         let worst = Step {
             freq_mhz: u32::MAX,
-            amplitude_q15: u16::MAX,
+            level: chladni_shared::icd::plan::Level::Accel(u32::MAX),
             duration_ms: u32::MAX,
             ramp_ms: u32::MAX,
         };

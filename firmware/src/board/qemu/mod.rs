@@ -8,14 +8,20 @@
 //! - [`executor`]: embassy's executor sleeping with WFI instead of WFE (which QEMU spins on);
 //! - [`flash`]: flash bank 2 kept in a host file through semihosting (QEMU's flash is inert);
 //! - defmt over semihosting, and [`exit`] to end QEMU with a status code;
+//! - [`sensor`]: the LSM6DSL accelerometer, simulated (QEMU has no I2C devices);
 //! - [`failsafe`]: the simulated DAC parks at mid-scale on a panic or HardFault, and the exit
 //!   code says whether it did.
+//! - [`watchdog`]: a simulated watchdog counted down by the SysTick time driver; when it runs
+//!   out it parks the drive, records the cause in RAM that survives the reset, and resets
+//!   (SYSRESETREQ), so [`reset_cause`] says `Watchdog` on the next boot.
 
 pub mod executor;
 pub mod failsafe;
 pub mod flash;
+pub mod sensor;
 pub mod time_driver;
 pub mod usart;
+pub mod watchdog;
 
 use defmt_semihosting as _;
 
@@ -28,6 +34,11 @@ pub type Link = usart::Usart1;
 /// The drive output: no DAC in QEMU, so a simulated one paced by the time driver, feeding the
 /// simulated shaker + plate, which the fault handlers park.
 pub type DriveOutput = failsafe::ParkableDac;
+
+pub use sensor::{Sensor, SensorBus, SensorIrq};
+/// The watchdog: simulated, counted down by the time driver (see [`watchdog`]).
+pub type Watchdog = watchdog::Watchdog;
+pub use watchdog::reset_cause;
 
 /// Flash bank 2 for the plan store: a host file (see [`flash`]).
 pub type Flash = flash::FileFlash;
@@ -44,8 +55,12 @@ pub struct Board {
     pub flash: Option<Flash>,
     /// Drive output.
     pub drive: DriveOutput,
+    /// The simulated LSM6DSL accelerometer's bus and INT1 line.
+    pub sensor: Sensor,
     /// This board's own tasks: none in QEMU.
     pub tasks: BoardTasks,
+    /// The (simulated) watchdog, not started: `app::watchdog::watchdog_task` starts it.
+    pub watchdog: Watchdog,
 }
 
 /// Background work of the board itself (the real board runs its USB device here).
@@ -67,7 +82,14 @@ pub fn init() -> Board {
         }
         opened.ok()
     });
-    Board { link: usart::Usart1::new(), flash, drive: DriveOutput::new(), tasks: BoardTasks }
+    Board {
+        link: usart::Usart1::new(),
+        flash,
+        drive: DriveOutput::new(),
+        sensor: sensor::new(),
+        tasks: BoardTasks,
+        watchdog: Watchdog::new(),
+    }
 }
 
 pub use executor::run;

@@ -4,6 +4,8 @@
 //! The core clock is left at its reset value, MSI 4 MHz, which QEMU's RCC model honours, so
 //! the reload is 4000 cycles. QEMU's virtual clock follows the host clock, so time slips under
 //! load: tests count samples, not milliseconds.
+//!
+//! The same interrupt also counts down the simulated watchdog ([`super::watchdog::on_tick`]).
 
 use core::cell::{Cell, RefCell};
 use core::task::Waker;
@@ -72,4 +74,6 @@ pub fn start(mut syst: SYST) {
 #[cortex_m_rt::exception]
 fn SysTick() {
     DRIVER.on_tick();
+    // The simulated watchdog counts in the same 1 kHz ticks (QEMU has no IWDG).
+    super::watchdog::on_tick();
 }

@@ -15,17 +15,23 @@
 //! recursion, print the message through defmt (panic-probe's `print-defmt`), then `udf` into
 //! HardFault (panic-probe's `hard_fault()`), which probe-rs reports with a backtrace.
 //!
+//! With the PWM drive (feature `drive-pwm`) parking means: stop its DMA and hold 50 % duty,
+//! the PWM's mid-scale, with TIM3 left running (see [`super::pwm::park`]).
+//!
 //! After parking, the handlers also detach from USB ([`detach_usb`]): a halted core no longer
 //! answers the host, and a device that just stops answering leaves the host's `chladni` waiting
 //! on timeouts; a detached one looks unplugged, so the host reports the link closed at once.
 
 use core::sync::atomic::{AtomicBool, Ordering};
 
+#[cfg(not(feature = "drive-pwm"))]
 use chladni_shared::drive::dds::DAC_MID;
 use stm32_metapac as pac;
 
+#[cfg(not(feature = "drive-pwm"))]
 /// DAC1 channel 1 (index 0 in the metapac's per-channel fields).
 const DAC_CH1: usize = 0;
+#[cfg(not(feature = "drive-pwm"))]
 /// DMA1 channel 3 (index 2), the DAC1 ch1 channel (request 6), see `super::DacOutput`.
 const DMA_CH3: usize = 2;
 
@@ -40,6 +46,7 @@ static PANICKED: AtomicBool = AtomicBool::new(false);
 /// TEN1 = 1 it would wait for a trigger that no longer comes), then write mid-scale. The
 /// channel stays enabled: switching it off would let PA4 float instead of holding mid-scale.
 /// Before `init` the peripheral clocks are off, the writes are ignored, and nothing drives.
+#[cfg(not(feature = "drive-pwm"))]
 pub fn park_output() {
     pac::TIM6.cr1().modify(|w| w.set_cen(false));
     pac::DMA1.ch(DMA_CH3).cr().modify(|w| w.set_en(false));
@@ -58,7 +65,26 @@ pub fn detach_usb() {
     pac::USB_OTG_FS.dctl().modify(|w| w.set_sdis(true));
 }
 
+/// Stops the PWM drive (feature `drive-pwm`) and holds it at 50 % duty, the PWM's mid-scale
+/// (zero signal after the filter): see [`super::pwm::park`]. Idempotent, needs no state.
+#[cfg(feature = "drive-pwm")]
+pub fn park_output() {
+    super::pwm::park();
+}
+
+/// Logs the PWM's duty and whether it is parked, for the fault report (feature `drive-pwm`).
+#[cfg(feature = "drive-pwm")]
+fn report_output() {
+    let (duty, parked) = super::pwm::parked_duty();
+    if parked {
+        defmt::error!("fault: output parked at duty {=u16}", duty);
+    } else {
+        defmt::error!("fault: output NOT parked (duty {=u16})", duty);
+    }
+}
+
 /// Logs what the output holds now (DOR1 and whether TIM6 still runs), for the fault report.
+#[cfg(not(feature = "drive-pwm"))]
 fn report_output() {
     // DOR1 follows DHR1 one APB clock after the write; a few loads later it has.
     let code = pac::DAC1.dor(DAC_CH1).read().dor();

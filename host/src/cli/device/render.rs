@@ -37,7 +37,7 @@ impl From<&StatusReport> for StatusJson {
         StatusJson {
             amplitude: Q15(s.amplitude_q15).to_fraction(),
             elapsed_ms: s.elapsed_ms(),
-            fault: s.fault.map(|f| f.name()),
+            fault: s.fault.map(|f| f.cause.name()),
             freq_hz: MilliHz(s.freq_mhz).to_hz(),
             plan: s.plan.as_ref().map(|p| p.to_string()),
             remaining_ms: s.remaining_ms(),
@@ -204,7 +204,7 @@ pub fn status(s: &StatusReport, json: bool) -> anyhow::Result<ExitCode> {
     println!("amplitude  {:.4}", Q15(s.amplitude_q15).to_fraction());
     println!("underruns  {}", s.underruns);
     if let Some(fault) = s.fault {
-        println!("fault      {} (`chladni device stop` clears it)", fault.name());
+        println!("fault      {} (`chladni device stop` clears it)", fault.cause.name());
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -222,7 +222,7 @@ pub fn telemetry_line(t: &Telemetry) -> String {
         }
         _ => "no plan".to_string(),
     };
-    let fault = s.fault.map_or(String::new(), |f| format!("  FAULT {}", f.name()));
+    let fault = s.fault.map_or(String::new(), |f| format!("  FAULT {}", f.cause.name()));
     format!(
         "#{:<5} {:<9} {:>9.3} Hz  amplitude {:.4}  {step}  run {}{fault}",
         t.seq,
@@ -263,7 +263,7 @@ pub fn config(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use chladni_shared::icd::link::{DriveState, Fault};
+    use chladni_shared::icd::link::{DriveState, Fault, FaultCause};
 
     pub fn status_report() -> StatusReport {
         StatusReport {
@@ -273,13 +273,12 @@ mod tests {
             run: RunNumber(17),
             plan: Some("square-45".try_into().unwrap()),
             remaining_samples: 25_000,
-            fault: None,
             elapsed_samples: 12_345,
-            sample_rate: 50_000,
             freq_mhz: 181_500,
             amplitude_q15: 32767,
             underruns: 3,
             commands: 9,
+            ..StatusReport::IDLE
         }
     }
 
@@ -321,11 +320,14 @@ mod tests {
             state: DriveState::Faulted,
             step: None,
             plan: None,
-            fault: Some(Fault::Latched),
+            fault: Some(Fault { cause: FaultCause::LoopOpen, value: 12, at_sample: 5 }),
             ..s
         };
         let v = serde_json::to_value(StatusJson::from(&faulted)).unwrap();
-        assert_eq!((v["state"].as_str(), v["fault"].as_str()), (Some("faulted"), Some("latched")));
+        assert_eq!(
+            (v["state"].as_str(), v["fault"].as_str()),
+            (Some("faulted"), Some("loop_open"))
+        );
         assert!(v["step"].is_null() && v["plan"].is_null());
     }
 

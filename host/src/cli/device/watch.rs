@@ -250,7 +250,7 @@ fn outcome_message(
         RunOutcome::Faulted(_) => format!(
             "error: the drive faulted during plan {what} (run {run}): {}; `chladni device \
              stop` clears it",
-            s.fault.map_or("fault", |f| f.name())
+            s.fault.map_or("fault", |f| f.cause.name())
         ),
         RunOutcome::Interrupted(_) => format!(
             "interrupted: stopped plan {what} (run {run}; the stop is run {})",
@@ -315,23 +315,18 @@ fn end_monitor(client: &mut DeviceClient, rate_hz: u16) -> anyhow::Result<ExitCo
 #[cfg(test)]
 mod tests {
     use super::*;
-    use chladni_shared::icd::link::{DriveState, Fault};
+    use chladni_shared::icd::link::{DriveState, Fault, FaultCause};
 
     fn status(run: u32, state: DriveState) -> StatusReport {
+        let fault = Fault { cause: FaultCause::LoopOpen, value: 0, at_sample: 0 };
         StatusReport {
             state,
-            step: None,
-            repetition: 0,
             run: RunNumber(run),
-            plan: None,
-            remaining_samples: 0,
-            fault: (state == DriveState::Faulted).then_some(Fault::Latched),
+            fault: (state == DriveState::Faulted).then_some(fault),
             elapsed_samples: 50_000,
-            sample_rate: 50_000,
-            freq_mhz: 0,
-            amplitude_q15: 0,
             underruns: 2,
             commands: 4,
+            ..StatusReport::IDLE
         }
     }
 

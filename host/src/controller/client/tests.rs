@@ -39,21 +39,7 @@ fn device_info() -> DeviceInfo {
 }
 
 fn idle_status(run: u32) -> StatusReport {
-    StatusReport {
-        state: DriveState::Idle,
-        step: None,
-        repetition: 0,
-        run: RunNumber(run),
-        plan: None,
-        remaining_samples: 0,
-        fault: None,
-        elapsed_samples: 0,
-        sample_rate: 50_000,
-        freq_mhz: 0,
-        amplitude_q15: 0,
-        underruns: 0,
-        commands: 0,
-    }
+    StatusReport { run: RunNumber(run), ..StatusReport::IDLE }
 }
 
 /// Answers `Hello` correctly; every other request through `script`.
@@ -194,7 +180,7 @@ fn refusals_link_errors_and_wrong_kinds_are_typed() {
         frame(env.session, env.id, body)
     });
     let mut c = client(io);
-    let err = c.drive(120_000, 100).unwrap_err();
+    let err = c.drive(120_000, chladni_shared::icd::plan::Level::Drive(100)).unwrap_err();
     assert!(matches!(&err, DeviceError::Refused(Refusal::Busy { idle_ms: 120, .. })));
     assert_eq!(
         err.to_string(),
@@ -268,7 +254,7 @@ fn telemetry_is_taken_for_this_subscription_only_even_while_waiting() {
 fn test_plan(steps: usize) -> Plan {
     let step = |i: usize| Step {
         freq_mhz: 50_000 + i as u32,
-        amplitude_q15: 1000,
+        level: chladni_shared::icd::plan::Level::Drive(1000),
         duration_ms: 10,
         ramp_ms: 0,
     };
@@ -404,7 +390,10 @@ fn release_is_sent_on_drop_only_by_a_client_that_may_own() {
 
     let (peer, io) = Peer::start(answer);
     let mut owner = client(io);
-    assert_eq!(owner.drive(100_000, 5).unwrap(), RunNumber(4));
+    assert_eq!(
+        owner.drive(100_000, chladni_shared::icd::plan::Level::Drive(5)).unwrap(),
+        RunNumber(4)
+    );
     drop(owner);
     let names: Vec<String> =
         peer.requests().iter().map(|r| r.as_ref().unwrap().body.name().to_string()).collect();
@@ -416,7 +405,7 @@ fn tampered_frames_fail_the_controllers_checks() {
     use chladni_shared::icd::link::Drive;
     let (peer, io) = Peer::start(|_| Vec::new());
     let mut c = client(io);
-    let drive = Drive { freq_mhz: 123_000, amplitude_q15: 4000 };
+    let drive = Drive { freq_mhz: 123_000, level: chladni_shared::icd::plan::Level::Drive(4000) };
     let id = c.send_tampered(drive, Tamper::CorruptCrc).unwrap();
     c.send_tampered(drive, Tamper::FlipBodyBit(8)).unwrap();
     c.send_tampered(drive, Tamper::Version(7)).unwrap();

@@ -40,7 +40,7 @@ fn step(i: usize, seed: u32) -> Step {
     let x = (i as u32).wrapping_mul(2_654_435_761) ^ seed.wrapping_mul(40_503);
     Step {
         freq_mhz: 1_000 + x % 1_999_000,
-        amplitude_q15: (x >> 7) as u16 % 32_768,
+        level: chladni_shared::icd::plan::Level::Drive((x >> 7) as u16 % 32_768),
         duration_ms: 1 + x % 4_000,
         ramp_ms: (x % 7).min(1 + x % 4_000),
     }
@@ -64,7 +64,7 @@ fn longest_plan(name: &str, seed: u32) -> Plan {
         let ms = if long { 16_384 } else { 128 };
         Step {
             freq_mhz: 1_999_000 - (i as u32 + seed) % 500,
-            amplitude_q15: 32_767 - (seed % 16) as u16,
+            level: chladni_shared::icd::plan::Level::Drive(32_767 - (seed % 16) as u16),
             duration_ms: ms,
             ramp_ms: ms,
         }

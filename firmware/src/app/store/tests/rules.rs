@@ -197,7 +197,7 @@ fn commit_checks_the_whole_plan() {
 
     // A wrong CRC stores nothing and ends the upload.
     let mut other = p.clone();
-    other.steps[39].amplitude_q15 ^= 1;
+    other.steps[39].duration_ms ^= 1;
     let mut begin = begin_of(&other, None);
     begin.crc = plan_crc(&p) ^ 0x55;
     block_on(s.begin(begin, &LIMITS)).unwrap();
