@@ -23,8 +23,9 @@
 //!   gain Ĝ = response / check effort seeds the controller.
 //! - **Run**: the PI with feed-forward, the setpoint ramping from the check's response to the
 //!   target over `ramp_ms`. A changed target ramps from the current setpoint.
-//! - **Regain** (a frequency change while running): the effort is held until the first window
-//!   at the new frequency, which re-measures Ĝ; then Run again, ramping from that response.
+//! - **Regain** (a frequency change while running): the effort is held for `check_ms` (the
+//!   plate rings at its own frequency after the change; that transient decays with the plate's
+//!   τ), then the last window re-measures Ĝ; then Run again, ramping from that response.
 //!
 //! A fault latches (reported in every [`LoopOutput`], effort `None`) until
 //! [`ClosedLoop::clear_fault`].
@@ -81,8 +82,12 @@ pub enum Stage {
         /// Its first sample.
         start: u64,
     },
-    /// Holding the effort until the first window at a new frequency.
-    Regain,
+    /// Holding the effort for `check_ms` after a frequency change (the plate's transient
+    /// dies down), then re-measuring the gain.
+    Regain {
+        /// The first sample at the new frequency (as the drive task saw it).
+        since: u64,
+    },
     /// The PI controls.
     Run,
 }
@@ -280,13 +285,17 @@ impl ClosedLoop {
                 }
                 self.check(i, start, target, ramp_len)
             }
-            Stage::Regain | Stage::Run if self.mark_switched => {
-                self.stage = Stage::Regain;
+            Stage::Regain { .. } | Stage::Run if self.mark_switched => {
+                self.stage = Stage::Regain { since: now };
                 self.ctrl.as_ref().map(|c| (c.effort(), None))
             }
-            Stage::Regain => {
+            Stage::Regain { since } => {
+                let hold = self.cfg.check_ms as u64 * SAMPLES_PER_MS as u64;
                 let ctrl = self.ctrl.as_mut()?;
-                if let Some(e) = fresh {
+                if now >= since + hold
+                    && let Some(e) = self.lockin.last()
+                    && e.end >= dac_time(since + hold / 2)
+                {
                     let y = e.accel_mmps2();
                     let gain = y as f32 / ctrl.effort().max(1) as f32;
                     ctrl.regain(gain, y, now, ramp_len);

@@ -73,7 +73,7 @@ impl Estimate {
         // ×4 then halve the root: half-mm resolution before rounding.
         let sq = 4.0 * (a * a + b * b);
         let r = (sq as u64).isqrt(); // ⌊2·amplitude⌋
-        ((r + 1) / 2) as u32
+        r.div_ceil(2) as u32
     }
 
     /// Amplitude (peak), m/s².

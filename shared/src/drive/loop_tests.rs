@@ -7,7 +7,6 @@ extern crate std;
 
 use crate::drive::closed_loop::{BlockInput, ClosedLoop, LoopOutput, Stage};
 use crate::drive::dds::{Dds, SAMPLES_PER_MS, gain_of_q15, tuning_word};
-use crate::drive::lockin::LSB_16G_MPS2;
 use crate::drive::plant::{Plant, PlantFault, PlantParams};
 use crate::drive::runner::BLOCK_LEN;
 use crate::drive::sensor_sim::{SensorSim, SensorSimConfig};
@@ -483,4 +482,34 @@ fn timebase_in_the_rig() {
         // The rig reads right after a DAC sample (the bound's ½-sample centring shows as +½).
         assert!(lo > -1.0 && hi < 2.0, "{lo} {hi}");
     }
+}
+
+/// A frequency change while running (a plan's next step): the loop holds its effort, re-measures
+/// the gain from the first window at the new frequency and settles again, without a fault.
+#[test]
+fn frequency_change_regains_and_resettles() {
+    let mut rig = Rig::new(180_000, quiet_sensor(), ControlConfig::DEFAULT);
+    let target = 40_000;
+    for _ in 0..60 {
+        assert_eq!(rig.block(0, Some(target), 10).fault, None);
+    }
+    rig.set_freq(150_000);
+    let changed = rig.now;
+    let mut last_outside = changed;
+    for _ in 0..120 {
+        let out = rig.block(0, Some(target), 10);
+        assert_eq!(out.fault, None);
+        if std::env::var("CHLADNI_TRACE").is_ok() {
+            std::println!("{:?} {:?} {:?}", out.measurement, out.effort_q15, rig.lp.stage());
+        }
+        if let Some(m) = out.measurement
+            && (m.accel_mmps2 as f64 / target as f64 - 1.0).abs() > 0.02
+        {
+            last_outside = rig.now;
+        }
+    }
+    let ms = (last_outside - changed) as f64 / SAMPLES_PER_MS as f64;
+    std::println!("frequency step 180 → 150 Hz at 40 m/s²: within 2 % again after {ms:.0} ms");
+    assert_eq!(rig.lp.stage(), Stage::Run);
+    assert!(ms < 300.0, "{ms} ms");
 }
