@@ -11,6 +11,7 @@
 #![no_main]
 
 use chladni_firmware::app::drive::{self, Command, DriveShared};
+use chladni_firmware::app::watchdog::{Supervisor, TaskSet};
 use chladni_firmware::board::{self, qemu::failsafe, qemu::flash};
 use chladni_shared::drive::dds::DAC_MID;
 use embassy_time::{Duration, Instant, Timer};
@@ -31,6 +32,8 @@ const DRIVEN: u16 = 256;
 const START_LIMIT: Duration = Duration::from_secs(10);
 
 static SHARED: DriveShared = DriveShared::new();
+/// No watchdog in this image: the drive's check-ins go nowhere.
+static SUPERVISOR: Supervisor = Supervisor::new(TaskSet::EMPTY);
 
 /// The way to crash.
 #[derive(Clone, Copy, defmt::Format)]
@@ -41,7 +44,7 @@ enum Crash {
 
 #[embassy_executor::task]
 async fn drive_task(mut output: board::DriveOutput) -> ! {
-    drive::run(&SHARED, &mut output).await
+    drive::run(&SHARED, &SUPERVISOR, &mut output).await
 }
 
 #[embassy_executor::task]

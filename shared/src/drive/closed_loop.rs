@@ -191,10 +191,13 @@ impl ClosedLoop {
     }
 
     /// Clears a latched fault; the next closed-loop run starts with a loop check.
+    /// Sensor errors reported before the clear are forgotten with it: a sensor still broken
+    /// reports again (and faults again) with its next error.
     pub fn clear_fault(&mut self) {
         self.fault = None;
         self.stage = Stage::Open;
         self.ctrl = None;
+        self.monitors = Monitors::new(self.cfg);
     }
 
     fn switch_mark(&mut self, mark: PhaseMark) {

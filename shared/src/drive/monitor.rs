@@ -196,7 +196,11 @@ impl Monitors {
             }
         }
         self.warning = outside_warn;
-        if dev.unsigned_abs() <= self.cfg.abort_band_mdb {
+        // Below the target with drive to spare, the controller is still climbing: if it gets
+        // there, fine; if it cannot, it ends at its ceiling and that is the cause to name
+        // (saturation), not the band.
+        let climbing = dev < 0 && c.demand_q15 < c.ceiling_q15 as u32;
+        if dev.unsigned_abs() <= self.cfg.abort_band_mdb || climbing {
             self.out_since = None;
             return None;
         }

@@ -24,7 +24,7 @@ pub struct SweepPoint {
 }
 
 /// A resonance found in a sweep.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Resonance {
     /// Index of the highest sweep point.
     pub index: usize,

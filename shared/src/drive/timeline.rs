@@ -94,6 +94,11 @@ pub const fn nominal_period_q16(odr_mhz: u32) -> u32 {
     if odr_mhz == 0 { 0 } else { ((num + odr_mhz as u64 / 2) / odr_mhz as u64) as u32 }
 }
 
+/// Sensor samples' worth of time beyond twice a batch's own that a gap between batches may
+/// span before the timebase starts again (a silent sensor; 64 samples ≈ 19 ms at 3.33 kHz,
+/// against reads every ~5 ms).
+const GAP_SLACK: u64 = 64;
+
 /// A batch the anchors remember: its stamp and the sensor-sample count after it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Anchor {
@@ -161,6 +166,14 @@ impl SensorTimebase {
         }
         // S samples output: the read happened in [S − 1, S); centre the bound at S − ½.
         let s = dac_time(stamp).saturating_sub(1 << (TIME_FRAC_BITS - 1));
+        // Far more time passed since the last batch than these samples explain: the sensor
+        // was silent (or restarted), so the old anchors no longer count the same samples.
+        if let Some(prev) = self.newest {
+            let explained = (2 * n as u64 + GAP_SLACK) * self.period_q16 as u64;
+            if s > prev + explained {
+                self.reset();
+            }
+        }
         self.count += n as u64;
         self.update_period(s);
         self.recent[self.recent_next] = Anchor { stamp: s, count: self.count };
@@ -285,6 +298,25 @@ mod tests {
             assert!(worst < period / 4.0, "worst {worst} of period {period}");
             assert!(mean < 1.0, "mean {mean}");
         }
+    }
+
+    #[test]
+    fn a_silent_sensor_starts_the_timebase_again() {
+        let mut tb = SensorTimebase::new(3_330_000);
+        let p = 50_000.0 / 3330.0;
+        // Reads every 250 DAC samples, ~16.7 samples each, then 2 s of silence.
+        let mut produced = 0.0f64;
+        for k in 1..=400u64 {
+            let due = (k * 250) as f64 / p;
+            let n = (due - produced).floor();
+            produced += n;
+            tb.push_batch(n as usize, k * 250);
+        }
+        let before = tb.period();
+        let newest = tb.push_batch(16, 400 * 250 + 100_000).unwrap();
+        // Without the restart the 2 s gap would pass for 16 samples' worth of time.
+        assert!((tb.period() - before).abs() < 0.01, "{} vs {before}", tb.period());
+        assert_eq!(newest, dac_time(400 * 250 + 100_000) - (1 << 15));
     }
 
     #[test]

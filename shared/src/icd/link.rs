@@ -233,7 +233,7 @@ pub struct SweepPage {
 pub enum TestFault {
     /// The shaker's wires are cut: the plate gets no force.
     ShakerDisconnected,
-    /// The amplifier clips at a tenth of full scale.
+    /// The amplifier clips at a fiftieth of full scale.
     AmplifierSaturated,
     /// The accelerometer stops producing samples.
     SensorSilent,

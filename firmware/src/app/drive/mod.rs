@@ -358,6 +358,8 @@ impl<'a> DriveCore<'a> {
                 if let Some(c) = &mut self.closed {
                     c.clear_fault();
                 }
+                // Errors the sense task queued before the clear are what was cleared.
+                while self.shared.sensor.try_receive().is_ok() {}
                 Ok(())
             }
             Queued::Command(Command::Sweep(spec)) => {

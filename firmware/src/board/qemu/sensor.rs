@@ -78,8 +78,9 @@ pub fn inject(fault: TestFault) {
     let set_sensor = |f: Fault| SIM.lock(|s| s.borrow_mut().set_fault(f));
     match fault {
         TestFault::ShakerDisconnected => PLANT_FAULTS.lock(|p| p.set(PlantFault::Disconnected)),
-        // A tenth of the DAC's swing: the amplifier's rail.
-        TestFault::AmplifierSaturated => PLANT_FAULTS.lock(|p| p.set(PlantFault::Saturated(205))),
+        // A fiftieth of the DAC's swing: no drive the controller may ask for reaches the
+        // targets the tests set, so it must end at its ceiling.
+        TestFault::AmplifierSaturated => PLANT_FAULTS.lock(|p| p.set(PlantFault::Saturated(41))),
         TestFault::SensorSilent => set_sensor(Fault::Silent),
         // 0x69: the id of another ST part (LSM6DS3 answers 0x69), as a swapped board would.
         TestFault::SensorWrongId => set_sensor(Fault::WrongId(0x69)),
