@@ -46,16 +46,22 @@ fn status_info_ping_config_and_list_print_their_json_shapes() {
     assert_eq!(
         keys(&status),
         [
+            "accel_mps2",
             "amplitude",
+            "effort",
             "elapsed_ms",
             "fault",
             "freq_hz",
+            "phase_deg",
             "plan",
             "remaining_ms",
+            "reset_cause",
             "run",
             "state",
             "step",
-            "underruns"
+            "target_accel_mps2",
+            "underruns",
+            "warning"
         ]
     );
     assert_eq!(status["state"], "idle");
@@ -68,7 +74,26 @@ fn status_info_ping_config_and_list_print_their_json_shapes() {
     let config = json_of(&chladni(&["device", "config", "get", "--port", &port, "--json"]));
     assert_eq!(
         keys(&config),
-        ["max_amplitude", "max_freq_hz", "max_steps", "max_total_ms", "min_freq_hz"]
+        [
+            "abort_band_db",
+            "band_ms",
+            "check_effort",
+            "check_min_mps2",
+            "check_ms",
+            "fault_accel_mps2",
+            "max_accel_mps2",
+            "max_amplitude",
+            "max_freq_hz",
+            "max_steps",
+            "max_total_ms",
+            "min_freq_hz",
+            "no_data_ms",
+            "open_loop_effort",
+            "open_loop_ms",
+            "open_loop_mps2",
+            "saturation_ms",
+            "warn_band_db"
+        ]
     );
     assert_eq!(
         (config["max_steps"].as_u64(), config["max_freq_hz"].as_f64()),
@@ -90,7 +115,7 @@ fn status_info_ping_config_and_list_print_their_json_shapes() {
         "0.25",
         "--json",
     ]));
-    assert_eq!(keys(&drive), ["amplitude", "freq_hz", "run"]);
+    assert_eq!(keys(&drive), ["accel_mps2", "amplitude", "freq_hz", "run"]);
     let stop = json_of(&chladni(&["device", "stop", "--port", &port, "--json"]));
     assert!(stop["run"].as_u64() > drive["run"].as_u64(), "{stop} after {drive}");
 }

@@ -165,3 +165,57 @@ fn device_plan_slots_names_and_config_values_are_checked_before_connecting() {
     let missing = tmp("no-such-plan.json");
     refused(&device(&["run-file", missing.to_str().unwrap()]), "cannot read plan");
 }
+
+#[test]
+fn drive_levels_sweeps_and_control_keys_are_checked_before_connecting() {
+    let port = "tcp://127.0.0.1:1";
+    let device = |args: &[&str]| {
+        let mut all = vec!["device"];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["--port", port]);
+        chladni(&all)
+    };
+    // Exactly one of --amplitude and --accel.
+    refused(&device(&["drive", "--freq", "100"]), "--amplitude");
+    refused(
+        &device(&["drive", "--freq", "100", "--amplitude", "0.1", "--accel", "5"]),
+        "cannot be used with",
+    );
+    refused(
+        &device(&["drive", "--freq", "100", "--accel", "150"]),
+        "acceleration target 150.000 m/s² above the maximum 100.000 m/s²",
+    );
+    refused(&device(&["drive", "--freq", "100", "--accel=-1"]), "--accel: acceleration -1 m/s²");
+    // Sweeps, by the controller's own check, before any connection.
+    let sweep = |extra: &[&str]| {
+        let mut args = vec!["sweep", "--from", "20", "--to", "400"];
+        args.extend_from_slice(extra);
+        device(&args)
+    };
+    refused(
+        &device(&["sweep", "--from", "400", "--to", "20"]),
+        "sweep from 400.000 Hz to 20.000 Hz: the start must be below the end",
+    );
+    refused(&device(&["sweep", "--from", "0.5", "--to", "20"]), "--from: frequency 0.5 Hz");
+    refused(&sweep(&["--points", "1"]), "1 sweep points: give 2..=200");
+    refused(&sweep(&["--points", "500"]), "500 sweep points: give 2..=200");
+    refused(&sweep(&["--amplitude", "2"]), "--amplitude: amplitude 2 outside 0..=1");
+    refused(&sweep(&["--dwell-ms", "5"]), "dwell 5 ms per point: give 10..=10000 ms");
+    refused(&sweep(&["--plot", "bode.gif"]), "--plot file must end in .png");
+    let plate = tmp("sweep-plate.toml");
+    std::fs::write(&plate, "[plate]\nname = \"p\"\n").unwrap();
+    let p = plate.to_str().unwrap();
+    refused(&sweep(&["--write-modes", p, "--out", p]), "refusing to overwrite an input");
+    std::fs::write(&plate, "[plate\n").unwrap();
+    refused(&sweep(&["--write-modes", p]), "--write-modes:");
+    // Control thresholds in user units.
+    refused(
+        &device(&["config", "set", "warn_band_db", "loud"]),
+        "warn_band_db must be a level in dB",
+    );
+    refused(
+        &device(&["config", "set", "fault_accel_mps2", "1e7"]),
+        "fault_accel_mps2: acceleration 10000000",
+    );
+    refused(&device(&["config", "set", "check_ms", "0.5"]), "check_ms must be whole milliseconds");
+}

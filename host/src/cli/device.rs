@@ -2,11 +2,12 @@
 //!
 //! Thin: parse, call [`chladni::controller::client`], render. Every command takes `--json`.
 //! The submodules hold the value parsers and config keys ([`values`]), the JSON shapes and
-//! tables ([`render`]), serial port listing ([`ports`]) and what takes time: waiting for a run,
-//! the telemetry monitor, Ctrl-C ([`watch`]).
+//! tables ([`render`]), serial port listing ([`ports`]), what takes time: waiting for a run,
+//! the telemetry monitor, Ctrl-C ([`watch`]), and the frequency sweep ([`sweep`]).
 
 mod ports;
 mod render;
+mod sweep;
 mod values;
 mod watch;
 
@@ -15,15 +16,17 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use chladni::controller::client::DeviceClient;
+use chladni::controller::client::DeviceError;
 use chladni::model::plan_file::PlanFile;
-use chladni_shared::icd::plan::{DeviceLimits, Plan};
+use chladni_shared::icd::link::Refusal;
+use chladni_shared::icd::plan::{DeviceLimits, Level, Plan};
 use chladni_shared::icd::store::{DeviceConfig, PlanName, PlanRef, SCRATCH_SLOT};
 use clap::{Args, Subcommand};
 
 use super::InputError;
-use super::parse::{drive_amplitude, drive_freq};
+use super::parse::{drive_accel, drive_amplitude, drive_freq};
 use render::{PlanJson, print_json};
-use values::{ConfigKey, config_key, plan_name, plan_target, slot};
+use values::{ConfigKey, config_key, config_refusal, plan_name, plan_target, slot};
 
 /// Where the controller is.
 #[derive(Debug, Args)]
@@ -123,7 +126,8 @@ pub enum DeviceCommand {
         #[command(flatten)]
         port: PortArg,
         /// Plan file (as written by `chladni plan --out`): {"name", "repeat", "steps":
-        /// [{"freq_hz", "duration_ms", "amplitude" (0..1), "ramp_ms"}], ...}; see docs/plan.md.
+        /// [{"freq_hz", "duration_ms", "amplitude" (0..1) or "accel_mps2", "ramp_ms"}], ...};
+        /// see docs/plan.md.
         plan: PathBuf,
         #[command(flatten)]
         wait: WaitArgs,
@@ -135,14 +139,14 @@ pub enum DeviceCommand {
         /// Frequency, Hz (1–2000, resolved to 1 mHz).
         #[arg(long, value_name = "HZ", value_parser = drive_freq)]
         freq: u32,
-        /// Amplitude, fraction of the DAC's full scale (0–1).
-        #[arg(long, value_name = "A", value_parser = drive_amplitude)]
-        amplitude: u16,
+        #[command(flatten)]
+        level: LevelArgs,
         /// Print JSON.
         #[arg(long)]
         json: bool,
     },
-    /// Ramp the drive to zero and idle (also clears a fault). Taken from any client.
+    /// Ramp the drive to zero and idle (a latched fault stays: `clear-fault`). Taken from any
+    /// client.
     Stop {
         #[command(flatten)]
         port: PortArg,
@@ -150,7 +154,20 @@ pub enum DeviceCommand {
         #[arg(long)]
         json: bool,
     },
-    /// The drive's state, plan, step, times, frequency, amplitude, run number and fault.
+    /// Clear a latched fault (nothing else clears it: not a stop, not a new run).
+    ClearFault {
+        #[command(flatten)]
+        port: PortArg,
+        /// Print JSON: {"run"}.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Sweep the drive over a frequency range, measure the plate's response, find its
+    /// resonances (frequency and Q): table, CSV, Bode plot, plate-file modes.
+    Sweep(sweep::SweepArgs),
+    /// The drive's state, plan, step, times, frequency, amplitude, run number, the measured
+    /// acceleration and phase, the closed-loop target, the warning, the fault and the reset
+    /// cause.
     Status {
         #[command(flatten)]
         port: PortArg,
@@ -173,9 +190,31 @@ pub enum DeviceCommand {
         #[arg(long)]
         json: bool,
     },
-    /// The controller's configuration (device limits).
+    /// The controller's configuration (device limits and fault-monitor thresholds).
     #[command(subcommand)]
     Config(ConfigCommand),
+}
+
+/// The level of a manual drive: exactly one of `--amplitude` and `--accel`.
+#[derive(Debug, Args)]
+#[group(required = true, multiple = false)]
+pub struct LevelArgs {
+    /// Amplitude, fraction of the DAC's full scale (0–1): open loop.
+    #[arg(long, value_name = "A", value_parser = drive_amplitude)]
+    amplitude: Option<u16>,
+    /// Acceleration amplitude the controller holds, m/s² (resolved to 1 mm/s²): closed loop,
+    /// after a short loop check.
+    #[arg(long, value_name = "MPS2", value_parser = drive_accel)]
+    accel: Option<u32>,
+}
+
+impl LevelArgs {
+    fn level(&self) -> Level {
+        match (self.amplitude, self.accel) {
+            (_, Some(accel)) => Level::Accel(accel),
+            (amplitude, None) => Level::Drive(amplitude.unwrap_or(0)),
+        }
+    }
 }
 
 /// `--wait` and `--json` of the commands that start a plan.
@@ -196,7 +235,9 @@ pub enum ConfigCommand {
     Get {
         #[command(flatten)]
         port: PortArg,
-        /// min_freq_hz, max_freq_hz, max_amplitude, max_steps or max_total_ms.
+        /// A key (see docs/device.md): min_freq_hz, max_freq_hz, max_amplitude,
+        /// max_accel_mps2, max_steps, max_total_ms, or a fault-monitor threshold
+        /// (open_loop_mps2, warn_band_db, ..., check_min_mps2).
         #[arg(value_parser = config_key)]
         key: Option<ConfigKey>,
         /// Print JSON.
@@ -207,10 +248,11 @@ pub enum ConfigCommand {
     Set {
         #[command(flatten)]
         port: PortArg,
-        /// min_freq_hz, max_freq_hz, max_amplitude, max_steps or max_total_ms.
+        /// A key, as for `config get`.
         #[arg(value_parser = config_key)]
         key: ConfigKey,
-        /// The new value: Hz for frequencies, 0..1 of full scale for the amplitude.
+        /// The new value in the key's unit: Hz, fraction of full scale (0..1), m/s², dB, ms or
+        /// steps.
         value: String,
         /// Print the configuration now in effect as JSON.
         #[arg(long)]
@@ -261,13 +303,18 @@ impl DeviceCommand {
                 watch::start_plan(&mut client, &target, *repeat, wait.wait, wait.json)
             }
             DeviceCommand::RunFile { port, plan, wait } => run_file(port, plan, wait),
-            DeviceCommand::Drive { port, freq, amplitude, json } => {
-                drive(port, *freq, *amplitude, *json)
+            DeviceCommand::Drive { port, freq, level, json } => {
+                drive(port, *freq, level.level(), *json)
             }
             DeviceCommand::Stop { port, json } => {
                 let run = port.open("stop")?.stop()?;
                 render::stopped(run, *json)
             }
+            DeviceCommand::ClearFault { port, json } => {
+                let run = port.open("clear-fault")?.clear_fault()?;
+                render::cleared(run, *json)
+            }
+            DeviceCommand::Sweep(args) => args.run(),
             DeviceCommand::Status { port, json } => {
                 render::status(&port.open("status")?.status()?, *json)
             }
@@ -288,13 +335,12 @@ fn ping(port: &PortArg, count: u32, json: bool) -> anyhow::Result<ExitCode> {
     render::pings(&rtts, json)
 }
 
-fn drive(port: &PortArg, freq: u32, amplitude: u16, json: bool) -> anyhow::Result<ExitCode> {
+fn drive(port: &PortArg, freq: u32, level: Level, json: bool) -> anyhow::Result<ExitCode> {
     DeviceLimits::DEFAULT
-        .check_setpoint(freq, chladni_shared::icd::plan::Level::Drive(amplitude))
+        .check_setpoint(freq, level)
         .map_err(|e| InputError(format!("drive refused: {e}")))?;
-    let run =
-        port.open("drive")?.drive(freq, chladni_shared::icd::plan::Level::Drive(amplitude))?;
-    render::driving(freq, amplitude, run, json)
+    let run = port.open("drive")?.drive(freq, level)?;
+    render::driving(freq, level, run, json)
 }
 
 /// `run-file`: the plan checked here first (bad input exits 2 before any connection), then
@@ -333,10 +379,17 @@ impl ConfigCommand {
                 let mut client = port.open("config set")?;
                 let mut config = client.config()?;
                 key.set(&mut config, value)?;
-                config
-                    .validate()
-                    .map_err(|e| InputError(format!("{} {value} refused: {e}", key.name())))?;
-                let now = client.set_config(config)?;
+                config.validate().map_err(|e| {
+                    InputError(format!("{} {value} refused: {}", key.name(), config_refusal(&e)))
+                })?;
+                let now = match client.set_config(config) {
+                    Err(DeviceError::Refused(Refusal::Config(e))) => anyhow::bail!(
+                        "the controller refused {} {value}: {}",
+                        key.name(),
+                        config_refusal(&e)
+                    ),
+                    other => other?,
+                };
                 render::config(&now, None, *json)
             }
         }

@@ -1,7 +1,7 @@
 //! Value parsers for the options: each refuses a value outside its range with a message that
 //! names the option and the value; clap then exits with code 2 (bad input).
 
-use chladni_shared::icd::units::{MilliHz, Q15};
+use chladni_shared::icd::units::{MilliHz, MmPerS2, Q15};
 
 /// A value parser for an `f64` option `--NAME` accepted when `ok`; refused with
 /// "--NAME must be WHAT, got VALUE".
@@ -62,6 +62,14 @@ pub fn drive_amplitude(s: &str) -> Result<u16, String> {
     Q15::from_fraction(v).map(|a| a.0).map_err(|e| e.to_string())
 }
 
+/// `--accel` of the manual drive, m/s² → mm/s² (the device's limit is checked with the
+/// setpoint).
+pub fn drive_accel(s: &str) -> Result<u32, String> {
+    let v: f64 =
+        s.trim().parse().map_err(|_| format!("--accel must be a number in m/s², got {s}"))?;
+    MmPerS2::from_mps2(v).map(|a| a.0).map_err(|e| format!("--accel: {e}"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -80,5 +88,8 @@ mod tests {
         assert!(drive_freq("0").unwrap_err().contains("frequency 0 Hz"));
         assert_eq!(drive_amplitude("1"), Ok(32767));
         assert!(drive_amplitude("1.5").unwrap_err().contains("amplitude 1.5"));
+        assert_eq!(drive_accel("12.5"), Ok(12_500));
+        assert!(drive_accel("-1").unwrap_err().starts_with("--accel: acceleration -1 m/s²"));
+        assert!(drive_accel("fast").unwrap_err().contains("number in m/s²"));
     }
 }

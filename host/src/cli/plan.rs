@@ -288,14 +288,15 @@ impl SimulateArgs {
         planner::check_input(&part, &plate).map_err(|e| bad(e.to_string()))?;
         let region = feed_region(&self.feed, &plate)?;
         let file = self.read_plan()?;
-        let steps = sim::plan_steps(&file, &plate).map_err(|e| {
-            bad(format!(
+        let steps = sim::plan_steps(&file, &plate).map_err(|e| match e {
+            sim::PlanStepsError::NoMode(e) => bad(format!(
                 "plan step {}: no mode of {} at {} Hz (modes: {})",
                 e.step,
                 self.plate.display(),
                 e.freq_hz,
                 e.modes
-            ))
+            )),
+            other => bad(other.to_string()),
         })?;
         let body = Body::new(&part);
         let fields: Vec<FieldModel> =

@@ -1,6 +1,6 @@
 //! Client for the controller's link: a serial port (the board's USB CDC port or the ST-LINK
 //! VCP) or `tcp://HOST:PORT` (the emulator). Frames are those of
-//! [`chladni_shared::icd::link`] (protocol v2).
+//! [`chladni_shared::icd::link`] (protocol v4).
 //!
 //! - A client opens a *session*: a random session number and a random first request id, then
 //!   `Hello` with its name, which checks the protocol version and names the client to others
@@ -11,7 +11,9 @@
 //!   are skipped, never acted on (see [`link`]).
 //! - Helpers wrap the sequences: chunked [`DeviceClient::upload`], paged
 //!   [`DeviceClient::list_plans`], [`DeviceClient::wait_for_run`] (when a plan is done),
-//!   telemetry ([`DeviceClient::subscribe`], [`DeviceClient::next_telemetry`]).
+//!   telemetry ([`DeviceClient::subscribe`], [`DeviceClient::next_telemetry`]), sweeps
+//!   ([`DeviceClient::sweep`], then [`DeviceClient::wait_for_run`], then
+//!   [`DeviceClient::sweep_points`], paged and checked to be the sweep's).
 //! - Dropping a client that may own the controller sends `Release`, so the next client need
 //!   not wait for the owner's lease to lapse.
 
@@ -24,10 +26,10 @@ use std::ops::ControlFlow;
 use std::time::{Duration, Instant};
 
 use chladni_shared::icd::link::{
-    DeletePlan, DeviceInfo, DriveState, Endpoint, GetConfig, GetInfo, GetStatus, Hello, Level,
-    LinkError, ListPlans, MAX_CLIENT_NAME, PROTOCOL_VERSION, Ping, Plan, Refusal, Release,
-    Response, RunNumber, RunPlan, SetConfig, StatusReport, Stop, Subscribe, Telemetry,
-    UploadCommit,
+    ClearFault, DeletePlan, DeviceInfo, DriveState, Endpoint, GetConfig, GetInfo, GetStatus,
+    GetSweep, Hello, InjectFault, Level, LinkError, ListPlans, MAX_CLIENT_NAME, PROTOCOL_VERSION,
+    Ping, Plan, Refusal, Release, Response, RunNumber, RunPlan, SetConfig, StatusReport, Stop,
+    Subscribe, Sweep, SweepPoint, Telemetry, TestFault, UploadCommit,
 };
 use chladni_shared::icd::store::{
     CHUNK_STEPS, DeviceConfig, PlanRef, PlanSummary, UploadBegin, UploadChunk,
@@ -88,6 +90,28 @@ pub enum DeviceError {
         request: &'static str,
         /// What came back.
         response: Box<Response>,
+    },
+    /// The controller's last sweep is not the one asked for (another client started one since,
+    /// or the controller restarted): its points would be another sweep's.
+    #[error(
+        "the controller's last sweep is run {found}, not run {expected}: another sweep replaced \
+         it (or the controller restarted); run the sweep again"
+    )]
+    StaleSweep {
+        /// The sweep's run number.
+        expected: u32,
+        /// The run number of the sweep the controller holds (0: none since reset).
+        found: u32,
+    },
+    /// The controller's sweep is not complete (it was stopped or faulted before its end).
+    #[error("sweep run {run} has {done} of {total} points: it was stopped before its end")]
+    SweepIncomplete {
+        /// The sweep's run number.
+        run: u32,
+        /// Points measured.
+        done: u16,
+        /// Points asked for.
+        total: u16,
     },
     /// The controller speaks another protocol version.
     #[error(
@@ -365,9 +389,49 @@ impl DeviceClient {
         self.call(RunPlan { plan, repeat })
     }
 
-    /// Ramps the drive to zero (and clears a fault). Taken from any session.
+    /// Ramps the drive to zero (a latched fault stays: [`Self::clear_fault`]). Taken from any
+    /// session.
     pub fn stop(&mut self) -> Result<RunNumber, DeviceError> {
         self.call(Stop)
+    }
+
+    /// Clears a latched fault (nothing else does); answered with its run number.
+    pub fn clear_fault(&mut self) -> Result<RunNumber, DeviceError> {
+        self.call(ClearFault)
+    }
+
+    /// Starts a frequency sweep (a run: wait for it with [`Self::wait_for_run`], then read its
+    /// points with [`Self::sweep_points`]).
+    pub fn sweep(&mut self, sweep: Sweep) -> Result<RunNumber, DeviceError> {
+        self.call(sweep)
+    }
+
+    /// Every point of sweep `run`, following the pages. A page of another run is
+    /// [`DeviceError::StaleSweep`]; a sweep with points missing is
+    /// [`DeviceError::SweepIncomplete`].
+    pub fn sweep_points(&mut self, run: RunNumber) -> Result<Vec<SweepPoint>, DeviceError> {
+        let mut points = Vec::new();
+        loop {
+            let page = self.call(GetSweep { from: points.len() as u16 })?;
+            if page.run != run {
+                return Err(DeviceError::StaleSweep { expected: run.0, found: page.run.0 });
+            }
+            if page.done < page.total {
+                let (done, total) = (page.done, page.total);
+                return Err(DeviceError::SweepIncomplete { run: run.0, done, total });
+            }
+            let got = page.points.len();
+            points.extend(page.points);
+            // An empty page before the end (a firmware bug) cannot loop for ever.
+            if got == 0 || points.len() >= usize::from(page.total) {
+                return Ok(points);
+            }
+        }
+    }
+
+    /// Simulates a fault (QEMU only; a board refuses it with `Refused(Unsupported)`).
+    pub fn inject_fault(&mut self, fault: TestFault) -> Result<(), DeviceError> {
+        self.call(InjectFault(fault))
     }
 
     /// The drive's status.

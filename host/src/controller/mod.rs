@@ -7,3 +7,4 @@ pub mod emulator;
 pub mod firmware;
 pub mod flash;
 pub mod proxy;
+pub mod sweep;

@@ -1,6 +1,8 @@
 //! `[[mode]]` entries for plate files: solver modes as sampled mode shapes (`node.kind =
 //! "grid"`), photo-derived straight nodes (`node.kind = "line"`) and photo-derived curved
-//! nodes as a sampled signed distance (`node.kind = "grid"`). Schema in docs/plate.md.
+//! nodes as a sampled signed distance (`node.kind = "grid"`), and resonances measured by a
+//! sweep, which have a frequency but no node yet ([`measured_mode`]: the plate file then
+//! refuses to load until the node is filled in). Schema in docs/plate.md.
 
 use crate::model::plate_file::{ModeEntry, NodeEntry, PlateFile, PlateTable};
 use crate::plate::solver::Grid;
@@ -29,6 +31,18 @@ pub fn sampled_mode(name: &str, freq_hz: Option<f64>, grid: &Grid) -> ModeEntry 
         name: Some(name.into()),
         freq_hz,
         node: Some(grid_node(grid)),
+        ..ModeEntry::default()
+    }
+}
+
+/// A `[[mode]]` entry for a resonance measured by `chladni device sweep`: its frequency, no
+/// node. The node is not known from a sweep; the entry has none, which the plate file's check
+/// refuses (naming the mode and the fix) until it is filled from the solver or a photo.
+pub fn measured_mode(freq_hz: f64, q: Option<f64>) -> ModeEntry {
+    let q = q.map_or(String::new(), |q| format!(", Q {q:.0}"));
+    ModeEntry {
+        name: Some(format!("swept {:.2} Hz{q}", round(freq_hz, 2))),
+        freq_hz: Some(round(freq_hz, 3)),
         ..ModeEntry::default()
     }
 }
@@ -106,5 +120,19 @@ mod tests {
         let line = line_mode("l", Some(60.0), 90.0, -12.5);
         assert!(matches!(line.node, Some(NodeEntry::Line { .. })));
         assert!(grid_of(&line, plate.size_mm).is_none());
+    }
+
+    #[test]
+    fn a_measured_mode_is_kept_but_refused_until_its_node_is_filled() {
+        use crate::model::plate::check_mode;
+        let table =
+            PlateTable { name: "p".into(), size_mm: Some([200.0, 150.0]), ..PlateTable::default() };
+        let out = render(&table, vec![measured_mode(181.5049, Some(47.6))]).unwrap();
+        assert!(out.contains("name = \"swept 181.50 Hz, Q 48\""), "{out}");
+        assert!(out.contains("freq_hz = 181.505"), "{out}");
+        let back = PlateFile::parse(&out, "out").unwrap();
+        let err = check_mode(0, &back.mode[0], [200.0, 150.0]).unwrap_err().to_string();
+        assert!(err.contains("node") && err.contains("swept 181.50 Hz"), "{err}");
+        assert!(err.contains("chladni plate"), "the fix names where a node comes from: {err}");
     }
 }

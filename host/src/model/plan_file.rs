@@ -3,15 +3,19 @@
 //!
 //! ```json
 //! {"name": "triangle", "repeat": 1,
-//!  "steps": [{"freq_hz": 60.0, "duration_ms": 2500, "amplitude": 0.8, "ramp_ms": 20}],
+//!  "steps": [{"freq_hz": 60.0, "duration_ms": 2500, "amplitude": 0.8, "ramp_ms": 20},
+//!            {"freq_hz": 181.5, "duration_ms": 1500, "accel_mps2": 25.0, "ramp_ms": 20}],
 //!  "final_orientation_deg": 110.7, "period_deg": 180.0, "final_position_mm": null}
 //! ```
+//! A step gives exactly one level: `amplitude` (fraction of full scale, open loop) or
+//! `accel_mps2` (the plate's acceleration amplitude the controller holds, closed loop).
 //! Converted to and from [`chladni_shared::icd::plan::Plan`] (the value the firmware stores and
-//! runs): frequency Hz → mHz and amplitude 0..1 → Q15 rounded to nearest, then validated
-//! against [`DeviceLimits`].
+//! runs): frequency Hz → mHz, amplitude 0..1 → Q15 and m/s² → mm/s² rounded to nearest (the
+//! conversions of [`chladni_shared::icd::units`]), then validated against [`DeviceLimits`].
+//! The planner writes open-loop steps only.
 
 use chladni_shared::icd::plan::{DeviceLimits, Level, MAX_NAME, MAX_STEPS, Plan, PlanError, Step};
-use chladni_shared::icd::units::{FrequencyError, MilliHz, Q15, round_half_away};
+use chladni_shared::icd::units::{FrequencyError, MilliHz, MmPerS2, Q15, round_half_away};
 use serde::{Deserialize, Serialize};
 
 /// Hz → mHz, rounded to nearest: `None` unless finite and within 1..=u32::MAX mHz once
@@ -36,11 +40,55 @@ pub struct StepJson {
     pub freq_hz: f64,
     /// Step length (ms), ramp included.
     pub duration_ms: u32,
-    /// Drive amplitude, fraction of full scale (0..=1).
-    pub amplitude: f64,
-    /// Amplitude ramp (ms).
+    /// Drive amplitude, fraction of full scale (0..=1): open loop. Exactly one of this and
+    /// `accel_mps2`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub amplitude: Option<f64>,
+    /// Acceleration amplitude the controller holds, m/s²: closed loop.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accel_mps2: Option<f64>,
+    /// Amplitude (or acceleration target) ramp (ms).
     #[serde(default)]
     pub ramp_ms: u32,
+}
+
+/// The level of a plan file step, as given.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StepLevel {
+    /// Open loop: fraction of full scale.
+    Amplitude(f64),
+    /// Closed loop: acceleration target, m/s².
+    AccelMps2(f64),
+}
+
+impl StepJson {
+    /// An open-loop step (what the planner writes).
+    pub fn open_loop(freq_hz: f64, duration_ms: u32, amplitude: f64, ramp_ms: u32) -> StepJson {
+        StepJson { freq_hz, duration_ms, amplitude: Some(amplitude), accel_mps2: None, ramp_ms }
+    }
+
+    /// The step's one level; both or neither is a [`PlanFileError::Level`] naming step `step`.
+    pub fn level(&self, step: usize) -> Result<StepLevel, PlanFileError> {
+        match (self.amplitude, self.accel_mps2) {
+            (Some(a), None) => Ok(StepLevel::Amplitude(a)),
+            (None, Some(a)) => Ok(StepLevel::AccelMps2(a)),
+            (amplitude, accel) => {
+                Err(PlanFileError::Level { step, both: amplitude.is_some() && accel.is_some() })
+            }
+        }
+    }
+
+    /// The device level: Q15 or mm/s², through the shared conversions.
+    fn device_level(&self, step: usize) -> Result<Level, PlanFileError> {
+        match self.level(step)? {
+            StepLevel::Amplitude(value) => Q15::from_fraction(value)
+                .map(|q| Level::Drive(q.0))
+                .map_err(|_| PlanFileError::Amplitude { step, value }),
+            StepLevel::AccelMps2(value) => MmPerS2::from_mps2(value)
+                .map(|a| Level::Accel(a.0))
+                .map_err(|e| PlanFileError::Accel { step, message: e.to_string() }),
+        }
+    }
 }
 
 /// The whole file.
@@ -98,6 +146,26 @@ pub enum PlanFileError {
         /// Value.
         value: f64,
     },
+    /// Neither or both of `amplitude` and `accel_mps2`.
+    #[error(
+        "step {step}: {} (give \"amplitude\": 0..1 for open loop or \"accel_mps2\": m/s² for \
+         closed loop)",
+        if *both { "both amplitude and accel_mps2" } else { "no amplitude or accel_mps2" }
+    )]
+    Level {
+        /// Step index.
+        step: usize,
+        /// Both were given (else neither).
+        both: bool,
+    },
+    /// An acceleration target that is not a non-negative number of m/s².
+    #[error("step {step}: {message}")]
+    Accel {
+        /// Step index.
+        step: usize,
+        /// The conversion's message.
+        message: String,
+    },
     /// Name longer than the device stores.
     #[error("name \"{0}\" is longer than {MAX_NAME} bytes")]
     NameTooLong(String),
@@ -125,11 +193,9 @@ impl PlanFile {
             let Some(freq_mhz) = freq_mhz(s.freq_hz) else {
                 return Err(PlanFileError::Frequency { step: i, value: s.freq_hz });
             };
-            let amplitude = Q15::from_fraction(s.amplitude)
-                .map_err(|_| PlanFileError::Amplitude { step: i, value: s.amplitude })?;
             let step = Step {
                 freq_mhz,
-                level: Level::Drive(amplitude.0),
+                level: s.device_level(i)?,
                 duration_ms: s.duration_ms,
                 ramp_ms: s.ramp_ms,
             };
@@ -151,14 +217,21 @@ impl PlanFile {
             steps: plan
                 .steps
                 .iter()
-                .map(|s| StepJson {
-                    freq_hz: MilliHz(s.freq_mhz).to_hz(),
-                    duration_ms: s.duration_ms,
-                    amplitude: match s.level {
-                        Level::Drive(q15) => (Q15(q15).to_fraction() * 1e6).round() / 1e6,
-                        Level::Accel(_) => 0.0,
-                    },
-                    ramp_ms: s.ramp_ms,
+                .map(|s| {
+                    let (amplitude, accel_mps2) = match s.level {
+                        // Six decimals: enough to round back to the same Q15 step.
+                        Level::Drive(q15) => {
+                            (Some((Q15(q15).to_fraction() * 1e6).round() / 1e6), None)
+                        }
+                        Level::Accel(mm) => (None, Some(MmPerS2(mm).to_mps2())),
+                    };
+                    StepJson {
+                        freq_hz: MilliHz(s.freq_mhz).to_hz(),
+                        duration_ms: s.duration_ms,
+                        amplitude,
+                        accel_mps2,
+                        ramp_ms: s.ramp_ms,
+                    }
                 })
                 .collect(),
             final_orientation_deg: None,
@@ -198,6 +271,69 @@ mod tests {
         let v = f.to_json();
         assert!(v["final_position_mm"].is_null());
         assert_eq!(v["steps"][0].as_object().unwrap().len(), 4);
+        assert!(v["steps"][0].get("accel_mps2").is_none(), "open-loop steps write no accel");
+    }
+
+    #[test]
+    fn closed_loop_steps_convert_once_and_round_trip() {
+        let text = r#"{"name": "c", "steps": [{"freq_hz": 181.5, "duration_ms": 900, "accel_mps2": 25.0004, "ramp_ms": 30},
+            {"freq_hz": 60.0, "duration_ms": 500, "amplitude": 0.25}]}"#;
+        let p = PlanFile::parse(text).unwrap().to_plan(&DeviceLimits::DEFAULT).unwrap();
+        assert_eq!(p.steps[0].level, Level::Accel(25_000));
+        assert_eq!(p.steps[1].level, Level::Drive(8192));
+        let back = PlanFile::from_plan(&p);
+        assert_eq!(back.steps[0].accel_mps2, Some(25.0));
+        assert_eq!(back.steps[0].amplitude, None);
+        assert_eq!(back.steps[1].level(1), Ok(StepLevel::Amplitude(0.250008)));
+        assert_eq!(back.to_plan(&DeviceLimits::DEFAULT).unwrap(), p);
+        let v = back.to_json();
+        let keys: Vec<&str> =
+            v["steps"][0].as_object().unwrap().keys().map(|k| k.as_str()).collect();
+        assert_eq!(keys, ["accel_mps2", "duration_ms", "freq_hz", "ramp_ms"]);
+        // Above the device's acceleration limit: refused by the limits, naming the step.
+        let high = r#"{"steps": [{"freq_hz": 60.0, "duration_ms": 5, "amplitude": 0.1},
+            {"freq_hz": 60.0, "duration_ms": 5, "accel_mps2": 150.0}]}"#;
+        let err = PlanFile::parse(high).unwrap().to_plan(&DeviceLimits::DEFAULT).unwrap_err();
+        assert_eq!(
+            err,
+            PlanFileError::Invalid(PlanError::AccelTooHigh {
+                step: 1,
+                accel_mmps2: 150_000,
+                max_mmps2: 100_000
+            })
+        );
+        assert_eq!(
+            err.to_string(),
+            "step 1: acceleration target 150.000 m/s² above the maximum 100.000 m/s²"
+        );
+    }
+
+    #[test]
+    fn a_step_gives_exactly_one_level() {
+        let both = r#"{"freq_hz": 60.0, "duration_ms": 5, "amplitude": 0.5, "accel_mps2": 2.0}"#;
+        let text = format!(r#"{{"steps": [{both}]}}"#);
+        let err = PlanFile::parse(&text).unwrap().to_plan(&DeviceLimits::DEFAULT).unwrap_err();
+        assert_eq!(err, PlanFileError::Level { step: 0, both: true });
+        assert!(
+            err.to_string().starts_with("step 0: both amplitude and accel_mps2 (give"),
+            "{err}"
+        );
+        let neither = r#"{"freq_hz": 60.0, "duration_ms": 5, "amplitude": 0.5}"#;
+        let text = format!(r#"{{"steps": [{neither}, {{"freq_hz": 60.0, "duration_ms": 5}}]}}"#);
+        let err = PlanFile::parse(&text).unwrap().to_plan(&DeviceLimits::DEFAULT).unwrap_err();
+        assert_eq!(err, PlanFileError::Level { step: 1, both: false });
+        assert!(err.to_string().contains("step 1: no amplitude or accel_mps2"), "{err}");
+        let neg = r#"{"steps": [{"freq_hz": 60.0, "duration_ms": 5, "accel_mps2": -3.0}]}"#;
+        let err = PlanFile::parse(neg).unwrap().to_plan(&DeviceLimits::DEFAULT).unwrap_err();
+        assert!(matches!(err, PlanFileError::Accel { step: 0, .. }), "{err:?}");
+        assert!(err.to_string().contains("acceleration -3 m/s²"), "{err}");
+        // A wrong type is a JSON error.
+        assert!(matches!(
+            PlanFile::parse(
+                r#"{"steps": [{"freq_hz": 60.0, "duration_ms": 5, "accel_mps2": "x"}]}"#
+            ),
+            Err(PlanFileError::Json(_))
+        ));
     }
 
     #[test]

@@ -206,10 +206,13 @@ pub fn check_mode(index: usize, e: &ModeEntry, size_mm: [f64; 2]) -> Result<Mode
     let node = match &e.node {
         Some(n) => node_of(&c, n, size_mm)?,
         None => {
+            // A mode measured by `chladni device sweep` has a frequency and no node yet.
             return Err(c.bad(
                 "node",
                 "missing",
-                "add node = { kind = \"line\", angle_deg = 90.0, offset_mm = 0.0 }",
+                "add node = { kind = \"line\", angle_deg = 90.0, offset_mm = 0.0 }, or take \
+                 it from `chladni plate modes` or `chladni plate from-photo` (a mode measured \
+                 by `chladni device sweep` has none until it is filled in)",
             ));
         }
     };

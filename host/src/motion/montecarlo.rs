@@ -258,12 +258,7 @@ mod tests {
         let plan = PlanFile {
             name: "r".into(),
             repeat: 1,
-            steps: vec![StepJson {
-                freq_hz: 60.0,
-                duration_ms: 600_000,
-                amplitude: plate.modes[0].amplitude,
-                ramp_ms: 0,
-            }],
+            steps: vec![StepJson::open_loop(60.0, 600_000, plate.modes[0].amplitude, 0)],
             final_orientation_deg: Some(90.0),
             period_deg: Some(180.0),
             final_position_mm: None,

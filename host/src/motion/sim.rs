@@ -13,7 +13,7 @@
 use crate::analysis::reference::GL;
 use crate::model::geometry::{self, inside};
 use crate::model::part::Part;
-use crate::model::plan_file::PlanFile;
+use crate::model::plan_file::{PlanFile, PlanFileError, StepLevel};
 use crate::model::plate::{Law, Mode, Node, PlateModel};
 use crate::plate::solver::Grid;
 
@@ -603,11 +603,41 @@ pub struct NoModeAt {
     pub modes: String,
 }
 
+/// Why a plan file's steps cannot be simulated.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanStepsError {
+    /// A step at a frequency the plate has no mode at.
+    #[error(transparent)]
+    NoMode(#[from] NoModeAt),
+    /// A step without exactly one level.
+    #[error(transparent)]
+    Level(#[from] PlanFileError),
+    /// A closed-loop step: the motion model is driven by amplitude, and the plate file does
+    /// not say which amplitude holds an acceleration.
+    #[error(
+        "plan step {step}: closed loop (accel_mps2 = {accel_mps2} m/s²): the simulation needs \
+         an open-loop \"amplitude\" (0..1) for this step"
+    )]
+    ClosedLoop {
+        /// Step index (0-based).
+        step: usize,
+        /// The step's acceleration target, m/s².
+        accel_mps2: f64,
+    },
+}
+
 /// The steps of a plan file as the simulator runs them, `repeat` times over: each step on the
 /// plate's first mode at its frequency (within 1 mHz), at its amplitude relative to the mode's.
-pub fn plan_steps(file: &PlanFile, plate: &PlateModel) -> Result<Vec<SimStep>, NoModeAt> {
+/// Open-loop steps only ([`PlanStepsError::ClosedLoop`]).
+pub fn plan_steps(file: &PlanFile, plate: &PlateModel) -> Result<Vec<SimStep>, PlanStepsError> {
     let mut steps = Vec::with_capacity(file.steps.len());
     for (i, s) in file.steps.iter().enumerate() {
+        let amplitude = match s.level(i)? {
+            StepLevel::Amplitude(a) => a,
+            StepLevel::AccelMps2(accel_mps2) => {
+                return Err(PlanStepsError::ClosedLoop { step: i, accel_mps2 });
+            }
+        };
         let k = plate.modes.iter().position(|m| (m.freq_hz - s.freq_hz).abs() < 1e-3).ok_or_else(
             || NoModeAt {
                 step: i,
@@ -620,7 +650,7 @@ pub fn plan_steps(file: &PlanFile, plate: &PlateModel) -> Result<Vec<SimStep>, N
                     .join(", "),
             },
         )?;
-        steps.push(SimStep::new(k, s.duration_ms, s.amplitude / plate.modes[k].amplitude));
+        steps.push(SimStep::new(k, s.duration_ms, amplitude / plate.modes[k].amplitude));
     }
     Ok((0..file.repeat).flat_map(|_| steps.iter().copied()).collect())
 }

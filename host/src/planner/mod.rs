@@ -946,12 +946,12 @@ impl Synthesis {
                 .iter()
                 .map(|s| {
                     let m = &plate.modes[s.mode];
-                    StepJson {
-                        freq_hz: m.freq_hz,
-                        duration_ms: s.duration_ms,
-                        amplitude: m.amplitude,
-                        ramp_ms: m.ramp_ms.min(s.duration_ms),
-                    }
+                    StepJson::open_loop(
+                        m.freq_hz,
+                        s.duration_ms,
+                        m.amplitude,
+                        m.ramp_ms.min(s.duration_ms),
+                    )
                 })
                 .collect(),
             final_orientation_deg: Some((self.final_orientation_deg * 1e4).round() / 1e4),

@@ -1,5 +1,5 @@
 //! Figures: rest analysis (part, turn and alignment functions), plans and motion traces,
-//! Chladni figures of plate modes, and the particle on a string.
+//! Chladni figures of plate modes, the particle on a string, and the Bode plot of a sweep.
 //!
 //! One font for every figure: Ubuntu Light, shipped inside the binary by the
 //! `epaint_default_fonts` crate and rendered by plotters' `ab_glyph` backend, registered once
@@ -13,6 +13,7 @@ use std::sync::OnceLock;
 use plotters::style::FontStyle;
 
 pub mod analysis;
+pub mod bode;
 pub mod plan;
 pub mod plate;
 pub mod string;

@@ -4,6 +4,12 @@
 //!   validity check, one range (the drive's, [`DeviceLimits`]), one error ([`FrequencyError`]).
 //! - [`Q15`]: drive amplitude, fraction of the DAC's full scale (`f64`, 0..=1) ↔ Q15 (`u16`,
 //!   1.0 ↦ 32767), one error ([`AmplitudeError`]).
+//! - [`MmPerS2`]: acceleration, m/s² (`f64`) ↔ mm/s² (`u32`, as on the wire: closed-loop
+//!   targets, measurements, thresholds), one error ([`AccelError`]). Only representability is
+//!   checked here; the device's limits are checked where they apply
+//!   ([`DeviceLimits::check_setpoint`], the configuration's validation).
+//! - [`MilliDb`]: a level ratio, dB ↔ millidecibels (`u32`, the control bands), one error
+//!   ([`DbError`]); [`MilliDeg`]: a phase, millidegrees (`i32`) → degrees.
 //! - [`Fx`] ↔ `f64` ([`Fx::from_f64`], [`Fx::to_f64`]) and binary angles ↔ degrees or radians
 //!   ([`bam_from_deg`], [`deg_from_bam`], [`bam_from_rad`], [`rad_from_bam`]).
 //!
@@ -139,6 +145,102 @@ impl Q15 {
     /// The amplitude as a fraction of full scale.
     pub fn to_fraction(self) -> f64 {
         self.0 as f64 / Q15_FULL
+    }
+}
+
+// ---- Acceleration ----
+
+/// An acceleration amplitude in mm/s², as closed-loop levels, measurements and the control
+/// thresholds carry it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct MmPerS2(pub u32);
+
+/// An acceleration that is not a finite, non-negative number of m/s² that fits in mm/s² (u32).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AccelError {
+    /// The acceleration asked for, m/s² (may be NaN).
+    pub mps2: f64,
+}
+
+impl core::fmt::Display for AccelError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "acceleration {} m/s² is not a number of m/s² in 0..={} (resolved to 1 mm/s²)",
+            self.mps2,
+            u32::MAX / 1000
+        )
+    }
+}
+
+impl core::error::Error for AccelError {}
+
+impl MmPerS2 {
+    /// `mps2` m/s², rounded to the nearest mm/s².
+    pub fn from_mps2(mps2: f64) -> Result<MmPerS2, AccelError> {
+        let mm = round_half_away(mps2 * 1000.0);
+        if !mps2.is_finite() || mm < 0 || mm > u32::MAX as i64 || mps2 < 0.0 {
+            return Err(AccelError { mps2 });
+        }
+        Ok(MmPerS2(mm as u32))
+    }
+
+    /// The acceleration in m/s².
+    pub fn to_mps2(self) -> f64 {
+        self.0 as f64 / 1000.0
+    }
+}
+
+// ---- Level ratios and phases ----
+
+/// A level ratio in millidecibels (the half-widths of the control bands).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct MilliDb(pub u32);
+
+/// A level ratio that is not a finite, non-negative number of dB that fits in mdB (u32).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DbError {
+    /// The ratio asked for, dB (may be NaN).
+    pub db: f64,
+}
+
+impl core::fmt::Display for DbError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "{} dB is not a number of dB in 0..={} (resolved to 0.001 dB)",
+            self.db,
+            u32::MAX / 1000
+        )
+    }
+}
+
+impl core::error::Error for DbError {}
+
+impl MilliDb {
+    /// `db` dB, rounded to the nearest millidecibel.
+    pub fn from_db(db: f64) -> Result<MilliDb, DbError> {
+        let m = round_half_away(db * 1000.0);
+        if !db.is_finite() || db < 0.0 || m > u32::MAX as i64 {
+            return Err(DbError { db });
+        }
+        Ok(MilliDb(m as u32))
+    }
+
+    /// The ratio in dB.
+    pub fn to_db(self) -> f64 {
+        self.0 as f64 / 1000.0
+    }
+}
+
+/// A phase in millidegrees, as measurements carry it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct MilliDeg(pub i32);
+
+impl MilliDeg {
+    /// The phase in degrees.
+    pub fn to_deg(self) -> f64 {
+        self.0 as f64 / 1000.0
     }
 }
 
@@ -293,5 +395,23 @@ mod tests {
             std::format!("{}", Q15::from_fraction(1.5).unwrap_err()),
             "amplitude 1.5 outside 0..=1 (fraction of full scale)"
         );
+    }
+
+    #[test]
+    fn acceleration_db_and_phase_convert_once() {
+        assert_eq!(MmPerS2::from_mps2(12.3456), Ok(MmPerS2(12_346)));
+        assert_eq!(MmPerS2::from_mps2(0.0), Ok(MmPerS2(0)));
+        assert_eq!(MmPerS2(150_000).to_mps2(), 150.0);
+        for bad in [-0.001, -1.0, 5e6, f64::NAN, f64::INFINITY] {
+            assert!(MmPerS2::from_mps2(bad).is_err(), "{bad}");
+        }
+        assert_eq!(
+            std::format!("{}", MmPerS2::from_mps2(-2.0).unwrap_err()),
+            "acceleration -2 m/s² is not a number of m/s² in 0..=4294967 (resolved to 1 mm/s²)"
+        );
+        assert_eq!(MilliDb::from_db(1.5), Ok(MilliDb(1_500)));
+        assert_eq!(MilliDb(3_000).to_db(), 3.0);
+        assert!(MilliDb::from_db(-1.0).is_err() && MilliDb::from_db(f64::NAN).is_err());
+        assert_eq!(MilliDeg(-90_500).to_deg(), -90.5);
     }
 }

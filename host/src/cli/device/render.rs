@@ -4,8 +4,10 @@
 use std::process::ExitCode;
 
 use chladni_shared::icd::link::{DeviceInfo, RunNumber, StatusReport, Telemetry};
+use chladni_shared::icd::plan::Level;
+use chladni_shared::icd::sense::Fault;
 use chladni_shared::icd::store::{DeviceConfig, PlanSummary};
-use chladni_shared::icd::units::{MilliHz, Q15};
+use chladni_shared::icd::units::{MilliDeg, MilliHz, MmPerS2, Q15};
 use serde::Serialize;
 
 use super::values::{CONFIG_KEYS, ConfigKey, ConfigValue};
@@ -16,35 +18,90 @@ pub fn print_json(value: &impl Serialize) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The `status --json` object: the keys of protocol v1's status, and `fault`, `plan`,
-/// `remaining_ms`, `run`.
+/// The `status --json` object: the keys of protocol v1's status; `fault`, `plan`,
+/// `remaining_ms`, `run` (v3); the sensing and control keys `accel_mps2`, `phase_deg`,
+/// `effort`, `target_accel_mps2`, `warning`, `reset_cause` (v4; `fault` became an object).
 #[derive(Debug, Serialize)]
 pub struct StatusJson {
+    /// Measured acceleration amplitude, m/s² (null without a measurement).
+    accel_mps2: Option<f64>,
     amplitude: f64,
+    /// The drive output (the control effort in closed loop), fraction of full scale.
+    effort: f64,
     elapsed_ms: f64,
-    fault: Option<&'static str>,
+    fault: Option<FaultJson>,
     freq_hz: f64,
+    /// Measured phase against the drive, degrees (null without a measurement).
+    phase_deg: Option<f64>,
     plan: Option<String>,
     remaining_ms: f64,
+    reset_cause: &'static str,
     run: u32,
     state: &'static str,
     step: Option<u16>,
+    /// The closed-loop target as ramped so far, m/s² (null in open loop or idle).
+    target_accel_mps2: Option<f64>,
     underruns: u32,
+    warning: bool,
+}
+
+/// A latched fault: `{"cause", "value", "unit", "at_s"}`.
+#[derive(Debug, Serialize)]
+pub struct FaultJson {
+    at_s: f64,
+    cause: &'static str,
+    unit: &'static str,
+    value: i32,
+}
+
+impl FaultJson {
+    fn of(f: &Fault, sample_rate: u32) -> Self {
+        FaultJson {
+            at_s: f.at_sample as f64 / f64::from(sample_rate.max(1)),
+            cause: f.cause.name(),
+            unit: f.cause.unit(),
+            value: f.value,
+        }
+    }
+
+    /// For people: cause, value with its unit, time, and the fix.
+    fn text(&self) -> String {
+        let value = if self.unit.is_empty() {
+            String::new()
+        } else {
+            format!(" {} {}", self.value, self.unit)
+        };
+        format!(
+            "{}{value} at {:.3} s (`chladni device clear-fault` clears it)",
+            self.cause, self.at_s
+        )
+    }
+}
+
+/// The latched fault of `s` for people (cause, value and unit, time, the fix), or "-".
+pub fn fault_text(s: &StatusReport) -> String {
+    s.fault.map_or("-".into(), |f| FaultJson::of(&f, s.sample_rate).text())
 }
 
 impl From<&StatusReport> for StatusJson {
     fn from(s: &StatusReport) -> Self {
         StatusJson {
+            accel_mps2: s.measured.map(|m| MmPerS2(m.accel_mmps2).to_mps2()),
             amplitude: Q15(s.amplitude_q15).to_fraction(),
+            effort: Q15(s.amplitude_q15).to_fraction(),
             elapsed_ms: s.elapsed_ms(),
-            fault: s.fault.map(|f| f.cause.name()),
+            fault: s.fault.map(|f| FaultJson::of(&f, s.sample_rate)),
             freq_hz: MilliHz(s.freq_mhz).to_hz(),
+            phase_deg: s.measured.map(|m| MilliDeg(m.phase_mdeg).to_deg()),
             plan: s.plan.as_ref().map(|p| p.to_string()),
             remaining_ms: s.remaining_ms(),
+            reset_cause: s.reset_cause.name(),
             run: s.run.0,
             state: s.state.name(),
             step: s.step,
+            target_accel_mps2: s.level.and_then(Level::accel_mmps2).map(|a| MmPerS2(a).to_mps2()),
             underruns: s.underruns,
+            warning: s.warning,
         }
     }
 }
@@ -162,13 +219,31 @@ pub fn uploaded(p: &PlanSummary, json: bool) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// `drive`.
-pub fn driving(freq: u32, amplitude: u16, run: RunNumber, json: bool) -> anyhow::Result<ExitCode> {
-    let (hz, a) = (MilliHz(freq).to_hz(), Q15(amplitude).to_fraction());
+/// `drive`: `{"accel_mps2", "amplitude", "freq_hz", "run"}`, the level not given null.
+pub fn driving(freq: u32, level: Level, run: RunNumber, json: bool) -> anyhow::Result<ExitCode> {
+    let hz = MilliHz(freq).to_hz();
+    let (amplitude, accel) = match level {
+        Level::Drive(q15) => (Some(Q15(q15).to_fraction()), None),
+        Level::Accel(mm) => (None, Some(MmPerS2(mm).to_mps2())),
+    };
     if json {
-        print_json(&serde_json::json!({ "amplitude": a, "freq_hz": hz, "run": run.0 }))?;
-    } else {
+        print_json(&serde_json::json!({
+            "accel_mps2": accel, "amplitude": amplitude, "freq_hz": hz, "run": run.0
+        }))?;
+    } else if let Some(a) = amplitude {
         println!("driving {hz:.3} Hz at amplitude {a:.4} (run {})", run.0);
+    } else if let Some(a) = accel {
+        println!("driving {hz:.3} Hz holding {a:.3} m/s² (closed loop; run {})", run.0);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `clear-fault`.
+pub fn cleared(run: RunNumber, json: bool) -> anyhow::Result<ExitCode> {
+    if json {
+        print_json(&serde_json::json!({ "run": run.0 }))?;
+    } else {
+        println!("fault cleared (run {})", run.0);
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -189,47 +264,69 @@ pub fn status(s: &StatusReport, json: bool) -> anyhow::Result<ExitCode> {
         print_json(&StatusJson::from(s))?;
         return Ok(ExitCode::SUCCESS);
     }
-    println!("state      {}", s.state.name());
-    println!("run        {}", s.run.0);
-    match (&s.plan, s.step) {
-        (Some(plan), Some(step)) => {
-            println!("plan       {plan}: step {step}, repetition {}", s.repetition);
-            println!("remaining  {:.1} ms", s.remaining_ms());
-        }
-        (Some(plan), None) => println!("plan       {plan}"),
-        _ => println!("plan       -"),
-    }
-    println!("elapsed    {:.2} ms ({} samples)", s.elapsed_ms(), s.elapsed_samples);
-    println!("frequency  {:.3} Hz", MilliHz(s.freq_mhz).to_hz());
-    println!("amplitude  {:.4}", Q15(s.amplitude_q15).to_fraction());
-    println!("underruns  {}", s.underruns);
-    if let Some(fault) = s.fault {
-        println!("fault      {} (`chladni device stop` clears it)", fault.cause.name());
+    for (label, value) in status_lines(s) {
+        println!("{label:<10} {value}");
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The `status` table, as (label, value) lines.
+pub fn status_lines(s: &StatusReport) -> Vec<(&'static str, String)> {
+    let j = StatusJson::from(s);
+    let mut lines = vec![("state", j.state.to_string()), ("run", j.run.to_string())];
+    match (&s.plan, s.step) {
+        (Some(plan), Some(step)) => {
+            lines.push(("plan", format!("{plan}: step {step}, repetition {}", s.repetition)));
+            lines.push(("remaining", format!("{:.1} ms", j.remaining_ms)));
+        }
+        (Some(plan), None) => lines.push(("plan", plan.to_string())),
+        _ => lines.push(("plan", "-".into())),
+    }
+    lines.push(("elapsed", format!("{:.2} ms ({} samples)", j.elapsed_ms, s.elapsed_samples)));
+    lines.push(("frequency", format!("{:.3} Hz", j.freq_hz)));
+    let target = j.target_accel_mps2.map_or(String::new(), |t| {
+        format!(
+            " (closed loop, target {t:.3} m/s²{})",
+            if j.warning { ", WARNING: outside the warning band" } else { "" }
+        )
+    });
+    lines.push(("effort", format!("{:.4}{target}", j.effort)));
+    lines.push(match (j.accel_mps2, j.phase_deg) {
+        (Some(a), Some(p)) => ("measured", format!("{a:.3} m/s² at {p:.1}°")),
+        _ => ("measured", "-".into()),
+    });
+    if j.warning && j.target_accel_mps2.is_none() {
+        lines.push(("warning", "the response is outside the warning band".into()));
+    }
+    lines.push(("underruns", j.underruns.to_string()));
+    lines.push(("fault", j.fault.as_ref().map_or("-".into(), FaultJson::text)));
+    lines.push(("reset", j.reset_cause.to_string()));
+    lines
 }
 
 /// One `monitor` line for people.
 pub fn telemetry_line(t: &Telemetry) -> String {
     let s = &t.status;
+    let j = StatusJson::from(s);
     let step = match (&s.plan, s.step) {
         (Some(plan), Some(step)) => {
             format!(
                 "plan '{plan}' step {step} rep {} remaining {:.0} ms",
-                s.repetition,
-                s.remaining_ms()
+                s.repetition, j.remaining_ms
             )
         }
         _ => "no plan".to_string(),
     };
-    let fault = s.fault.map_or(String::new(), |f| format!("  FAULT {}", f.cause.name()));
+    let measured = match (j.accel_mps2, j.phase_deg) {
+        (Some(a), Some(p)) => format!("{a:>8.3} m/s² {p:>7.1}°"),
+        _ => format!("{:>8} m/s² {:>7}°", "-", "-"),
+    };
+    let target = j.target_accel_mps2.map_or(String::new(), |t| format!(" → {t:.3} m/s²"));
+    let warning = if j.warning { "  WARN" } else { "" };
+    let fault = j.fault.as_ref().map_or(String::new(), |f| format!("  FAULT {}", f.text()));
     format!(
-        "#{:<5} {:<9} {:>9.3} Hz  amplitude {:.4}  {step}  run {}{fault}",
-        t.seq,
-        s.state.name(),
-        MilliHz(s.freq_mhz).to_hz(),
-        Q15(s.amplitude_q15).to_fraction(),
-        s.run.0
+        "#{:<5} {:<9} {:>9.3} Hz  effort {:.4}{target}  {measured}  {step}  run {}{warning}{fault}",
+        t.seq, j.state, j.freq_hz, j.effort, j.run
     )
 }
 
@@ -254,7 +351,7 @@ pub fn config(
         if key.is_some() {
             println!("{value}");
         } else {
-            println!("{:<14} {value}", k.name());
+            println!("{:<16} {value}", k.name());
         }
     }
     Ok(ExitCode::SUCCESS)
@@ -282,6 +379,26 @@ mod tests {
         }
     }
 
+    /// The documented keys of `status --json` (docs/device.md).
+    const STATUS_KEYS: [&str; 16] = [
+        "accel_mps2",
+        "amplitude",
+        "effort",
+        "elapsed_ms",
+        "fault",
+        "freq_hz",
+        "phase_deg",
+        "plan",
+        "remaining_ms",
+        "reset_cause",
+        "run",
+        "state",
+        "step",
+        "target_accel_mps2",
+        "underruns",
+        "warning",
+    ];
+
     fn keys(v: &serde_json::Value) -> Vec<&str> {
         v.as_object().unwrap().keys().map(|k| k.as_str()).collect()
     }
@@ -290,21 +407,7 @@ mod tests {
     fn status_json_keeps_the_old_keys_and_adds_plan_remaining_run_fault() {
         let s = status_report();
         let v = serde_json::to_value(StatusJson::from(&s)).unwrap();
-        assert_eq!(
-            keys(&v),
-            [
-                "amplitude",
-                "elapsed_ms",
-                "fault",
-                "freq_hz",
-                "plan",
-                "remaining_ms",
-                "run",
-                "state",
-                "step",
-                "underruns"
-            ]
-        );
+        assert_eq!(keys(&v), STATUS_KEYS);
         assert_eq!(v["state"], "ramp_up");
         assert_eq!(v["step"], 2);
         assert_eq!(v["elapsed_ms"], 246.9);
@@ -324,11 +427,65 @@ mod tests {
             ..s
         };
         let v = serde_json::to_value(StatusJson::from(&faulted)).unwrap();
-        assert_eq!(
-            (v["state"].as_str(), v["fault"].as_str()),
-            (Some("faulted"), Some("loop_open"))
-        );
+        assert_eq!(v["state"].as_str(), Some("faulted"));
+        assert_eq!(keys(&v["fault"]), ["at_s", "cause", "unit", "value"]);
         assert!(v["step"].is_null() && v["plan"].is_null());
+    }
+
+    #[test]
+    fn status_shows_the_measurement_target_warning_fault_and_reset_cause() {
+        use chladni_shared::icd::link::Measurement;
+        use chladni_shared::icd::sense::ResetCause;
+        let closed = StatusReport {
+            state: DriveState::Running,
+            level: Some(Level::Accel(25_000)),
+            measured: Some(Measurement { accel_mmps2: 24_310, phase_mdeg: -91_250 }),
+            amplitude_q15: 8192,
+            warning: true,
+            reset_cause: ResetCause::Watchdog,
+            fault: Some(Fault { cause: FaultCause::OutOfBand, value: -3_250, at_sample: 125_000 }),
+            ..status_report()
+        };
+        let v = serde_json::to_value(StatusJson::from(&closed)).unwrap();
+        assert_eq!(
+            (v["accel_mps2"].as_f64(), v["phase_deg"].as_f64()),
+            (Some(24.31), Some(-91.25))
+        );
+        assert_eq!(
+            (v["effort"].as_f64(), v["target_accel_mps2"].as_f64()),
+            (Some(8192.0 / 32767.0), Some(25.0))
+        );
+        assert_eq!(
+            (v["warning"].as_bool(), v["reset_cause"].as_str()),
+            (Some(true), Some("watchdog"))
+        );
+        assert_eq!(
+            v["fault"],
+            serde_json::json!({"at_s": 2.5, "cause": "out_of_band", "unit": "mdB", "value": -3250})
+        );
+        let lines = status_lines(&closed);
+        let line = |label: &str| lines.iter().find(|(l, _)| *l == label).unwrap().1.clone();
+        assert_eq!(line("measured"), "24.310 m/s² at -91.2°");
+        assert_eq!(
+            line("effort"),
+            "0.2500 (closed loop, target 25.000 m/s², WARNING: outside the warning band)"
+        );
+        assert_eq!(
+            line("fault"),
+            "out_of_band -3250 mdB at 2.500 s (`chladni device clear-fault` clears it)"
+        );
+        assert_eq!(line("reset"), "watchdog");
+        // Open loop, no sensor data: nulls, and "-" for people.
+        let open = status_report();
+        let v = serde_json::to_value(StatusJson::from(&open)).unwrap();
+        assert!(v["accel_mps2"].is_null() && v["phase_deg"].is_null());
+        assert!(v["target_accel_mps2"].is_null() && v["fault"].is_null());
+        assert_eq!(status_lines(&open).iter().find(|(l, _)| *l == "measured").unwrap().1, "-");
+        let t = Telemetry { seq: 1, left: 0, status: closed };
+        let text = telemetry_line(&t);
+        assert!(text.contains("effort 0.2500 → 25.000 m/s²"), "{text}");
+        assert!(text.contains("24.310 m/s²   -91.2°") && text.contains("WARN"), "{text}");
+        assert!(text.contains("FAULT out_of_band -3250 mdB at 2.500 s"), "{text}");
     }
 
     #[test]
@@ -337,7 +494,7 @@ mod tests {
         let v = serde_json::to_value(TelemetryJson::from(&t)).unwrap();
         assert_eq!((v["seq"].as_u64(), v["left"].as_u64()), (Some(4), Some(6)));
         assert_eq!(v["state"], "ramp_up");
-        assert_eq!(v.as_object().unwrap().len(), 12);
+        assert_eq!(v.as_object().unwrap().len(), STATUS_KEYS.len() + 2);
         let line = telemetry_line(&t);
         assert!(line.contains("plan 'square-45' step 2 rep 1 remaining 500 ms"), "{line}");
         assert!(line.contains("181.500 Hz") && line.contains("run 17"), "{line}");

@@ -19,7 +19,7 @@ use chladni_shared::icd::units::{MilliHz, Q15};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
-use super::render::{StatusJson, TelemetryJson, print_json, telemetry_line};
+use super::render::{StatusJson, TelemetryJson, fault_text, print_json, telemetry_line};
 
 /// Exit code after Ctrl-C (128 + SIGINT, as shells report it).
 pub const EXIT_INTERRUPTED: u8 = 130;
@@ -247,11 +247,9 @@ fn outcome_message(
              shows run {now}",
             NEVER_STARTED_AFTER.as_secs()
         ),
-        RunOutcome::Faulted(_) => format!(
-            "error: the drive faulted during plan {what} (run {run}): {}; `chladni device \
-             stop` clears it",
-            s.fault.map_or("fault", |f| f.cause.name())
-        ),
+        RunOutcome::Faulted(_) => {
+            format!("error: the drive faulted during plan {what} (run {run}): {}", fault_text(s))
+        }
         RunOutcome::Interrupted(_) => format!(
             "interrupted: stopped plan {what} (run {run}; the stop is run {})",
             stop.map_or("not sent".to_string(), |r| r.0.to_string())
@@ -349,7 +347,11 @@ mod tests {
             say(RunOutcome::NeverStarted(status(6, DriveState::Idle)))
                 .contains("never started: after 2 s the controller still shows run 6")
         );
-        assert!(say(RunOutcome::Faulted(status(7, DriveState::Faulted))).contains("): latched;"));
+        assert_eq!(
+            say(RunOutcome::Faulted(status(7, DriveState::Faulted))),
+            "error: the drive faulted during plan 'tri' (slot 64) (run 7): loop_open 0 mm/s² at \
+             0.000 s (`chladni device clear-fault` clears it)"
+        );
         assert_eq!(
             say(RunOutcome::Interrupted(status(7, DriveState::Running))),
             "interrupted: stopped plan 'tri' (slot 64) (run 7; the stop is run 8)"

@@ -471,3 +471,86 @@ fn a_run_is_judged_by_its_number_and_the_state() {
         Some(RunOutcome::NeverStarted(_))
     ));
 }
+
+/// A peer holding a finished sweep of `total` points as run `run` (`done` of them measured);
+/// it answers `GetSweep` in pages and counts them in `pages`.
+fn sweep_peer(run: u32, total: u16, done: u16) -> (Peer, Box<dyn Transport>) {
+    use chladni_shared::icd::link::{Measurement, SWEEP_PAGE, SweepPage};
+    Peer::start(move |env| {
+        let body = match &env.body {
+            Request::Sweep(_) => Response::Sweep(RunNumber(run)),
+            Request::Status(_) => Response::Status(idle_status(run)),
+            Request::GetSweep(g) => {
+                let points = (g.from..done.min(g.from + SWEEP_PAGE as u16))
+                    .map(|i| SweepPoint {
+                        freq_mhz: 10_000 + u32::from(i),
+                        measured: (i % 5 != 4).then_some(Measurement {
+                            accel_mmps2: u32::from(i) * 10,
+                            phase_mdeg: -i32::from(i),
+                        }),
+                    })
+                    .collect();
+                Response::GetSweep(SweepPage { run: RunNumber(run), total, done, points })
+            }
+            Request::ClearFault(_) => Response::ClearFault(RunNumber(run + 1)),
+            Request::InjectFault(_) => Response::Refused(Refusal::Unsupported),
+            _ => Response::Release(()),
+        };
+        frame(env.session, env.id, body)
+    })
+}
+
+#[test]
+fn a_sweep_is_a_run_and_its_points_come_in_pages() {
+    let (peer, io) = sweep_peer(12, 70, 70);
+    let mut c = client(io);
+    let sweep =
+        Sweep { from_mhz: 10_000, to_mhz: 20_000, points: 70, amplitude_q15: 3000, dwell_ms: 20 };
+    let run = c.sweep(sweep).unwrap();
+    assert_eq!(run, RunNumber(12));
+    let outcome = c.wait_for_run(run, |_| ControlFlow::Continue(())).unwrap();
+    assert!(matches!(outcome, RunOutcome::Done(_)), "{outcome:?}");
+    let points = c.sweep_points(run).unwrap();
+    assert_eq!(points.len(), 70);
+    assert!(points.iter().enumerate().all(|(i, p)| p.freq_mhz == 10_000 + i as u32));
+    assert_eq!(points.iter().filter(|p| p.measured.is_none()).count(), 14);
+    drop(c);
+    let froms: Vec<u16> = peer
+        .requests()
+        .into_iter()
+        .filter_map(|r| match r.unwrap().body {
+            Request::GetSweep(g) => Some(g.from),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(froms, [0, 32, 64]);
+}
+
+#[test]
+fn another_runs_sweep_is_stale_and_a_short_one_incomplete() {
+    let (_peer, io) = sweep_peer(13, 40, 40);
+    let err = client(io).sweep_points(RunNumber(12)).unwrap_err();
+    assert!(matches!(err, DeviceError::StaleSweep { expected: 12, found: 13 }), "{err:?}");
+    assert_eq!(
+        err.to_string(),
+        "the controller's last sweep is run 13, not run 12: another sweep replaced it (or the \
+         controller restarted); run the sweep again"
+    );
+    let (_peer, io) = sweep_peer(12, 40, 17);
+    let err = client(io).sweep_points(RunNumber(12)).unwrap_err();
+    assert!(matches!(err, DeviceError::SweepIncomplete { run: 12, done: 17, total: 40 }));
+    assert!(err.to_string().contains("17 of 40 points"), "{err}");
+}
+
+#[test]
+fn clear_fault_and_inject_fault_are_typed_calls() {
+    let (peer, io) = sweep_peer(3, 2, 2);
+    let mut c = client(io);
+    assert_eq!(c.clear_fault().unwrap(), RunNumber(4));
+    let err = c.inject_fault(TestFault::SensorSilent).unwrap_err();
+    assert!(matches!(err, DeviceError::Refused(Refusal::Unsupported)), "{err:?}");
+    drop(c);
+    let names: Vec<String> =
+        peer.requests().iter().map(|r| r.as_ref().unwrap().body.name().to_string()).collect();
+    assert_eq!(names, ["Hello", "ClearFault", "InjectFault", "Release"]);
+}
