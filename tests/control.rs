@@ -10,12 +10,11 @@
 use std::time::{Duration, Instant};
 
 use chladni::controller::client::{DeviceClient, DeviceError};
+use chladni::controller::sweep::{SweepSample, find_resonances};
 use chladni_e2e::{Controller, plan, poll_until};
 use chladni_shared::drive::dds::SAMPLE_RATE;
-use chladni_shared::drive::resonance::{self, Resonance, SweepPoint as Point};
 use chladni_shared::icd::link::{
-    ClearFault, DriveError, DriveState, FaultCause, GetSweep, InjectFault, Refusal, SensorFault,
-    StatusReport, Sweep, TestFault,
+    DriveError, DriveState, FaultCause, Refusal, SensorFault, StatusReport, Sweep, TestFault,
 };
 use chladni_shared::icd::plan::{Level, Step};
 use chladni_shared::icd::sense::ResetCause;
@@ -121,35 +120,17 @@ fn sweep_finds_the_resonance(client: &mut DeviceClient) {
         amplitude_q15: 3_000,
         dwell_ms: 120,
     };
-    let run = client.call(spec).expect("sweep accepted");
+    let run = client.sweep(spec).expect("sweep accepted");
     poll_until(client, Duration::from_secs(60), |s| s.run == run && s.state == DriveState::Idle);
-    let mut points = Vec::new();
-    loop {
-        let page = client.call(GetSweep { from: points.len() as u16 }).expect("sweep page");
-        assert_eq!((page.run, page.total, page.done), (run, 41, 41), "the sweep is complete");
-        if page.points.is_empty() {
-            break;
-        }
-        points.extend(page.points);
-    }
+    let points = client.sweep_points(run).expect("the sweep's points, complete");
     assert_eq!(points.len(), 41);
     assert_eq!(points[0].freq_mhz, 100_000);
     assert_eq!(points[40].freq_mhz, 300_000);
-    let bode: Vec<Point> = points
-        .iter()
-        .map(|p| {
-            let m = p.measured.expect("every point measured");
-            Point {
-                freq_hz: p.freq_mhz as f32 / 1000.0,
-                amplitude: m.accel_mmps2 as f32 / 1000.0,
-                phase_deg: m.phase_mdeg as f32 / 1000.0,
-            }
-        })
-        .collect();
-    let mut found = [Resonance::default(); 4];
-    let n = resonance::find_resonances(&bode, &mut found);
-    assert_eq!(n, 1, "one resonance: {:?}", &found[..n]);
-    let f0 = found[0].freq_hz as f64;
+    let bode: Vec<SweepSample> = points.iter().map(SweepSample::from).collect();
+    assert!(bode.iter().all(|p| p.accel_mps2.is_some()), "every point measured");
+    let found = find_resonances(&bode);
+    assert_eq!(found.len(), 1, "one resonance: {found:?}");
+    let f0 = found[0].freq_hz;
     let error = (f0 - PLANT_F0_HZ).abs() / PLANT_F0_HZ;
     println!(
         "sweep 100–300 Hz, 41 points, 120 ms each: resonance {f0:.2} Hz ({:+.2} %), Q {:?} \
@@ -158,16 +139,22 @@ fn sweep_finds_the_resonance(client: &mut DeviceClient) {
         found[0].q
     );
     assert!(error < 0.01, "resonance at {f0} Hz");
-    // Phase: the acceleration leads the drive below resonance and lags above it, crossing
-    // near the peak (a second-order plant seen through its acceleration).
-    let peak = &bode[found[0].index];
-    let (low, high) = (&bode[0], &bode[40]);
+    // Phase: the acceleration is opposite the drive well below resonance, leads it by about
+    // 90° at resonance and follows it well above (a force-driven mass seen through its
+    // acceleration).
+    let phase = |i: usize| bode[i].phase_deg.unwrap_or(f64::NAN);
+    let peak = (0..bode.len())
+        .min_by(|&a, &b| (bode[a].freq_hz - f0).abs().total_cmp(&(bode[b].freq_hz - f0).abs()))
+        .unwrap();
     println!(
-        "phase {:.0}° at {} Hz, {:.0}° at the peak, {:.0}° at {} Hz",
-        low.phase_deg, low.freq_hz, peak.phase_deg, high.phase_deg, high.freq_hz
+        "phase {:.0}° at 100 Hz, {:.0}° at {:.1} Hz, {:.0}° at 300 Hz",
+        phase(0),
+        phase(peak),
+        bode[peak].freq_hz,
+        phase(40)
     );
-    let spread = |a: f32, b: f32| (a - b + 540.0).rem_euclid(360.0) - 180.0;
-    assert!(spread(low.phase_deg, high.phase_deg).abs() > 120.0, "the phase turns across f0");
+    let spread = |a: f64, b: f64| (a - b + 540.0).rem_euclid(360.0) - 180.0;
+    assert!(spread(phase(0), phase(40)).abs() > 120.0, "the phase turns across f0");
 }
 
 /// `fault` injected while a closed-loop drive runs: the drive ramps to zero, the fault is
@@ -178,7 +165,7 @@ fn injected_fault_stops_the_drive(client: &mut DeviceClient, fault: TestFault) {
         s.run == run && s.elapsed_samples > 40_000 && s.fault.is_none()
     });
     let before = settled.last().unwrap().clock;
-    client.call(InjectFault(fault)).expect("inject");
+    client.inject_fault(fault).expect("inject");
     let seen = poll_until(client, Duration::from_secs(30), |s| s.state == DriveState::Faulted);
     let faulted = seen.last().unwrap();
     let latched = faulted.fault.expect("a faulted drive names its fault");
@@ -210,8 +197,8 @@ fn injected_fault_stops_the_drive(client: &mut DeviceClient, fault: TestFault) {
     );
     let still = client.status().expect("status");
     assert_eq!(still.fault, Some(latched));
-    client.call(InjectFault(TestFault::Heal)).expect("heal");
-    client.call(ClearFault).expect("clear");
+    client.inject_fault(TestFault::Heal).expect("heal");
+    client.clear_fault().expect("clear");
     poll_until(client, Duration::from_secs(10), |s| s.fault.is_none());
     // The sensor comes back by itself once healed (the sense task sets it up again).
     let run = client.drive(170_000, Level::Accel(15_000)).expect("runs again once cleared");
@@ -230,7 +217,7 @@ fn watchdog_reset_comes_back_idle(controller: &Controller) {
     let before = client.status().expect("status");
     assert_eq!(before.reset_cause, ResetCause::PowerOn);
     client.drive(150_000, Level::Drive(4_000)).expect("drive");
-    client.call(InjectFault(TestFault::StallTask)).expect("inject");
+    client.inject_fault(TestFault::StallTask).expect("inject");
     drop(client);
     // The controller is gone for a moment (its executor hangs, then it resets): reconnect.
     let deadline = Instant::now() + Duration::from_secs(30);

@@ -16,7 +16,6 @@
 //! - [`closed_loop`]: [`closed_loop::ClosedLoop`], the one call per block of the drive task:
 //!   timebase → lock-in → loop check → controller, monitors.
 //! - [`sensor_sim`]: the simulated accelerometer (own clock, noise, 16-bit quantisation).
-//! - [`resonance`]: resonances in a sweep (parabolic peak, Q from the −3 dB points).
 
 pub mod closed_loop;
 pub mod control;
@@ -27,7 +26,6 @@ mod loop_tests;
 pub mod monitor;
 pub mod plant;
 pub mod pwm;
-pub mod resonance;
 pub mod runner;
 pub mod sensor_sim;
 pub mod timeline;
