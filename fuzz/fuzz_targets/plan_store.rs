@@ -27,6 +27,7 @@ use chladni_fuzz::Choices;
 use chladni_fuzz::flash::{Cut, PAGE, SharedFlash};
 use chladni_shared::icd::link::Refusal;
 use chladni_shared::icd::plan::{DeviceLimits, MAX_STEPS, Plan, Step};
+use chladni_shared::icd::sense::ControlConfig;
 use chladni_shared::icd::store::{
     CHUNK_STEPS, DeviceConfig, PLAN_SLOTS, PlanRef, PlanSummary, StoreError, UploadBegin,
     UploadChunk, plan_crc,
@@ -303,8 +304,13 @@ impl Harness {
             max_amplitude_q15: c.u16() % (hw.max_amplitude_q15 + 1),
             max_steps: 1 + c.u16() % hw.max_steps,
             max_total_ms: 1 + c.u32() as u64 % hw.max_total_ms,
+            max_accel_mmps2: 1 + c.u32() % hw.max_accel_mmps2,
         };
-        let config = DeviceConfig { limits };
+        // The loop check's drive must fit under the amplitude limit.
+        let check_effort_q15 =
+            ControlConfig::DEFAULT.check_effort_q15.min(limits.max_amplitude_q15);
+        let control = ControlConfig { check_effort_q15, ..ControlConfig::DEFAULT };
+        let config = DeviceConfig { limits, control };
         if config.validate().is_err() {
             return InFlight::Nothing;
         }

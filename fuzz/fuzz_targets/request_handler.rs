@@ -55,7 +55,7 @@ async fn run(data: &[u8]) {
     let drive = DriveShared::new();
     let mut flash = RamFlash::new(STORE_PAGES);
     let store = PlanStore::new(&mut flash, 0..(STORE_PAGES * chladni_fuzz::flash::PAGE) as u32);
-    let mut link = Link::new(Identity { board: Board::Qemu }, &drive, Some(store));
+    let mut link = Link::new(Identity { board: Board::Qemu, inject: None }, &drive, Some(store));
     link.load_config().await;
     let mut core = DriveCore::new(&drive);
     let mut reader = FrameReader::<MAX_FRAME>::new();

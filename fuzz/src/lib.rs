@@ -10,11 +10,12 @@ pub mod flash;
 
 use chladni_shared::icd::frame::{CRC32, ENCODE_BUF, Envelope, PROTOCOL_VERSION, encode};
 use chladni_shared::icd::link::{
-    Board, DeletePlan, DeviceInfo, Drive, DriveError, DriveState, Fault, GetConfig, GetInfo,
-    GetStatus, Hello, ListPlans, Ping, Refusal, Release, Request, Response, RunNumber, RunPlan,
-    SetConfig, StatusReport, Stop, Subscribe, Telemetry, UploadCommit,
+    Board, ClearFault, DeletePlan, DeviceInfo, Drive, DriveError, DriveState, Fault, FaultCause,
+    GetConfig, GetInfo, GetStatus, GetSweep, Hello, InjectFault, ListPlans, Measurement, Ping,
+    Refusal, Release, Request, Response, RunNumber, RunPlan, SetConfig, StatusReport, Stop,
+    Subscribe, Sweep, SweepError, SweepPage, SweepPoint, Telemetry, TestFault, UploadCommit,
 };
-use chladni_shared::icd::plan::{DeviceLimits, Plan, PlanError, Step};
+use chladni_shared::icd::plan::{DeviceLimits, Level, Plan, PlanError, Step};
 use chladni_shared::icd::store::{
     CHUNK_STEPS, DeviceConfig, PlanPage, PlanRef, PlanSummary, StoreError, UploadBegin,
     UploadChunk, UploadError,
@@ -66,7 +67,7 @@ fn name<const N: usize>(s: &str) -> heapless::String<N> {
 fn step(i: u32) -> Step {
     Step {
         freq_mhz: 100_000 + i * 1_001,
-        level: chladni_shared::icd::plan::Level::Drive((i * 97 % 32_768) as u16),
+        level: Level::Drive((i * 97 % 32_768) as u16),
         duration_ms: 10 + i,
         ramp_ms: i % 11,
     }
@@ -102,7 +103,7 @@ pub fn sample_requests() -> Vec<Request> {
         Request::Ping(Ping { nonce: 0xdead_beef }),
         Request::GetInfo(GetInfo),
         Request::Release(Release),
-        Request::Drive(Drive { freq_mhz: 123_000, level: chladni_shared::icd::plan::Level::Drive(16_384) }),
+        Request::Drive(Drive { freq_mhz: 123_000, level: Level::Drive(16_384) }),
         Request::RunPlan(RunPlan { plan: PlanRef::Slot(4), repeat: None }),
         Request::RunPlan(RunPlan { plan: PlanRef::Name(name("square-45")), repeat: Some(2) }),
         Request::Stop(Stop),
@@ -120,6 +121,16 @@ pub fn sample_requests() -> Vec<Request> {
         Request::Subscribe(Subscribe { rate_hz: 10, count: 100 }),
         Request::GetConfig(GetConfig),
         Request::SetConfig(SetConfig(DeviceConfig::DEFAULT)),
+        Request::ClearFault(ClearFault),
+        Request::Sweep(Sweep {
+            from_mhz: 100_000,
+            to_mhz: 300_000,
+            points: 41,
+            amplitude_q15: 3_000,
+            dwell_ms: 120,
+        }),
+        Request::GetSweep(GetSweep { from: 0 }),
+        Request::InjectFault(InjectFault(TestFault::Heal)),
     ]);
     requests
 }
@@ -132,13 +143,15 @@ fn status() -> StatusReport {
         run: RunNumber(17),
         plan: Some(name("square-45")),
         remaining_samples: 48_000,
-        fault: None,
         elapsed_samples: 96_000,
         sample_rate: 48_000,
         freq_mhz: 120_000,
         amplitude_q15: 16_000,
-        underruns: 0,
+        level: Some(Level::Accel(20_000)),
+        measured: Some(Measurement { accel_mmps2: 19_987, phase_mdeg: -12_345 }),
+        clock: 1_000_000,
         commands: 5,
+        ..StatusReport::IDLE
     }
 }
 
@@ -164,7 +177,7 @@ pub fn sample_responses() -> Vec<Response> {
     };
     let mut faulted = status();
     faulted.state = DriveState::Faulted;
-    faulted.fault = Some(Fault::Latched);
+    faulted.fault = Some(Fault { cause: FaultCause::LoopOpen, value: 12, at_sample: 990_000 });
     faulted.plan = None;
     faulted.step = None;
     vec![
@@ -190,13 +203,30 @@ pub fn sample_responses() -> Vec<Response> {
         Response::GetConfig(DeviceConfig::DEFAULT),
         Response::SetConfig(DeviceConfig {
             limits: DeviceLimits { max_steps: 100, ..DeviceLimits::DEFAULT },
+            ..DeviceConfig::DEFAULT
         }),
+        Response::ClearFault(RunNumber(4)),
+        Response::Sweep(RunNumber(5)),
+        Response::GetSweep(SweepPage {
+            run: RunNumber(5),
+            total: 41,
+            done: 2,
+            points: (0..2)
+                .map(|i| SweepPoint {
+                    freq_mhz: 100_000 + i * 2_000,
+                    measured: Some(Measurement { accel_mmps2: 1_000 + i, phase_mdeg: 170_000 }),
+                })
+                .collect(),
+        }),
+        Response::InjectFault(()),
         Response::Error(chladni_shared::icd::frame::LinkError::BadCrc),
         Response::Refused(Refusal::Busy { owner: name("other"), idle_ms: 120 }),
         Response::Refused(Refusal::Drive(DriveError::Plan(PlanError::ZeroDuration { step: 2 }))),
         Response::Refused(Refusal::Upload(UploadError::OutOfOrder { expected: 1, got: 3 })),
         Response::Refused(Refusal::Store(StoreError::NotFound(PlanRef::Name(name("gone"))))),
         Response::Refused(Refusal::TelemetryRate { rate_hz: 500 }),
+        Response::Refused(Refusal::Sweep(SweepError::Points { points: 1 })),
+        Response::Refused(Refusal::Unsupported),
         Response::Telemetry(Telemetry { seq: 9, left: 90, status: status() }),
     ]
 }
