@@ -62,11 +62,13 @@ async fn timer_task() {
 /// The link's answer to `request` (no flash: nothing is stored).
 fn answer(request: chladni_shared::icd::link::Request) -> chladni_shared::icd::link::Response {
     use chladni_firmware::app::link::{Identity, Link};
-    let drive = chladni_firmware::app::drive::DriveShared::new();
+    // A static, as in the application (~9 KiB: the staged plan, the sweep's points).
+    static DRIVE: chladni_firmware::app::drive::DriveShared =
+        chladni_firmware::app::drive::DriveShared::new();
     let identity = Identity { board: chladni_shared::icd::link::Board::Qemu, inject: None };
     // ~17 KiB on the 32 KiB stack, and the request's future beside it.
     let mut link =
-        Link::<chladni_firmware::board::qemu::flash::FileFlash>::new(identity, &drive, None);
+        Link::<chladni_firmware::board::qemu::flash::FileFlash>::new(identity, &DRIVE, None);
     embassy_futures::block_on(link.handle(7, 1, request, embassy_time::Instant::now()))
 }
 

@@ -227,3 +227,82 @@ fn ctrl_c_during_run_file_wait_stops_the_plan_and_exits_130() {
         std::thread::sleep(Duration::from_millis(20));
     }
 }
+
+#[test]
+fn sweep_finds_the_plate_writes_its_files_and_appends_the_mode() {
+    let emu = emulator("sweep");
+    let port = emu.address();
+    let dir = std::env::temp_dir().join(format!("chladni-cli-sweep-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (csv, png, plate) = (dir.join("sweep.csv"), dir.join("sweep.png"), dir.join("plate.toml"));
+    std::fs::copy("../examples/plates/four-lines.toml", &plate).unwrap();
+    let path = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let out = chladni(&[
+        "device",
+        "sweep",
+        "--port",
+        &port,
+        "--from",
+        "120",
+        "--to",
+        "260",
+        "--points",
+        "29",
+        "--dwell-ms",
+        "120",
+        "--amplitude",
+        "0.1",
+        "--out",
+        &path(&csv),
+        "--plot",
+        &path(&png),
+        "--write-modes",
+        &path(&plate),
+        "--json",
+    ]);
+    let v = json_of(&out);
+    assert_eq!(keys(&v), ["points", "resonances"]);
+    let points = v["points"].as_array().unwrap();
+    assert_eq!(points.len(), 29);
+    assert_eq!(keys(&points[0]), ["accel_mps2", "freq_hz", "phase_deg"]);
+    let resonances = v["resonances"].as_array().unwrap();
+    assert_eq!(resonances.len(), 1, "{v}");
+    let f0 = resonances[0]["freq_hz"].as_f64().unwrap();
+    assert!((f0 - 180.0).abs() < 1.8, "the simulated plate resonates at 180 Hz, found {f0}");
+    assert_eq!(std::fs::read_to_string(&csv).unwrap().lines().count(), 30, "header + points");
+    assert!(std::fs::metadata(&png).unwrap().len() > 10_000, "a Bode plot was drawn");
+    let toml = std::fs::read_to_string(&plate).unwrap();
+    assert_eq!(toml.matches("[[mode]]").count(), 5, "the resonance appended as a fifth mode");
+    // The appended mode has no node yet: planning with it is refused by name.
+    let plan = chladni(&["plan", "../examples/parts/rectangle.json", "--plate", &path(&plate)]);
+    assert_eq!(plan.status.code(), Some(2), "{}", String::from_utf8_lossy(&plan.stderr));
+}
+
+#[test]
+fn closed_loop_drive_shows_its_measurement_and_a_fault_needs_clearing() {
+    let emu = emulator("accel");
+    let port = emu.address();
+    let drive = json_of(&chladni(&[
+        "device", "drive", "--port", &port, "--freq", "180", "--accel", "12", "--json",
+    ]));
+    assert!(drive["run"].as_u64().is_some(), "{drive}");
+    // Settled well within a second of the drive's start (QEMU time may slip: poll).
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let status = loop {
+        let s = json_of(&chladni(&["device", "status", "--port", &port, "--json"]));
+        let settled = s["accel_mps2"].as_f64().is_some_and(|a| (a - 12.0).abs() < 0.24);
+        if settled && s["elapsed_ms"].as_f64().unwrap() > 1000.0 {
+            break s;
+        }
+        assert!(Instant::now() < deadline, "never settled: {s}");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert_eq!(status["target_accel_mps2"], 12.0);
+    assert!(status["effort"].as_f64().unwrap() > 0.0 && status["fault"].is_null());
+    // Human output names the measurement too.
+    let text = chladni(&["device", "status", "--port", &port]);
+    assert!(String::from_utf8_lossy(&text.stdout).contains("m/s²"));
+    let clear = chladni(&["device", "clear-fault", "--port", &port, "--json"]);
+    assert_eq!(clear.status.code(), Some(0), "{}", String::from_utf8_lossy(&clear.stderr));
+    chladni(&["device", "stop", "--port", &port]);
+}
