@@ -43,6 +43,17 @@ start_emulator $chladni $out --flash-file $out/flash.bin --log $out/firmware.log
 say chladni device info --port $port
 $chladni device info --port "$port"
 
+# Calibration: sweep the (simulated) plate, find its resonance, hold an acceleration on it.
+say chladni device sweep --port $port --from 100 --to 300 --points 41 --plot $out/sweep.png --out $out/sweep.csv
+$chladni device sweep --port "$port" --from 100 --to 300 --points 41 --plot "$out/sweep.png" --out "$out/sweep.csv"
+
+say chladni device drive --port $port --freq 180 --accel 20
+$chladni device drive --port "$port" --freq 180 --accel 20
+sleep 1
+say chladni device status --port $port
+$chladni device status --port "$port"
+$chladni device stop --port "$port" >/dev/null
+
 # Plans are kept on the controller: upload, list, run by name (and they survive a restart).
 say chladni device upload --port $port $out/plan.json --name demo-orient
 $chladni device upload --port "$port" "$out/plan.json" --name demo-orient
@@ -61,4 +72,4 @@ say chladni device status --port $port --json
 $chladni device status --port "$port" --json
 
 echo
-echo "figures: $out/analysis.png $out/plan.png $out/traces.png $out/modes/; firmware log: $out/firmware.log"
+echo "figures: $out/analysis.png $out/plan.png $out/traces.png $out/modes/ $out/sweep.png; firmware log: $out/firmware.log"

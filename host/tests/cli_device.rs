@@ -89,8 +89,8 @@ fn status_info_ping_config_and_list_print_their_json_shapes() {
             "min_freq_hz",
             "no_data_ms",
             "open_loop_effort",
-            "open_loop_ms",
             "open_loop_mps2",
+            "open_loop_ms",
             "saturation_ms",
             "warn_band_db"
         ]
@@ -173,7 +173,8 @@ fn monitor_prints_one_json_object_per_sample_and_stops_at_count() {
     assert_eq!(seqs, [0, 1, 2, 3, 4]);
     assert_eq!(lines[4]["left"], 0);
     assert_eq!(lines[0]["state"], "idle");
-    assert_eq!(lines[0].as_object().unwrap().len(), 12, "{}", lines[0]);
+    // The status's keys (`device status --json`) and the stream's `seq` and `left`.
+    assert_eq!(lines[0].as_object().unwrap().len(), 18, "{}", lines[0]);
 }
 
 #[test]

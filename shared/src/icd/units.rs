@@ -150,6 +150,13 @@ impl Q15 {
 
 // ---- Acceleration ----
 
+/// `x` in thousandths, rounded to the nearest: `None` unless `x` is finite, not negative and
+/// fits a u32 of thousandths (the one rule of the milli-units below).
+fn milli(x: f64) -> Option<u32> {
+    let m = round_half_away(x * 1000.0);
+    (x.is_finite() && x >= 0.0 && (0..=u32::MAX as i64).contains(&m)).then_some(m as u32)
+}
+
 /// An acceleration amplitude in mm/s², as closed-loop levels, measurements and the control
 /// thresholds carry it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -178,11 +185,7 @@ impl core::error::Error for AccelError {}
 impl MmPerS2 {
     /// `mps2` m/s², rounded to the nearest mm/s².
     pub fn from_mps2(mps2: f64) -> Result<MmPerS2, AccelError> {
-        let mm = round_half_away(mps2 * 1000.0);
-        if !mps2.is_finite() || mm < 0 || mm > u32::MAX as i64 || mps2 < 0.0 {
-            return Err(AccelError { mps2 });
-        }
-        Ok(MmPerS2(mm as u32))
+        milli(mps2).map(MmPerS2).ok_or(AccelError { mps2 })
     }
 
     /// The acceleration in m/s².
@@ -220,11 +223,7 @@ impl core::error::Error for DbError {}
 impl MilliDb {
     /// `db` dB, rounded to the nearest millidecibel.
     pub fn from_db(db: f64) -> Result<MilliDb, DbError> {
-        let m = round_half_away(db * 1000.0);
-        if !db.is_finite() || db < 0.0 || m > u32::MAX as i64 {
-            return Err(DbError { db });
-        }
-        Ok(MilliDb(m as u32))
+        milli(db).map(MilliDb).ok_or(DbError { db })
     }
 
     /// The ratio in dB.
