@@ -127,12 +127,14 @@ impl Monitors {
             value: value.clamp(i32::MIN as i64, i32::MAX as i64) as i32,
             at_sample: i.now,
         };
-        if let Some(s) = self.sensor.take() {
-            return Some(fault(FaultCause::Sensor(s), 0));
-        }
         if !i.driving {
+            // Nothing to protect: a sensor error now is forgotten (a sensor still broken
+            // reports again, and faults the next drive within one retry).
             *self = Self { cfg: self.cfg, last_data: i.now, ..Self::new(self.cfg) };
             return None;
+        }
+        if let Some(s) = self.sensor.take() {
+            return Some(fault(FaultCause::Sensor(s), 0));
         }
         if !self.was_driving {
             // The no-data gap counts from the start of the drive.
@@ -236,19 +238,22 @@ mod tests {
     }
 
     #[test]
-    fn sensor_error_faults_at_once_and_idle_resets_timers() {
+    fn sensor_error_faults_at_once_while_driving_and_idle_resets_timers() {
         let mut m = Monitors::new(ControlConfig::DEFAULT);
         m.sensor_error(SensorFault::Bus);
         let i = MonitorInput {
             now: 7,
-            driving: false,
+            driving: true,
             effort_q15: 0,
             response_mmps2: None,
             closed: None,
         };
         assert_eq!(m.check(&i).map(|f| f.cause), Some(FaultCause::Sensor(SensorFault::Bus)));
-        // Not driving: no no-data fault however long.
-        let i = MonitorInput { now: 1_000_000, ..i };
-        assert_eq!(m.check(&i), None);
+        // Not driving: a sensor error is forgotten, and no no-data fault however long.
+        m.sensor_error(SensorFault::Nack);
+        let idle = MonitorInput { now: 1_000_000, driving: false, ..i };
+        assert_eq!(m.check(&idle), None);
+        assert_eq!(m.check(&MonitorInput { now: 1_000_001, ..idle }), None);
+        assert_eq!(m.check(&MonitorInput { now: 1_000_002, ..i }), None);
     }
 }

@@ -102,6 +102,15 @@ macro_rules! endpoints {
             pub const fn name(&self) -> &'static str {
                 match self { $( Request::$name(_) => stringify!($name), )* }
             }
+
+            /// Whether `response` is this request's own answer kind (not an error, a refusal
+            /// or telemetry): the table's pairing, for checkers.
+            pub const fn is_answered_by(&self, response: &Response) -> bool {
+                match (self, response) {
+                    $( (Request::$name(_), Response::$name(_)) => true, )*
+                    _ => false,
+                }
+            }
         }
 
         $(
@@ -807,6 +816,15 @@ mod tests {
         assert!(!Stop.into_request().needs_owner());
         assert!(!GetStatus.into_request().needs_owner());
         assert!(ClearFault.into_request().needs_owner());
+        let sweep = GetSweep { from: 0 }.into_request();
+        assert!(sweep.is_answered_by(&GetSweep::respond(SweepPage {
+            run: RunNumber(1),
+            total: 0,
+            done: 0,
+            points: heapless::Vec::new(),
+        })));
+        assert!(!sweep.is_answered_by(&Response::Ping(1)));
+        assert!(!sweep.is_answered_by(&Response::Refused(Refusal::Unsupported)));
     }
 
     #[test]
