@@ -1,6 +1,9 @@
 //! Plan synthesis for a 64-vertex part on a plate with 12 straight-node modes: step maps
 //! (shared fixed-point analysis), breadth-first search, dynamic confirmation and simulated
-//! step durations (`plan`), and maps + search alone (`search`).
+//! step durations (`plan`), and maps + search alone (`search`); the dynamic straight-node
+//! maps computed from scratch (`planner::dynamic`, 72 orientations, uncached) for one mode and
+//! for all twelve. The plan and search benches reuse the process-wide map cache after their
+//! first run (as a second `plan` call in one process would).
 //!
 //! `cargo bench -p chladni-host --bench plan -- --warm-up-time 1 --measurement-time 3`
 
@@ -9,7 +12,7 @@ use std::hint::black_box;
 use chladni::model::part::Part;
 use chladni::model::plate::PlateModel;
 use chladni::model::plate_file::PlateFile;
-use chladni::planner::{self, PlanOptions, Problem};
+use chladni::planner::{self, Backend, DynSettings, MapKind, PlanOptions, Problem, plan_period};
 use criterion::{Criterion, criterion_group, criterion_main};
 
 /// An irregular 64-gon (an ellipse with a few harmonics): no symmetry.
@@ -61,6 +64,29 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             Problem::new(black_box(&p), black_box(&pl), &quick).unwrap().search(&quick).unwrap()
         })
+    });
+    let st = PlanOptions { maps: MapKind::Static, ..quick };
+    group.bench_function("64-gon, 12 modes: static maps + search", |b| {
+        b.iter(|| Problem::new(black_box(&p), black_box(&pl), &st).unwrap().search(&st).unwrap())
+    });
+    let period = plan_period(&p, &pl);
+    let dynamic = |k: usize| {
+        planner::dynamic::dynamic_line_map(
+            black_box(&p),
+            &pl.modes[k],
+            &pl,
+            period,
+            Backend::Fixed,
+            DynSettings::default(),
+        )
+        .unwrap()
+    };
+    group.bench_function("64-gon: one dynamic map (sign law, uncached)", |b| b.iter(|| dynamic(0)));
+    group.bench_function("64-gon: one dynamic map (linear law, uncached)", |b| {
+        b.iter(|| dynamic(2))
+    });
+    group.bench_function("64-gon, 12 modes: dynamic maps (uncached)", |b| {
+        b.iter(|| (0..pl.modes.len()).map(dynamic).collect::<Vec<_>>())
     });
     group.finish();
 }

@@ -10,7 +10,7 @@ use chladni::motion::montecarlo::{self, Report, Setup, Stats, Trials};
 use chladni::motion::sim::{self, Body, FieldModel, Pose, SimStep, simulate_plan};
 use chladni::output::write_atomic;
 use chladni::planner::feed::{self, FeedRegion};
-use chladni::planner::{self, PlanOptions, Synthesis};
+use chladni::planner::{self, MapKind, PlanOptions, Synthesis};
 use chladni::plot::plan::{self as plan_plot, TracesFigure};
 use chladni::rng::Rng;
 use chladni_shared::icd::plan::DeviceLimits;
@@ -83,6 +83,17 @@ pub struct PlanArgs {
     /// Parts are dropped in this rectangle (mm): plan by tracking poses from it.
     #[arg(long, num_args = 4, value_names = ["X0", "Y0", "X1", "Y1"], allow_negative_numbers = true)]
     feed: Option<Vec<f64>>,
+    /// Straight-node step maps: simulated approach from both sides of the node (dynamic),
+    /// or the static alignment function checked by simulation afterwards (static).
+    #[arg(long, value_enum, default_value_t = Maps::Dynamic)]
+    maps: Maps,
+}
+
+/// `--maps`: which step maps straight-node modes use ([`MapKind`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum Maps {
+    Static,
+    Dynamic,
 }
 
 impl PlanArgs {
@@ -136,6 +147,10 @@ impl PlanArgs {
             margin_deg: self.margin_deg,
             safety: self.safety,
             feed: region,
+            maps: match self.maps {
+                Maps::Static => MapKind::Static,
+                Maps::Dynamic => MapKind::Dynamic,
+            },
             ..Default::default()
         };
         match &region {

@@ -2,9 +2,12 @@
 //! brings every start orientation to one final orientation.
 //!
 //! 1. **Step maps.** Each mode gives a map θ ↦ θ' (plate frame) with its basin boundaries:
-//!    - straight node of direction α: the shared fixed-point analysis in the node frame,
+//!    - straight node of direction α, static ([`MapKind::Static`]): the shared fixed-point analysis in the node frame,
 //!      θ' = α − 90° + a(θ − α + 90°); boundaries = unstable rests (the f64 reference can be
 //!      used instead, [`Backend::F64`], to check agreement);
+//!    - straight nodes, by default ([`MapKind::Dynamic`], [`dynamic`]): measured by
+//!      simulating the approach to the node from both sides for 72 start orientations; an
+//!      orientation whose outcome depends on the side is mapped to every rest it reaches;
 //!    - hyperbola and grid nodes: quasi-static simulation ([`crate::motion::sim`]) from `sim_starts`
 //!      start orientations at one start point (hyperbola: its vertex; grid: the plate centre);
 //!      final orientations are clustered (2°) into rests, boundaries lie between neighbouring
@@ -43,7 +46,10 @@ use crate::model::plan_file::{PlanFile, StepJson};
 use crate::model::plate::{Mode, Node, PlateModel};
 use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
 
+pub mod dynamic;
 pub mod feed;
+
+pub use dynamic::{DynSettings, MapCache, MapKind};
 
 /// Which model computes straight-node maps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -74,6 +80,11 @@ pub struct PlanOptions {
     pub feed: Option<feed::FeedRegion>,
     /// Settings of the feed-region search.
     pub feed_search: feed::FeedSearch,
+    /// Straight-node maps: measured by simulating the approach from both sides
+    /// ([`MapKind::Dynamic`], default) or the static alignment function ([`MapKind::Static`]).
+    pub maps: MapKind,
+    /// Settings of dynamic maps.
+    pub dyn_maps: DynSettings,
 }
 
 impl Default for PlanOptions {
@@ -87,6 +98,8 @@ impl Default for PlanOptions {
             max_states: 200_000,
             feed: None,
             feed_search: feed::FeedSearch::default(),
+            maps: MapKind::default(),
+            dyn_maps: DynSettings::default(),
         }
     }
 }
@@ -107,6 +120,9 @@ pub struct StepMap {
     /// Simulated grid maps: start points outside the mode's reach (no interior node
     /// reached; see [`sampled_map`]).
     pub dead_starts: usize,
+    /// Dynamic straight-node maps ([`dynamic`]): the measured outcome of every start
+    /// orientation from either side of the node; `None` for every other map.
+    dynamic: Option<std::sync::Arc<dynamic::DynamicImages>>,
 }
 
 impl StepMap {
@@ -119,6 +135,7 @@ impl StepMap {
             sampled: None,
             slack: 0.0,
             dead_starts: 0,
+            dynamic: None,
         }
     }
 }
@@ -130,16 +147,41 @@ pub fn cdist(a: f64, b: f64, p: f64) -> f64 {
 }
 
 impl StepMap {
+    /// Every orientation `theta` (deg) may reach: one for static and simulated maps, all
+    /// the rests a dynamic map measured when the outcome depends on the side the part
+    /// approaches from; `Err(distance)` when `theta` lies within `margin` of a basin boundary
+    /// (distance 0: a simulated run from it did not come to rest).
+    pub fn apply_all(&self, theta: f64, margin: f64) -> Result<Vec<f64>, f64> {
+        match &self.dynamic {
+            Some(d) if !self.neutral => {
+                self.near_boundary(theta, margin)?;
+                d.images(theta).ok_or(0.0)
+            }
+            _ => self.apply(theta, margin).map(|v| vec![v]),
+        }
+    }
+
+    /// `Err(distance)` when `theta` lies within `margin` (plus the map's slack) of a basin
+    /// boundary.
+    fn near_boundary(&self, theta: f64, margin: f64) -> Result<(), f64> {
+        let near =
+            self.boundaries.iter().map(|&b| cdist(theta, b, 360.0)).fold(f64::INFINITY, f64::min);
+        if near < margin + self.slack { Err(near) } else { Ok(()) }
+    }
+
     /// The orientation reached from `theta` (deg), or `Err(distance)` when `theta` lies
-    /// within `margin` of a basin boundary.
+    /// within `margin` of a basin boundary. A dynamic map's ambiguous orientation (several
+    /// images, see [`Self::apply_all`]) gives `Err(0.0)`.
     pub fn apply(&self, theta: f64, margin: f64) -> Result<f64, f64> {
         if self.neutral {
             return Ok(theta.rem_euclid(360.0));
         }
-        let near =
-            self.boundaries.iter().map(|&b| cdist(theta, b, 360.0)).fold(f64::INFINITY, f64::min);
-        if near < margin + self.slack {
-            return Err(near);
+        self.near_boundary(theta, margin)?;
+        if self.dynamic.is_some() {
+            return match self.apply_all(theta, margin)?.as_slice() {
+                [v] => Ok(*v),
+                _ => Err(0.0),
+            };
         }
         if let Some(s) = &self.sampled {
             let best = s
@@ -245,7 +287,15 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, S
             }
         }
     }
-    Ok(StepMap { stable, boundaries, neutral, sampled: None, slack: 0.0, dead_starts: 0 })
+    Ok(StepMap {
+        stable,
+        boundaries,
+        neutral,
+        sampled: None,
+        slack: 0.0,
+        dead_starts: 0,
+        dynamic: None,
+    })
 }
 
 /// Where simulated maps start the part: the hyperbola's vertex (else the plate centre) and
@@ -349,6 +399,7 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
         sampled: Some(sampled),
         slack: 180.0 / n as f64,
         dead_starts,
+        dynamic: None,
     }
 }
 
@@ -403,8 +454,11 @@ pub enum PlanFailure {
 
 /// The image of a set of orientation ids under mode `k` (sorted, deduplicated); `None` when
 /// some orientation has no allowed transition.
-fn set_image(set: &[usize], trans: &[Vec<Option<usize>>], k: usize) -> Option<Vec<usize>> {
-    let mut img = set.iter().map(|&u| trans[u][k]).collect::<Option<Vec<usize>>>()?;
+fn set_image(set: &[usize], trans: &[Vec<Option<Vec<usize>>>], k: usize) -> Option<Vec<usize>> {
+    let mut img = Vec::with_capacity(set.len());
+    for &u in set {
+        img.extend_from_slice(trans[u][k].as_deref()?);
+    }
     img.sort_unstable();
     img.dedup();
     Some(img)
@@ -546,7 +600,18 @@ impl Problem {
             .modes
             .iter()
             .map(|mode| match mode.node {
-                Node::Line { .. } => line_map(part, mode, opt.backend).map_err(PlanFailure::Model),
+                Node::Line { .. } => match opt.maps {
+                    MapKind::Static => line_map(part, mode, opt.backend),
+                    MapKind::Dynamic => MapCache::global().line_map(
+                        part,
+                        mode,
+                        plate,
+                        period,
+                        opt.backend,
+                        opt.dyn_maps,
+                    ),
+                }
+                .map_err(PlanFailure::Model),
                 _ => Ok(sampled_map(&body, mode, plate, opt.sim_starts, period)),
             })
             .collect::<Result<Vec<_>, _>>()?;
@@ -576,8 +641,9 @@ impl Problem {
             }
         };
         let nm = self.maps.len();
-        // trans[u][mode]
-        let mut trans: Vec<Vec<Option<usize>>> = Vec::new();
+        // trans[u][mode]: every orientation u may reach (several for an ambiguous
+        // orientation of a dynamic map).
+        let mut trans: Vec<Vec<Option<Vec<usize>>>> = Vec::new();
         let mut starts: Vec<(usize, Vec<usize>)> = Vec::new();
         for (k, map) in self.maps.iter().enumerate() {
             if map.neutral || map.stable.is_empty() {
@@ -588,7 +654,7 @@ impl Problem {
             set.dedup();
             starts.push((k, set));
         }
-        let close = |uni: &mut Vec<f64>, trans: &mut Vec<Vec<Option<usize>>>| {
+        let close = |uni: &mut Vec<f64>, trans: &mut Vec<Vec<Option<Vec<usize>>>>| {
             while trans.len() < uni.len() {
                 let u = uni[trans.len()];
                 let row = (0..nm)
@@ -596,7 +662,8 @@ impl Problem {
                         if forbidden.iter().any(|&(f, fk)| fk == k && cdist(f, u, p) < 1e-3) {
                             return None;
                         }
-                        self.maps[k].apply(u, opt.margin_deg).ok().map(|v| id(uni, v))
+                        let vs = self.maps[k].apply_all(u, opt.margin_deg).ok()?;
+                        Some(vs.into_iter().map(|v| id(uni, v)).collect())
                     })
                     .collect();
                 trans.push(row);
@@ -660,27 +727,18 @@ impl Problem {
                 continue;
             }
             let blocked =
-                set.iter().find_map(|&t| map.apply(t, opt.margin_deg).err().map(|d| (t, d)));
+                set.iter().find_map(|&t| map.apply_all(t, opt.margin_deg).err().map(|d| (t, d)));
             match blocked {
+                Some((t, _)) if map.near_boundary(t, opt.margin_deg).is_ok() => why.push(format!(
+                    "mode {}: a simulated approach from {t:.2}° does not come to rest",
+                    k + 1
+                )),
                 Some((t, d)) => why.push(format!(
                     "mode {} would put {t:.2}° only {d:.2}° from a basin boundary (margin {}°)",
                     k + 1,
                     opt.margin_deg
                 )),
-                None => {
-                    let mut img: Vec<f64> = set
-                        .iter()
-                        .filter_map(|&t| map.apply(t, opt.margin_deg).ok())
-                        .map(|v| v.rem_euclid(p))
-                        .collect();
-                    img.sort_by(f64::total_cmp);
-                    img.dedup_by(|a, b| cdist(*a, *b, p) < 1e-3);
-                    why.push(format!(
-                        "mode {} keeps them apart ({})",
-                        k + 1,
-                        img.iter().map(|v| format!("{v:.2}°")).collect::<Vec<_>>().join(", ")
-                    ));
-                }
+                None => why.push(keeps_apart(k, map, &set, opt.margin_deg, p)),
             }
         }
         format!(
@@ -689,6 +747,25 @@ impl Problem {
             why.join("; ")
         )
     }
+}
+
+/// Why mode `k` leaves the orientations `set` apart: their images, and which orientation a
+/// dynamic map sends to several rests depending on the side the part approaches from.
+fn keeps_apart(k: usize, map: &StepMap, set: &[f64], margin: f64, p: f64) -> String {
+    let images: Vec<(f64, Vec<f64>)> =
+        set.iter().filter_map(|&t| Some((t, map.apply_all(t, margin).ok()?))).collect();
+    let mut img: Vec<f64> = images.iter().flat_map(|(_, v)| v).map(|v| v.rem_euclid(p)).collect();
+    img.sort_by(f64::total_cmp);
+    img.dedup_by(|a, b| cdist(*a, *b, p) < 1e-3);
+    let fmt = |v: &[f64]| v.iter().map(|v| format!("{v:.2}°")).collect::<Vec<_>>().join(", ");
+    let mut msg = format!("mode {} keeps them apart ({})", k + 1, fmt(&img));
+    if let Some((t, v)) = images.iter().find(|(_, v)| v.len() > 1) {
+        msg += &format!(
+            ", sending {t:.2}° to {} depending on the side it approaches the node from",
+            fmt(v).replacen(", ", " or ", 1)
+        );
+    }
+    msg
 }
 
 /// Inset plate corners (by the part radius) farthest from a straight node on each side, or
@@ -779,6 +856,18 @@ pub(crate) fn step_duration_ms(settle_s: f64, safety: f64, ramp_ms: u32) -> u32 
 /// Does the simulation take orientation `u` to `v` (mod `period`, within 1°) under a straight
 /// node, approaching from either side, from beyond the part's radius and from half-way across?
 pub fn confirm(body: &Body, mode: &Mode, plate: &PlateModel, u: f64, v: f64, period: f64) -> bool {
+    confirm_any(body, mode, plate, u, &[v], period)
+}
+
+/// [`confirm`] for several possible images: every approach must end within 1° of one of them.
+pub fn confirm_any(
+    body: &Body,
+    mode: &Mode,
+    plate: &PlateModel,
+    u: f64,
+    images: &[f64],
+    period: f64,
+) -> bool {
     let field = FieldModel::new(mode, plate);
     let FieldModel::Line { xhat, c, .. } = field else { return true };
     let ctr = plate.center();
@@ -790,18 +879,44 @@ pub fn confirm(body: &Body, mode: &Mode, plate: &PlateModel, u: f64, v: f64, per
         let start =
             Pose { x: base[0] + xi * xhat[0], y: base[1] + xi * xhat[1], theta: u.to_radians() };
         let end = sim::run(body, &field, p, start).pose.theta.to_degrees();
-        cdist(end, v, period) < 1.0
+        images.iter().any(|&v| cdist(end, v, period) < 1.0)
     })
 }
 
 /// Plans: maps, search, durations, position; with a feed region, by tracking poses from it
-/// ([`feed::plan`], no progress shown).
+/// ([`feed::plan`], no progress shown). With [`MapKind::Dynamic`] maps and no plan over them,
+/// the static maps (with the dynamic check) are tried before giving up, and the failure
+/// reported is the dynamic maps' one.
 pub fn plan(part: &Part, plate: &PlateModel, opt: &PlanOptions) -> Result<Synthesis, PlanFailure> {
     if let Some(region) = &opt.feed {
         return feed::plan(part, plate, opt, region, &indicatif::ProgressBar::hidden());
     }
     let problem = Problem::new(part, plate, opt)?;
-    plan_with(part, plate, opt, &problem)
+    let plan = plan_with(part, plate, opt, &problem);
+    // Dynamic maps hold the margin to every measured boundary, which can rule out a plan
+    // the static maps find and the dynamic check confirms at its start points (the boundary
+    // moves with the approach, sometimes to within the margin): then that plan is taken
+    // rather than none, so the default finds every plan the static maps find.
+    let has_lines = plate.modes.iter().any(|m| matches!(m.node, Node::Line { .. }));
+    match plan {
+        Err(PlanFailure::NoPlan(why)) if opt.maps == MapKind::Dynamic && has_lines => {
+            let st = PlanOptions { maps: MapKind::Static, ..*opt };
+            // Only the straight-node maps change; the simulated ones are kept.
+            let maps = plate
+                .modes
+                .iter()
+                .zip(problem.maps)
+                .map(|(mode, map)| match mode.node {
+                    Node::Line { .. } => line_map(part, mode, opt.backend),
+                    _ => Ok(map),
+                })
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(PlanFailure::Model)?;
+            plan_with(part, plate, &st, &Problem { maps, period: problem.period })
+                .map_err(|_| PlanFailure::NoPlan(why))
+        }
+        other => other,
+    }
 }
 
 /// [`plan`] with the maps already built.
@@ -825,8 +940,8 @@ pub fn plan_with(
                 continue;
             }
             for &u in &w[0].1 {
-                let Ok(v) = problem.maps[k].apply(u, opt.margin_deg) else { continue };
-                if !confirm(&body, mode, plate, u, v, problem.period) {
+                let Ok(vs) = problem.maps[k].apply_all(u, opt.margin_deg) else { continue };
+                if !confirm_any(&body, mode, plate, u, &vs, problem.period) {
                     bad.push((u, k));
                 }
             }
@@ -845,7 +960,7 @@ pub fn plan_with(
                 let map = &problem.maps[*k];
                 (0..24)
                     .map(|i| i as f64 * 15.0)
-                    .filter(|&t| map.apply(t, opt.margin_deg).is_ok())
+                    .filter(|&t| map.apply_all(t, opt.margin_deg).is_ok())
                     .collect()
             } else {
                 before.clone()
