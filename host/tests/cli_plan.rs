@@ -245,3 +245,26 @@ fn bad_feed_regions_exit_2_naming_the_values() {
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("feed region 0 0 400 40 mm is not inside"), "{err}");
 }
+
+#[test]
+fn static_and_dynamic_maps_give_the_same_example_plan() {
+    let run = |maps: &str| {
+        let args =
+            ["plan", &ex("parts/key.svg"), "--plate", &ex("plates/four-lines.toml"), "--json"];
+        let out = chladni(&[&args[..], &["--maps", maps]].concat());
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        out.stdout
+    };
+    assert_eq!(run("static"), run("dynamic"));
+    let out = chladni(&[
+        "plan",
+        &ex("parts/key.svg"),
+        "--plate",
+        &ex("plates/four-lines.toml"),
+        "--maps",
+        "exact",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("static") && err.contains("dynamic"), "{err}");
+}
