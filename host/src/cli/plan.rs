@@ -17,14 +17,11 @@ use chladni_shared::icd::plan::DeviceLimits;
 use clap::Args;
 
 use super::parse::{f64_where, positive};
+use super::part::PartArgs;
 use super::{InputError, check_output, check_plot, output_error, plot_error};
 
 fn bad(msg: String) -> anyhow::Error {
     InputError(msg).into()
-}
-
-fn load_part(path: &Path) -> anyhow::Result<Part> {
-    Part::load(path).map_err(|e| bad(format!("{}: {e}", path.display())))
 }
 
 fn load_plate(path: &Path) -> anyhow::Result<PlateModel> {
@@ -58,8 +55,8 @@ fn search_bar(hidden: bool) -> indicatif::ProgressBar {
 /// Sensorless plan: the shortest mode sequence bringing every start orientation to one.
 #[derive(Debug, Args)]
 pub struct PlanArgs {
-    /// Part file (.json or .svg).
-    part: PathBuf,
+    #[command(flatten)]
+    part: PartArgs,
     /// Plate model (TOML with [[mode]] entries; docs/plan.md).
     #[arg(long, value_name = "PLATE.toml")]
     plate: PathBuf,
@@ -87,12 +84,12 @@ pub struct PlanArgs {
 
 impl PlanArgs {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
-        let inputs = [("part", self.part.as_path()), ("plate", self.plate.as_path())];
+        let inputs = [("part", self.part.path()), ("plate", self.plate.as_path())];
         check_plot("--plot", &self.plot, &["png"], &inputs)?;
         if let Some(out) = &self.out {
             check_output("--out", out, &inputs)?;
         }
-        let part = load_part(&self.part)?;
+        let part = self.part.load()?;
         let plate = load_plate(&self.plate)?;
         planner::check_input(&part, &plate).map_err(|e| bad(e.to_string()))?;
         if let (_, Some(warning)) = planner::plan_name(&part.name) {
@@ -239,8 +236,8 @@ fn plot_plan(
 /// Monte Carlo simulation of a plan: success rate and final pose spread.
 #[derive(Debug, Args)]
 pub struct SimulateArgs {
-    /// Part file (.json or .svg).
-    part: PathBuf,
+    #[command(flatten)]
+    part: PartArgs,
     /// Plate model (TOML).
     #[arg(long, value_name = "PLATE.toml")]
     plate: PathBuf,
@@ -275,7 +272,7 @@ fn plan_figure_path(plot: &Path) -> PathBuf {
 impl SimulateArgs {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
         let inputs = [
-            ("part", self.part.as_path()),
+            ("part", self.part.path()),
             ("plate", self.plate.as_path()),
             ("plan", self.plan.as_path()),
         ];
@@ -283,7 +280,7 @@ impl SimulateArgs {
         if let Some(path) = &self.plot {
             check_output("--plot", &plan_figure_path(path), &inputs)?;
         }
-        let part = load_part(&self.part)?;
+        let part = self.part.load()?;
         let plate = load_plate(&self.plate)?;
         planner::check_input(&part, &plate).map_err(|e| bad(e.to_string()))?;
         let region = feed_region(&self.feed, &plate)?;
