@@ -53,7 +53,7 @@ fn two_photos_calibrate_a_plate_file_that_the_planner_reads() {
     );
     assert_eq!(model.size_mm, [300.0, 200.0]);
     let names: Vec<&str> = model.modes.iter().map(|m| m.name.as_str()).collect();
-    assert_eq!(names, ["photo 120 Hz nodes", "photo 60 Hz line 1"]);
+    assert_eq!(names, ["photo 120 Hz nodes", "photo 60 Hz line"]);
     assert!(matches!(model.modes[0].node, Node::Grid(_)));
     match model.modes[1].node {
         Node::Line { angle_deg, offset_mm } => {
