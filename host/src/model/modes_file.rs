@@ -215,7 +215,10 @@ mod tests {
         let grid =
             Grid { nx: 2, ny: 2, size_mm: [300.0, 200.0], values: vec![1.0, -1.0, 1.0, -1.0] };
         let e = add_entry(&mut modes, sampled_mode("g", Some(60.0), &grid)).unwrap_err();
-        assert!(e.contains("[[mode]] 1 (a)") && e.contains("60 Hz") && e.contains("lines of g"), "{e}");
+        assert!(
+            e.contains("[[mode]] 1 (a)") && e.contains("60 Hz") && e.contains("lines of g"),
+            "{e}"
+        );
         let mut loud = line_mode("d", Some(80.0), 0.0, 0.0);
         loud.amplitude = Some(0.5);
         assert!(add_entry(&mut modes, loud).is_err(), "other keys differ: not merged");
