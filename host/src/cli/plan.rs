@@ -316,12 +316,7 @@ fn print_plan(parts: &[Part], plate: &PlateModel, syn: &Synthesis) {
         );
     }
     if syn.parts.is_empty() {
-        print_final(
-            &syn.final_orientation_deg,
-            syn.period_deg,
-            syn.goal_deg,
-            syn.final_position_mm,
-        );
+        print_final(syn.final_orientation_deg, syn.period_deg, syn.goal_deg, syn.final_position_mm);
         print_reach(&syn.reachable_deg, syn.max_steps);
     } else {
         for p in &syn.parts {
