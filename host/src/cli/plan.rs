@@ -230,6 +230,11 @@ impl PlanArgs {
     }
 }
 
+/// Rounds to 10⁻⁴ (as the plan file's orientations).
+fn r4(v: f64) -> f64 {
+    (v * 1e4).round() / 1e4
+}
+
 /// The `--json` object of a failed plan: `error` (the failure's name), `message`, and the
 /// failure's data (an unreachable goal: `reachable_deg` and `nearest_deg`).
 fn failure_json(e: &PlanFailure) -> serde_json::Value {
@@ -247,7 +252,8 @@ fn failure_json(e: &PlanFailure) -> serde_json::Value {
             nearest_deg,
         } => json!({"error": "goal_unreachable", "part": part, "goal_deg": goal_deg,
             "period_deg": period_deg, "tolerance_deg": tol_deg, "max_steps": max_steps,
-            "reachable_deg": reachable_deg, "nearest_deg": nearest_deg}),
+            "reachable_deg": reachable_deg.iter().map(|&d| r4(d)).collect::<Vec<_>>(),
+            "nearest_deg": nearest_deg.map(r4)}),
         PlanFailure::PositionNotFixed { part, max_steps, tol_mm } => json!({
             "error": "position_not_fixed", "part": part, "max_steps": max_steps,
             "tolerance_mm": tol_mm}),
