@@ -53,7 +53,7 @@ fn two_photos_calibrate_a_plate_file_that_the_planner_reads() {
     );
     assert_eq!(model.size_mm, [300.0, 200.0]);
     let names: Vec<&str> = model.modes.iter().map(|m| m.name.as_str()).collect();
-    assert_eq!(names, ["photo 120 Hz nodes", "photo 60 Hz line 1"]);
+    assert_eq!(names, ["photo 120 Hz nodes", "photo 60 Hz line"]);
     assert!(matches!(model.modes[0].node, Node::Grid(_)));
     match model.modes[1].node {
         Node::Line { angle_deg, offset_mm } => {
@@ -286,4 +286,76 @@ fn png_named_jpg_is_read_by_its_content() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["lines"].as_array().unwrap().len(), 1, "{v}");
     let _ = std::fs::remove_file(jpg);
+}
+
+/// A photo with two node lines is one mode (one `lines` entry), a line photo appended at the
+/// same frequency merges into it, and the plan made on the plate holds in simulation.
+#[test]
+fn multi_line_photo_is_one_mode_that_plans_and_simulates_as_planned() {
+    let plate = tmp("lines.toml");
+    let plate_s = plate.to_str().unwrap();
+    // 60 Hz: vertical lines at x = 80 and x = 190 mm (offset along n̂ = (−1, 0) from x = 150).
+    let two = photo("two-lines.png", vec![(90.0, 70.0), (90.0, -40.0)], vec![]);
+    let out = from_photo(&two, &["--freq-hz", "60", "--out", plate_s]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let model = PlateModel::load(&plate).unwrap();
+    assert_eq!(model.modes.len(), 1);
+    assert_eq!(
+        model.modes[0].name,
+        "photo 60 Hz 2 lines",
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    assert!(matches!(&model.modes[0].node, Node::Lines(l) if l.len() == 2));
+    // 80 Hz: a horizontal line, appended as a second mode.
+    let horizontal = photo("horizontal.png", vec![(0.0, 0.0)], vec![]);
+    let out = from_photo(&horizontal, &["--freq-hz", "80", "--append", "--out", plate_s]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+
+    let part = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/parts/rectangle.json");
+    let plan = tmp("lines-plan.json");
+    let out =
+        chladni(&["plan", part, "--plate", plate_s, "--json", "--out", plan.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let p: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let freqs: Vec<f64> =
+        p["steps"].as_array().unwrap().iter().map(|s| s["freq_hz"].as_f64().unwrap()).collect();
+    assert!(freqs.windows(2).all(|w| w[0] != w[1]), "{freqs:?}");
+    let out = chladni(&[
+        "simulate",
+        part,
+        "--plate",
+        plate_s,
+        "--plan",
+        plan.to_str().unwrap(),
+        "--trials",
+        "60",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // The plan claims every start ends at its final orientation.
+    assert_eq!(s["success_rate"].as_f64(), Some(1.0), "{s}");
+
+    // A third line at 60 Hz merges into the 60 Hz mode, and says so.
+    let third = photo("third.png", vec![(0.0, 60.0)], vec![]);
+    let out = from_photo(&third, &["--freq-hz", "60", "--append", "--out", plate_s]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        stderr(&out).contains("merged into [[mode]] 1 (photo 60 Hz 2 lines)"),
+        "{}",
+        stderr(&out)
+    );
+    let model = PlateModel::load(&plate).unwrap();
+    assert_eq!(model.modes.len(), 2);
+    assert!(matches!(&model.modes[0].node, Node::Lines(l) if l.len() == 3));
+    // A grid entry at 60 Hz cannot merge with lines: refused, the file unchanged.
+    let before = std::fs::read_to_string(&plate).unwrap();
+    let out = from_photo(&third, &["--freq-hz", "60", "--as-grid", "--append", "--out", plate_s]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("already at 60 Hz"), "{}", stderr(&out));
+    assert_eq!(std::fs::read_to_string(&plate).unwrap(), before);
+    for f in [plate, plan, two, horizontal, third] {
+        let _ = std::fs::remove_file(f);
+    }
 }

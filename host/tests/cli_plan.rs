@@ -35,7 +35,15 @@ fn plan_json_is_the_documented_object_and_simulates_to_100_percent() {
     keys.sort_unstable();
     assert_eq!(
         keys,
-        ["final_orientation_deg", "final_position_mm", "name", "period_deg", "repeat", "steps"]
+        [
+            "final_orientation_deg",
+            "final_position_mm",
+            "name",
+            "period_deg",
+            "reachable_deg",
+            "repeat",
+            "steps"
+        ]
     );
     let steps = v["steps"].as_array().unwrap();
     assert_eq!(steps.len(), 2);

@@ -24,8 +24,10 @@ fn plate_text(modes: &str) -> PlateModel {
 }
 
 fn line(law: &str, gain_right: f64, angle: f64, offset: f64) -> String {
+    // Distinct frequencies (modes at one frequency must be one node).
+    let freq = 40.0 + angle + 10.0 * gain_right + offset;
     format!(
-        "[[mode]]\nfreq_hz = 60.0\nfield = \"{law}\"\ngain_right = {gain_right}\n\
+        "[[mode]]\nfreq_hz = {freq}\nfield = \"{law}\"\ngain_right = {gain_right}\n\
          node = {{ kind = \"line\", angle_deg = {angle}, offset_mm = {offset} }}\n"
     )
 }

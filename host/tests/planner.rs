@@ -208,3 +208,37 @@ fn simulated_grid_map_matches_the_exact_line_analysis() {
         assert!(grid.stable.iter().any(|g| cdist(*g, *s, 360.0) < 1.0), "{s} vs {:?}", grid.stable);
     }
 }
+
+/// Two `line` entries at one frequency are one mode: the planner cannot plan a step from one
+/// to the other ("60 Hz → 60 Hz"), which the plate cannot tell apart.
+#[test]
+fn two_lines_at_one_frequency_plan_as_one_mode() {
+    let plate = plate_text(
+        r#"
+[[mode]]
+name = "60 Hz vertical"
+freq_hz = 60.0
+node = { kind = "line", angle_deg = 90.0, offset_mm = 50.0 }
+[[mode]]
+name = "60 Hz horizontal"
+freq_hz = 60.0
+node = { kind = "line", angle_deg = 0.0, offset_mm = 0.0 }
+[[mode]]
+name = "80 Hz diagonal"
+freq_hz = 80.0
+field = "sign"
+node = { kind = "line", angle_deg = 45.0, offset_mm = 0.0 }
+"#,
+    );
+    assert_eq!(plate.modes.len(), 2);
+    assert!(matches!(&plate.modes[0].node, Node::Lines(l) if l.len() == 2));
+    let rect = part("rectangle.json");
+    let opt = PlanOptions::default();
+    let syn = planner::plan(&rect, &plate, &opt).unwrap();
+    let freqs: Vec<f64> = syn.steps.iter().map(|s| plate.modes[s.mode].freq_hz).collect();
+    assert!(!freqs.is_empty());
+    assert!(freqs.windows(2).all(|w| w[0] != w[1]), "same frequency twice in a row: {freqs:?}");
+    // The plan holds in simulation: the merged mode's field is the nearest line's.
+    let (worst, _) = verify(&rect, &plate, &opt, 30.0);
+    assert!(worst < 5.0, "worst final error {worst}°");
+}

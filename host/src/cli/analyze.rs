@@ -14,13 +14,14 @@ use clap::Args;
 use serde::Serialize;
 
 use super::parse::f64_where;
+use super::part::PartArgs;
 use super::{InputError, check_plot, plot_error};
 
 /// Rest orientations of a part at a straight node (the plate's y-axis).
 #[derive(Debug, Args)]
 pub struct AnalyzeArgs {
-    /// Part file: .json (format in docs/analyze.md) or .svg (<polygon>/<path>, straight segments).
-    part: PathBuf,
+    #[command(flatten)]
+    part: PartArgs,
     /// Field law.
     #[arg(long, value_enum)]
     field: Law,
@@ -92,9 +93,8 @@ impl AnalyzeArgs {
 
     pub fn run(&self) -> anyhow::Result<ExitCode> {
         let field = self.field()?;
-        check_plot("--plot", &self.plot, &analysis::EXTENSIONS, &[("part", &self.part)])?;
-        let part =
-            Part::load(&self.part).map_err(|e| bad(format!("{}: {e}", self.part.display())))?;
+        check_plot("--plot", &self.plot, &analysis::EXTENSIONS, &[("part", self.part.path())])?;
+        let part = self.part.load()?;
         let rings = part.to_fixed();
         let slices: Vec<&[chladni_shared::analysis::geometry::Pt]> =
             rings.iter().map(Vec::as_slice).collect();
@@ -109,7 +109,7 @@ impl AnalyzeArgs {
                     part.name
                 ))
             }
-            other => bad(format!("{}: cannot analyse: {other:?}", self.part.display())),
+            other => bad(format!("{}: cannot analyse: {other:?}", self.part.path().display())),
         })?;
         let analysis = an.analyze().map_err(|e| anyhow::anyhow!("analysis failed: {e:?}"))?;
         let stable: Vec<f64> =

@@ -13,6 +13,7 @@ mod device;
 mod emulator;
 mod flash;
 mod parse;
+mod part;
 mod physics;
 mod plan;
 mod plate;

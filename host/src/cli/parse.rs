@@ -30,6 +30,13 @@ pub fn positive(
     f64_where(name, "positive", |v| v.is_finite() && v > 0.0)
 }
 
+/// `--NAME` any finite number.
+pub fn finite(
+    name: &'static str,
+) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
+    f64_where(name, "a finite number", f64::is_finite)
+}
+
 /// `--NAME` finite and at least 0.
 pub fn non_negative(
     name: &'static str,

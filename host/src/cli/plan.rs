@@ -10,21 +10,18 @@ use chladni::motion::montecarlo::{self, Report, Setup, Stats, Trials};
 use chladni::motion::sim::{self, Body, FieldModel, Pose, SimStep, simulate_plan};
 use chladni::output::write_atomic;
 use chladni::planner::feed::{self, FeedRegion};
-use chladni::planner::{self, MapKind, PlanOptions, Synthesis};
+use chladni::planner::{self, MapKind, Minimize, PlanFailure, PlanOptions, Synthesis};
 use chladni::plot::plan::{self as plan_plot, TracesFigure};
 use chladni::rng::Rng;
 use chladni_shared::icd::plan::DeviceLimits;
-use clap::Args;
+use clap::{Args, ValueEnum};
 
-use super::parse::{f64_where, positive};
+use super::parse::{f64_where, finite, positive};
+use super::part::PartRead;
 use super::{InputError, check_output, check_plot, output_error, plot_error};
 
 fn bad(msg: String) -> anyhow::Error {
     InputError(msg).into()
-}
-
-fn load_part(path: &Path) -> anyhow::Result<Part> {
-    Part::load(path).map_err(|e| bad(format!("{}: {e}", path.display())))
 }
 
 fn load_plate(path: &Path) -> anyhow::Result<PlateModel> {
@@ -55,11 +52,23 @@ fn search_bar(hidden: bool) -> indicatif::ProgressBar {
     bar
 }
 
+/// What `--minimize` makes the plan shortest in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum MinimizeArg {
+    /// Fewest steps (the first such plan found).
+    Steps,
+    /// Least total duration (sum of the simulated step durations).
+    Time,
+}
+
 /// Sensorless plan: the shortest mode sequence bringing every start orientation to one.
 #[derive(Debug, Args)]
 pub struct PlanArgs {
-    /// Part file (.json or .svg).
-    part: PathBuf,
+    /// Part file(s) (.json, .svg or .dxf); several parts: one sequence orients each of them.
+    #[arg(required = true, num_args = 1..)]
+    part: Vec<PathBuf>,
+    #[command(flatten)]
+    read: PartRead,
     /// Plate model (TOML with [[mode]] entries; docs/plan.md).
     #[arg(long, value_name = "PLATE.toml")]
     plate: PathBuf,
@@ -83,6 +92,21 @@ pub struct PlanArgs {
     /// Parts are dropped in this rectangle (mm): plan by tracking poses from it.
     #[arg(long, num_args = 4, value_names = ["X0", "Y0", "X1", "Y1"], allow_negative_numbers = true)]
     feed: Option<Vec<f64>>,
+    /// Final orientation wanted (deg, modulo the part's period), one per part: among the
+    /// shortest plans (or one step longer) one that ends there, within --margin-deg.
+    #[arg(long, num_args = 1.., value_name = "θ", allow_negative_numbers = true,
+          value_parser = finite("goal-deg"))]
+    goal_deg: Option<Vec<f64>>,
+    /// Only a plan that fixes the final position (checked by simulation).
+    #[arg(long)]
+    fix_position: bool,
+    /// Among plans that fix the position, the one ending nearest to (X, Y) mm (one part).
+    #[arg(long, num_args = 2, value_names = ["X", "Y"], allow_negative_numbers = true,
+          value_parser = finite("goal-pos"))]
+    goal_pos: Option<Vec<f64>>,
+    /// What the plan is shortest in: steps, or time (the sum of the step durations).
+    #[arg(long, value_enum, default_value_t = MinimizeArg::Steps)]
+    minimize: MinimizeArg,
     /// Straight-node step maps: simulated approach from both sides of the node (dynamic),
     /// or the static alignment function checked by simulation afterwards (static).
     #[arg(long, value_enum, default_value_t = Maps::Dynamic)]
@@ -97,21 +121,68 @@ enum Maps {
 }
 
 impl PlanArgs {
+    /// One goal per part (or none), and the options the goal flags combine with: bad input
+    /// before any work.
+    fn goals(&self) -> anyhow::Result<Vec<Option<f64>>> {
+        let n = self.part.len();
+        if n > 1 && self.feed.is_some() {
+            return Err(bad(format!("--feed plans one part; {n} parts were given")));
+        }
+        if n > 1 && self.plot.is_some() {
+            return Err(bad(format!("--plot draws one part; {n} parts were given")));
+        }
+        if n > 1 && self.goal_pos.is_some() {
+            return Err(bad(format!("--goal-pos places one part; {n} parts were given")));
+        }
+        let goal_flags = self.goal_deg.is_some() || self.fix_position || self.goal_pos.is_some();
+        if self.feed.is_some() && (goal_flags || self.minimize != MinimizeArg::Steps) {
+            return Err(bad(
+                "--goal-deg, --fix-position, --goal-pos and --minimize plan over orientation \
+                 sets: not with --feed"
+                    .into(),
+            ));
+        }
+        match &self.goal_deg {
+            None => Ok(vec![None; n]),
+            Some(g) if g.len() == n => Ok(g.iter().map(|&v| Some(v)).collect()),
+            Some(g) => Err(bad(format!(
+                "--goal-deg takes one angle per part: {n} part(s), {} angle(s) given",
+                g.len()
+            ))),
+        }
+    }
+
     pub fn run(&self) -> anyhow::Result<ExitCode> {
-        let inputs = [("part", self.part.as_path()), ("plate", self.plate.as_path())];
+        let mut inputs: Vec<(&str, &Path)> =
+            self.part.iter().map(|p| ("part", p.as_path())).collect();
+        inputs.push(("plate", self.plate.as_path()));
         check_plot("--plot", &self.plot, &["png"], &inputs)?;
         if let Some(out) = &self.out {
             check_output("--out", out, &inputs)?;
         }
-        let part = load_part(&self.part)?;
+        let goals = self.goals()?;
+        let parts =
+            self.part.iter().map(|p| self.read.load(p)).collect::<anyhow::Result<Vec<_>>>()?;
         let plate = load_plate(&self.plate)?;
-        planner::check_input(&part, &plate).map_err(|e| bad(e.to_string()))?;
-        if let (_, Some(warning)) = planner::plan_name(&part.name) {
+        for part in &parts {
+            planner::check_input(part, &plate).map_err(|e| bad(e.to_string()))?;
+        }
+        let name = parts.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join("+");
+        if let (_, Some(warning)) = planner::plan_name(&name) {
             eprintln!("warning: {warning}");
         }
         let region = feed_region(&self.feed, &plate)?;
-        let syn = self.synthesize(&part, &plate, region)?;
-        let file = syn.to_file(&plate, &part.name);
+        let syn = match self.synthesize(&parts, &plate, region, &goals) {
+            Ok(syn) => syn,
+            Err(e) => {
+                if self.json {
+                    println!("{}", failure_json(&e));
+                }
+                eprintln!("error: {e}");
+                return Ok(ExitCode::from(1));
+            }
+        };
+        let file = syn.to_file(&plate, &name);
         file.to_plan(&DeviceLimits::DEFAULT)
             .map_err(|e| anyhow::anyhow!("planned steps refused: {e}"))?;
         let json = file.to_json();
@@ -122,13 +193,13 @@ impl PlanArgs {
         if self.json {
             println!("{json}");
         } else {
-            print_plan(&part, &plate, &syn);
+            print_plan(&parts, &plate, &syn);
             if let Some(out) = &self.out {
                 println!("written    {}", out.display());
             }
         }
         if let Some(path) = &self.plot {
-            plot_plan(path, &part, &plate, &syn, region.as_ref())?;
+            plot_plan(path, &parts[0], &plate, &syn, region.as_ref())?;
             if !self.json {
                 println!("plot       {}", path.display());
             }
@@ -136,13 +207,15 @@ impl PlanArgs {
         Ok(ExitCode::SUCCESS)
     }
 
-    /// The plan: over orientation sets, or by tracking poses from the feed region.
+    /// The plan: over orientation sets (one part or several), or by tracking poses from the
+    /// feed region.
     fn synthesize(
         &self,
-        part: &Part,
+        parts: &[Part],
         plate: &PlateModel,
         region: Option<FeedRegion>,
-    ) -> anyhow::Result<Synthesis> {
+        goals: &[Option<f64>],
+    ) -> Result<Synthesis, PlanFailure> {
         let opt = PlanOptions {
             margin_deg: self.margin_deg,
             safety: self.safety,
@@ -151,24 +224,72 @@ impl PlanArgs {
                 Maps::Static => MapKind::Static,
                 Maps::Dynamic => MapKind::Dynamic,
             },
+            minimize: match self.minimize {
+                MinimizeArg::Steps => Minimize::Steps,
+                MinimizeArg::Time => Minimize::Time,
+            },
+            goal_deg: goals.first().copied().flatten(),
+            fix_position: self.fix_position,
+            goal_pos_mm: self.goal_pos.as_ref().map(|g| [g[0], g[1]]),
             ..Default::default()
         };
         match &region {
             Some(r) => {
                 let bar = search_bar(self.json);
-                let syn = feed::plan(part, plate, &opt, r, &bar);
+                let syn = feed::plan(&parts[0], plate, &opt, r, &bar);
                 bar.finish_and_clear();
                 syn
             }
-            None => planner::plan(part, plate, &opt),
+            None => planner::plan_parts(parts, plate, &opt, goals),
         }
-        .map_err(|e| anyhow::anyhow!("{}: {e}", part.name))
     }
 }
 
+/// Rounds to 10⁻⁴ (as the plan file's orientations).
+fn r4(v: f64) -> f64 {
+    (v * 1e4).round() / 1e4
+}
+
+/// The `--json` object of a failed plan: `error` (the failure's name), `message`, and the
+/// failure's data (an unreachable goal: `reachable_deg` and `nearest_deg`).
+fn failure_json(e: &PlanFailure) -> serde_json::Value {
+    use serde_json::json;
+    let mut v = match e {
+        PlanFailure::NoPlan(_) => json!({"error": "no_plan"}),
+        PlanFailure::Model(_) => json!({"error": "model"}),
+        PlanFailure::GoalUnreachable {
+            part,
+            goal_deg,
+            period_deg,
+            tol_deg,
+            max_steps,
+            reachable_deg,
+            nearest_deg,
+        } => json!({"error": "goal_unreachable", "part": part, "goal_deg": goal_deg,
+            "period_deg": period_deg, "tolerance_deg": tol_deg, "max_steps": max_steps,
+            "reachable_deg": reachable_deg.iter().map(|&d| r4(d)).collect::<Vec<_>>(),
+            "nearest_deg": nearest_deg.map(r4)}),
+        PlanFailure::PositionNotFixed { part, max_steps, tol_mm } => json!({
+            "error": "position_not_fixed", "part": part, "max_steps": max_steps,
+            "tolerance_mm": tol_mm}),
+        PlanFailure::PositionNotConfirmed { part, predicted_mm, worst_mm } => json!({
+            "error": "position_not_confirmed", "part": part, "predicted_mm": predicted_mm,
+            "worst_mm": worst_mm}),
+        PlanFailure::PartsApart { apart, searched } => json!({
+            "error": "parts_apart", "searched": searched,
+            "apart": apart.iter().map(|(n, d, p)| json!({"part": n, "orientations_deg": d,
+                "period_deg": p})).collect::<Vec<_>>()}),
+    };
+    v["message"] = json!(e.to_string());
+    v
+}
+
 /// The plan as a table: one line per step, the feed check, the final pose.
-fn print_plan(part: &Part, plate: &PlateModel, syn: &Synthesis) {
-    println!("part       {} (symmetry period {}°)", part.name, syn.period_deg);
+fn print_plan(parts: &[Part], plate: &PlateModel, syn: &Synthesis) {
+    for (i, part) in parts.iter().enumerate() {
+        let period = syn.parts.get(i).map_or(syn.period_deg, |p| p.period_deg);
+        println!("part       {} (symmetry period {period}°)", part.name);
+    }
     println!("plate      {} ({} modes)", plate.name, plate.modes.len());
     for (i, s) in syn.steps.iter().enumerate() {
         let m = &plate.modes[s.mode];
@@ -215,11 +336,40 @@ fn print_plan(part: &Part, plate: &PlateModel, syn: &Synthesis) {
             f.worst_error_deg
         );
     }
-    println!("final      θ = {:.3}° (mod {}°)", syn.final_orientation_deg, syn.period_deg);
-    match syn.final_position_mm {
+    if syn.parts.is_empty() {
+        print_final(syn.final_orientation_deg, syn.period_deg, syn.goal_deg, syn.final_position_mm);
+        print_reach(&syn.reachable_deg, syn.max_steps);
+    } else {
+        for p in &syn.parts {
+            println!("--         {}", p.name);
+            print_final(p.final_orientation_deg, p.period_deg, p.goal_deg, p.final_position_mm);
+            print_reach(&p.reachable_deg, syn.max_steps);
+        }
+    }
+    if let Some(d) = syn.position_check_mm {
+        println!("           (simulated from 40 starts: every final centroid within {d:.2} mm)");
+    }
+    let total: u64 = syn.steps.iter().map(|s| u64::from(s.duration_ms)).sum();
+    println!("total      {:.1} s", total as f64 / 1000.0);
+}
+
+/// The final orientation (and goal) and position lines.
+fn print_final(theta: f64, period: f64, goal: Option<f64>, pos: Option<[f64; 2]>) {
+    let goal = goal.map(|g| format!(" (goal {g}°)")).unwrap_or_default();
+    println!("final      θ = {theta:.3}° (mod {period}°){goal}");
+    match pos {
         Some(p) => println!("position   ({:.2}, {:.2}) mm", p[0], p[1]),
         None => println!("position   not fixed by these nodes"),
     }
+}
+
+/// The final orientations plans of at most `max_steps` steps reach.
+fn print_reach(reachable: &[f64], max_steps: usize) {
+    if reachable.is_empty() {
+        return;
+    }
+    let list = reachable.iter().map(|v| format!("{v:.2}°")).collect::<Vec<_>>().join(", ");
+    println!("reachable  {{{list}}} in at most {max_steps} steps");
 }
 
 /// The step-by-step figure for three example starts (seed 1).
@@ -254,8 +404,11 @@ fn plot_plan(
 /// Monte Carlo simulation of a plan: success rate and final pose spread.
 #[derive(Debug, Args)]
 pub struct SimulateArgs {
-    /// Part file (.json or .svg).
-    part: PathBuf,
+    /// Part file(s) (.json, .svg or .dxf); a plan for several parts takes them in its order.
+    #[arg(required = true, num_args = 1..)]
+    part: Vec<PathBuf>,
+    #[command(flatten)]
+    read: PartRead,
     /// Plate model (TOML).
     #[arg(long, value_name = "PLATE.toml")]
     plate: PathBuf,
@@ -287,22 +440,35 @@ fn plan_figure_path(plot: &Path) -> PathBuf {
     PathBuf::from(format!("{}-plan.png", plot.with_extension("").display()))
 }
 
+/// One part's `chladni simulate --json` entry in a plan for several parts.
+#[derive(serde::Serialize)]
+struct PartReport<'a> {
+    part: &'a str,
+    #[serde(flatten)]
+    report: Report,
+}
+
 impl SimulateArgs {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
-        let inputs = [
-            ("part", self.part.as_path()),
-            ("plate", self.plate.as_path()),
-            ("plan", self.plan.as_path()),
-        ];
+        let mut inputs: Vec<(&str, &Path)> =
+            self.part.iter().map(|p| ("part", p.as_path())).collect();
+        inputs.extend([("plate", self.plate.as_path()), ("plan", self.plan.as_path())]);
         check_plot("--plot", &self.plot, &["png"], &inputs)?;
         if let Some(path) = &self.plot {
             check_output("--plot", &plan_figure_path(path), &inputs)?;
+            if self.part.len() > 1 {
+                return Err(bad(format!("--plot draws one part; {} given", self.part.len())));
+            }
         }
-        let part = load_part(&self.part)?;
+        let parts =
+            self.part.iter().map(|p| self.read.load(p)).collect::<anyhow::Result<Vec<_>>>()?;
         let plate = load_plate(&self.plate)?;
-        planner::check_input(&part, &plate).map_err(|e| bad(e.to_string()))?;
+        for part in &parts {
+            planner::check_input(part, &plate).map_err(|e| bad(e.to_string()))?;
+        }
         let region = feed_region(&self.feed, &plate)?;
         let file = self.read_plan()?;
+        let views = self.part_views(&file, &parts)?;
         let steps = sim::plan_steps(&file, &plate).map_err(|e| match e {
             sim::PlanStepsError::NoMode(e) => bad(format!(
                 "plan step {}: no mode of {} at {} Hz (modes: {})",
@@ -313,38 +479,79 @@ impl SimulateArgs {
             )),
             other => bad(other.to_string()),
         })?;
-        let body = Body::new(&part);
         let fields: Vec<FieldModel> =
             plate.modes.iter().map(|m| FieldModel::new(m, &plate)).collect();
-        let setup = Setup {
-            body: &body,
-            plate: &plate,
-            fields: &fields,
-            steps: &steps,
-            feed: region.as_ref(),
-        };
+        let mut reports = Vec::new();
+        for (part, view) in parts.iter().zip(&views) {
+            let body = Body::new(part);
+            let setup = Setup {
+                body: &body,
+                plate: &plate,
+                fields: &fields,
+                steps: &steps,
+                feed: region.as_ref(),
+            };
+            let trials = self.trials_of(&setup);
+            let stats = montecarlo::statistics(&trials, view, self.tol_deg);
+            if !self.json {
+                self.print(part, steps.len(), &stats);
+            }
+            reports.push(Report::new(&stats, view, self.trials, self.seed, self.tol_deg));
+            if let Some(path) = &self.plot {
+                let target = view.final_orientation_deg.zip(view.period_deg);
+                let fig = plot_trials(path, part, &setup, &trials, target)?;
+                if !self.json {
+                    println!("plots      {} {}", path.display(), fig.display());
+                }
+            }
+        }
+        if self.json {
+            self.print_json(&parts, reports)?;
+        }
+        Ok(ExitCode::SUCCESS)
+    }
+
+    /// `--json`: one part, the report; several, `{"parts": [{"part": name, ...report}]}`.
+    fn print_json(&self, parts: &[Part], reports: Vec<Report>) -> anyhow::Result<()> {
+        if parts.len() == 1
+            && let Some(r) = reports.first()
+        {
+            println!("{}", serde_json::to_string(r)?);
+            return Ok(());
+        }
+        let entries: Vec<PartReport> = parts
+            .iter()
+            .zip(reports)
+            .map(|(p, report)| PartReport { part: &p.name, report })
+            .collect();
+        println!("{}", serde_json::json!({ "parts": entries }));
+        Ok(())
+    }
+
+    /// The random trials of one part (a progress bar for 100 or more, not with --json).
+    fn trials_of(&self, setup: &Setup<'_>) -> Trials {
         let bar = if !self.json && self.trials >= 100 {
             indicatif::ProgressBar::new(self.trials as u64)
         } else {
             indicatif::ProgressBar::hidden()
         };
-        let trials = montecarlo::run_trials(&setup, self.trials, self.seed, || bar.inc(1));
+        let trials = montecarlo::run_trials(setup, self.trials, self.seed, || bar.inc(1));
         bar.finish_and_clear();
-        let stats = montecarlo::statistics(&trials, &file, self.tol_deg);
-        if self.json {
-            let report = Report::new(&stats, &file, self.trials, self.seed, self.tol_deg);
-            println!("{}", serde_json::to_string(&report)?);
-        } else {
-            self.print(&part, steps.len(), &stats);
+        trials
+    }
+
+    /// The plan as each part sees it (its own predictions): a plan for several parts needs
+    /// as many parts, in its order; a one-part plan, one part.
+    fn part_views(&self, file: &PlanFile, parts: &[Part]) -> anyhow::Result<Vec<PlanFile>> {
+        let planned = file.parts.as_ref().map_or(1, Vec::len);
+        if planned != parts.len() {
+            return Err(bad(format!(
+                "plan {} is for {planned} part(s), {} given (give the parts in the plan's order)",
+                self.plan.display(),
+                parts.len()
+            )));
         }
-        if let Some(path) = &self.plot {
-            let target = file.final_orientation_deg.zip(file.period_deg);
-            let fig = plot_trials(path, &part, &setup, &trials, target)?;
-            if !self.json {
-                println!("plots      {} {}", path.display(), fig.display());
-            }
-        }
-        Ok(ExitCode::SUCCESS)
+        Ok((0..parts.len()).filter_map(|i| file.for_part(i)).collect())
     }
 
     /// Reads and checks the plan file: every problem is bad input.

@@ -250,13 +250,15 @@ pub struct FromPhotoArgs {
     /// Print the recovered lines and curves as JSON.
     #[arg(long)]
     json: bool,
-    /// Write a plate file (`[plate]` name and size, then `[[mode]]` entries): one `line`
-    /// entry per straight node, or, when curved nodes were found (or with --as-grid), one
-    /// `grid` entry for all nodes.
+    /// Write a plate file (`[plate]` name and size, then one `[[mode]]` entry: a `line` node
+    /// for one straight node, a `lines` node for several, or, when curved nodes were found
+    /// (or with --as-grid), a `grid` node for all of them).
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
-    /// Add the entries to the plate file given by --out instead of replacing it (one photo
+    /// Add the entry to the plate file given by --out instead of replacing it (one photo
     /// per drive frequency calibrates a plate mode by mode); its size must match --size-mm.
+    /// Lines at the frequency of an existing line entry are merged into it (one frequency is
+    /// one mode); any other entry at that frequency is refused.
     #[arg(long, requires = "out")]
     append: bool,
     /// Describe the nodes by one grid entry (signed distance to them) even if all are
@@ -362,7 +364,20 @@ impl FromPhotoArgs {
                 ))
                 .into());
             }
-            file.mode.extend(entries);
+            for entry in entries {
+                let name = entry.name.clone().unwrap_or_default();
+                match modes_file::add_entry(&mut file.mode, entry)
+                    .map_err(|e| InputError(format!("--append to {}: {e}", out.display())))?
+                {
+                    modes_file::Added::New => {}
+                    modes_file::Added::Merged(k) => eprintln!(
+                        "note: {name}: merged into [[mode]] {} ({}) at the same frequency (one \
+                         frequency is one mode)",
+                        k + 1,
+                        file.mode[k].name.as_deref().unwrap_or("unnamed")
+                    ),
+                }
+            }
             file
         } else {
             let stem = self.image.file_stem().map_or("photo".into(), |s| s.to_string_lossy());

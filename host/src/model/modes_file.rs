@@ -1,10 +1,13 @@
 //! `[[mode]]` entries for plate files: solver modes as sampled mode shapes (`node.kind =
 //! "grid"`), photo-derived straight nodes (`node.kind = "line"`) and photo-derived curved
-//! nodes as a sampled signed distance (`node.kind = "grid"`), and resonances measured by a
+//! nodes as a sampled signed distance (`node.kind = "grid"`), several photo-derived straight
+//! nodes of one frequency as one mode (`node.kind = "lines"`; [`add_entry`] merges a photo's
+//! lines into the entry already at its frequency), and resonances measured by a
 //! sweep, which have a frequency but no node yet ([`measured_mode`]: the plate file then
 //! refuses to load until the node is filled in). Schema in docs/plate.md.
 
-use crate::model::plate_file::{ModeEntry, NodeEntry, PlateFile, PlateTable};
+use crate::model::plate::SAME_FREQ_HZ;
+use crate::model::plate_file::{LineEntry, ModeEntry, NodeEntry, PlateFile, PlateTable};
 use crate::plate::solver::Grid;
 
 /// Rounds to `digits` decimals so files stay small and diff well.
@@ -69,6 +72,80 @@ pub fn line_mode(name: &str, freq_hz: Option<f64>, angle_deg: f64, offset_mm: f6
     }
 }
 
+/// A `[[mode]]` entry holding all straight node lines `(angle_deg, offset_mm)` of one
+/// frequency: a `line` node for one line, a `lines` node for several (one frequency is one
+/// mode, see [`crate::model::plate`]).
+pub fn lines_mode(name: &str, freq_hz: Option<f64>, lines: &[(f64, f64)]) -> ModeEntry {
+    if let [(angle_deg, offset_mm)] = lines {
+        return line_mode(name, freq_hz, *angle_deg, *offset_mm);
+    }
+    let lines = lines
+        .iter()
+        .map(|&(a, o)| LineEntry { angle_deg: round(a, 3), offset_mm: round(o, 3) })
+        .collect();
+    ModeEntry {
+        name: Some(name.into()),
+        freq_hz,
+        node: Some(NodeEntry::Lines { lines: Some(lines) }),
+        ..ModeEntry::default()
+    }
+}
+
+/// The lines of a `line` or `lines` entry (`None` for other nodes, or a line without angle).
+fn entry_lines(e: &ModeEntry) -> Option<Vec<LineEntry>> {
+    match &e.node {
+        Some(NodeEntry::Line { angle_deg: Some(a), offset_mm }) => {
+            Some(vec![LineEntry { angle_deg: *a, offset_mm: offset_mm.unwrap_or(0.0) }])
+        }
+        Some(NodeEntry::Lines { lines: Some(l) }) => Some(l.clone()),
+        _ => None,
+    }
+}
+
+/// How [`add_entry`] added an entry.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Added {
+    /// As a new `[[mode]]` (no entry at its frequency).
+    New,
+    /// Its lines merged into the entry at this index (0-based), which keeps its name.
+    Merged(usize),
+}
+
+/// Adds `entry` to `modes`, keeping one mode per frequency: a straight-node entry at the
+/// frequency of a straight-node entry that agrees on every other key is merged into it; an
+/// entry at an existing frequency that cannot be merged is refused (`Err` names both, the
+/// frequency and the fix).
+pub fn add_entry(modes: &mut Vec<ModeEntry>, entry: ModeEntry) -> Result<Added, String> {
+    let same = |m: &ModeEntry| match (m.freq_hz, entry.freq_hz) {
+        (Some(a), Some(b)) => (a - b).abs() < SAME_FREQ_HZ,
+        _ => false,
+    };
+    let Some(k) = modes.iter().position(same) else {
+        modes.push(entry);
+        return Ok(Added::New);
+    };
+    let old = &mut modes[k];
+    let name = |e: &ModeEntry| e.name.clone().unwrap_or_else(|| "unnamed".into());
+    // Every key but the name, the node and the frequency (equal within SAME_FREQ_HZ) must agree.
+    let strip = |e: &ModeEntry| ModeEntry { name: None, node: None, freq_hz: None, ..e.clone() };
+    match (entry_lines(old), entry_lines(&entry)) {
+        (Some(mut lines), Some(new)) if strip(old) == strip(&entry) => {
+            lines.extend(new);
+            old.node = Some(NodeEntry::Lines { lines: Some(lines) });
+            Ok(Added::Merged(k))
+        }
+        _ => Err(format!(
+            "[[mode]] {} ({}) is already at {} Hz and cannot take the lines of {} (only \
+             straight-node entries with the same other keys merge): one drive frequency is \
+             one mode; remove that entry first, or write to another file",
+            k + 1,
+            name(old),
+            old.freq_hz.unwrap_or_default(),
+            name(&entry)
+        )),
+    }
+}
+
 /// Renders a plate file with the given `[plate]` table and `[[mode]]` entries.
 pub fn render(plate: &PlateTable, modes: Vec<ModeEntry>) -> Result<String, toml::ser::Error> {
     toml::to_string(&PlateFile { plate: plate.clone(), mode: modes })
@@ -120,6 +197,37 @@ mod tests {
         let line = line_mode("l", Some(60.0), 90.0, -12.5);
         assert!(matches!(line.node, Some(NodeEntry::Line { .. })));
         assert!(grid_of(&line, plate.size_mm).is_none());
+    }
+
+    #[test]
+    fn lines_of_one_frequency_are_one_entry() {
+        use crate::model::plate::{Node, PlateModel};
+        let mut modes = vec![lines_mode("a", Some(60.0), &[(90.0, -50.0), (0.0, 10.0)])];
+        assert!(
+            matches!(&modes[0].node, Some(NodeEntry::Lines { lines: Some(l) }) if l.len() == 2)
+        );
+        // A third line at 60 Hz merges; 80 Hz is a new mode; a grid at 60 Hz is refused.
+        assert_eq!(
+            add_entry(&mut modes, line_mode("b", Some(60.0004), 45.0, 0.0)),
+            Ok(Added::Merged(0))
+        );
+        assert_eq!(add_entry(&mut modes, line_mode("c", Some(80.0), 45.0, 0.0)), Ok(Added::New));
+        let grid =
+            Grid { nx: 2, ny: 2, size_mm: [300.0, 200.0], values: vec![1.0, -1.0, 1.0, -1.0] };
+        let e = add_entry(&mut modes, sampled_mode("g", Some(60.0), &grid)).unwrap_err();
+        assert!(
+            e.contains("[[mode]] 1 (a)") && e.contains("60 Hz") && e.contains("lines of g"),
+            "{e}"
+        );
+        let mut loud = line_mode("d", Some(80.0), 0.0, 0.0);
+        loud.amplitude = Some(0.5);
+        assert!(add_entry(&mut modes, loud).is_err(), "other keys differ: not merged");
+        let table = PlateTable { size_mm: Some([300.0, 200.0]), ..PlateTable::default() };
+        let text = render(&table, modes).unwrap();
+        let model = PlateModel::parse(&text, "t").unwrap();
+        assert_eq!(model.modes.len(), 2);
+        assert!(matches!(&model.modes[0].node, Node::Lines(l) if l.len() == 3), "{text}");
+        assert!(matches!(model.modes[1].node, Node::Line { .. }));
     }
 
     #[test]

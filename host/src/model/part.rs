@@ -1,11 +1,13 @@
-//! Planar parts: import from JSON (format in docs/physics.md) or SVG, validation, conversion to
-//! the fixed-point rings of `chladni_shared::analysis::rest`.
+//! Planar parts: import from JSON (format in docs/physics.md), SVG or DXF ([`dxf`]),
+//! validation, conversion to the fixed-point rings of `chladni_shared::analysis::rest`.
 //!
 //! JSON: `{"name": "...", "outline": [[x,y],...], "holes": [[[x,y],...],...]}`, mm, any
 //! winding, y up. SVG: every `<polygon>` and every sub-path of every `<path>` (straight
 //! segments only: M/L/H/V/Z, absolute or relative; `transform` attributes are applied) is a
 //! ring; the ring of largest area is the outline, the others are holes. SVG user units are
-//! taken as mm and SVG's y-down axis is flipped, so the part looks as drawn.
+//! taken as mm and SVG's y-down axis is flipped, so the part looks as drawn. DXF: closed
+//! polylines, circles and LINE/ARC chains of the model space (or of one layer), arcs
+//! flattened to a chord tolerance, scaled from `$INSUNITS` to mm (see [`dxf`]).
 //!
 //! After import every ring is checked and the winding normalised (outline counter-clockwise,
 //! holes clockwise). Errors name the problem, the ring and the vertex index (0-based, as in
@@ -19,6 +21,9 @@ use chladni_shared::analysis::geometry::Pt;
 
 use crate::model::geometry::{self, orient, segments_meet};
 pub use crate::model::geometry::{inside, signed_area};
+pub use dxf::{DxfError, ImportOptions};
+
+pub mod dxf;
 
 /// Coordinates beyond this (mm) are rejected as absurd.
 pub const MAX_COORD_MM: f64 = 1.0e5;
@@ -122,8 +127,14 @@ pub enum PartError {
     #[error("SVG has no <polygon> or <path> element")]
     NoShape,
     /// Unknown file type.
-    #[error("unknown part format (expected .json or .svg)")]
+    #[error("unknown part format (expected .json, .svg or .dxf)")]
     UnknownFormat,
+    /// A DXF drawing that is not a part (entity, layer and position named).
+    #[error("DXF: {0}")]
+    Dxf(#[from] DxfError),
+    /// `--layer` given for a file without layers.
+    #[error("--layer {0}: only DXF part files have layers")]
+    LayerNotDxf(String),
     /// Fewer than three vertices.
     #[error("{ring}: {count} vertices, a polygon needs at least 3")]
     TooFewVertices {
@@ -233,15 +244,33 @@ struct PartJson {
 }
 
 impl Part {
-    /// Loads a `.json` or `.svg` part file.
+    /// Loads a `.json`, `.svg` or `.dxf` part file with the default [`ImportOptions`].
     pub fn load(path: &Path) -> Result<Part, PartError> {
-        let text = std::fs::read_to_string(path)?;
+        Part::load_with(path, &ImportOptions::default()).map(|(part, _)| part)
+    }
+
+    /// Loads a part file (format by extension) and the notes the reader has for the user
+    /// (e.g. a DXF drawing without units, read as mm). `opt.layer` is refused for files
+    /// without layers; `opt.chord_mm` only matters for DXF arcs.
+    pub fn load_with(path: &Path, opt: &ImportOptions) -> Result<(Part, Vec<String>), PartError> {
         let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+        let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+        if ext.as_deref() == Some("dxf") {
+            // The reader opens the file itself (DXF may be binary).
+            std::fs::metadata(path)?;
+            let d = dxf::load(path, &stem, opt)?;
+            return Ok((d.part, d.notes));
+        }
+        if let Some(layer) = &opt.layer {
+            return Err(PartError::LayerNotDxf(layer.clone()));
+        }
+        let text = std::fs::read_to_string(path)?;
+        let part = match ext.as_deref() {
             Some("json") => Part::from_json(&text, &stem),
             Some("svg") => Part::from_svg(&text, &stem),
             _ => Err(PartError::UnknownFormat),
-        }
+        }?;
+        Ok((part, Vec::new()))
     }
 
     /// Parses the JSON part format; `default_name` is used when the file has none.

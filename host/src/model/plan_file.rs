@@ -92,7 +92,7 @@ impl StepJson {
 }
 
 /// The whole file.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PlanFile {
     /// Name (at most 32 bytes).
@@ -112,6 +112,41 @@ pub struct PlanFile {
     /// Predicted final centroid position (mm) when the nodes fix it, informative.
     #[serde(default)]
     pub final_position_mm: Option<[f64; 2]>,
+    /// The goal orientation the plan was made for (deg, modulo `period_deg`), informative.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal_deg: Option<f64>,
+    /// Final orientations plans as long as this one (or one step longer) can reach (deg),
+    /// informative.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reachable_deg: Option<Vec<f64>>,
+    /// A plan for several parts at once: one prediction per part, in the order the parts
+    /// were given (the top-level predictions are then `null`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parts: Option<Vec<PartPrediction>>,
+}
+
+/// One part's predictions in a plan for several parts (the top-level fields of a one-part
+/// plan, plus the part's name).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PartPrediction {
+    /// The part's name.
+    pub name: String,
+    /// Its predicted final orientation (deg, modulo `period_deg`).
+    #[serde(default)]
+    pub final_orientation_deg: Option<f64>,
+    /// Its period (deg).
+    #[serde(default)]
+    pub period_deg: Option<f64>,
+    /// Its predicted final centroid (mm) when fixed.
+    #[serde(default)]
+    pub final_position_mm: Option<[f64; 2]>,
+    /// Its goal orientation (deg).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal_deg: Option<f64>,
+    /// Its reachable final orientations (deg).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reachable_deg: Option<Vec<f64>>,
 }
 
 fn default_name() -> String {
@@ -234,10 +269,26 @@ impl PlanFile {
                     }
                 })
                 .collect(),
-            final_orientation_deg: None,
-            period_deg: None,
-            final_position_mm: None,
+            ..PlanFile::default()
         }
+    }
+
+    /// The plan as seen by one part: part `i`'s predictions at the top level (for
+    /// `chladni simulate` and its statistics); a one-part plan is itself for `i = 0`.
+    pub fn for_part(&self, i: usize) -> Option<PlanFile> {
+        let Some(parts) = &self.parts else {
+            return (i == 0).then(|| self.clone());
+        };
+        let p = parts.get(i)?;
+        Some(PlanFile {
+            final_orientation_deg: p.final_orientation_deg,
+            period_deg: p.period_deg,
+            final_position_mm: p.final_position_mm,
+            goal_deg: p.goal_deg,
+            reachable_deg: p.reachable_deg.clone(),
+            parts: None,
+            ..self.clone()
+        })
     }
 
     /// The documented JSON object (the derived serialisation): steps,

@@ -13,15 +13,36 @@
 //! speed_mm_s = 10.0                  # settle speed μ (default 10)
 //! ramp_ms = 20                       # amplitude ramp at the start of the step (default 20)
 //! node = { kind = "line", angle_deg = 90.0, offset_mm = 0.0 }
+//! # or several lines of one mode:
+//! # node = { kind = "lines", lines = [{ angle_deg = 90.0, offset_mm = -50.0 }, { angle_deg = 0.0 }] }
 //! ```
+//!
+//! One drive frequency is one mode: the plate vibrates in one shape, so entries at the same
+//! frequency (within [`SAME_FREQ_HZ`]) are one mode. Straight-node entries that agree on
+//! everything but their lines are merged into one [`Node::Lines`] mode (the node is all their
+//! lines; names joined by " + "); any other pair is refused ([`ModelError::SameFrequency`]),
+//! since the planner would otherwise plan "60 Hz → 60 Hz" steps the plate cannot tell apart.
 
 use std::path::Path;
 
 use crate::model::field::LawError;
 pub use crate::model::field::{LINEAR_SCALE_MM, Law};
 use crate::model::plan_file::check_drive_freq;
-use crate::model::plate_file::{ModeEntry, NodeEntry, PlateFile, PlateFileError};
+use crate::model::plate_file::{LineEntry, ModeEntry, NodeEntry, PlateFile, PlateFileError};
 use crate::plate::solver::Grid;
+
+/// Entries whose frequencies differ by less than this (Hz) are one mode (the drive's
+/// resolution is 1 mHz).
+pub const SAME_FREQ_HZ: f64 = 1e-3;
+
+/// One straight line of a [`Node::Lines`] node (the conventions of [`Node::Line`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NodeLine {
+    /// Direction α (degrees).
+    pub angle_deg: f64,
+    /// n̂·(p − c) on the line (mm).
+    pub offset_mm: f64,
+}
 
 /// The node a mode creates.
 #[derive(Debug, Clone, PartialEq)]
@@ -34,6 +55,10 @@ pub enum Node {
         /// n̂·(p − c) on the line (mm).
         offset_mm: f64,
     },
+    /// Several straight lines of one mode (e.g. a Chladni figure with two or more lines): the
+    /// field at a point is that of the nearest line, with the mode's law and gains (left and
+    /// right of that line).
+    Lines(Vec<NodeLine>),
     /// One branch of a hyperbola: c + R(α)·(a cosh t, b sinh t), t ∈ ℝ.
     Hyperbola {
         /// Centre (plate frame, mm; origin at the plate corner).
@@ -54,6 +79,7 @@ impl Node {
     pub fn kind(&self) -> &'static str {
         match self {
             Node::Line { .. } => "line",
+            Node::Lines(_) => "lines",
             Node::Hyperbola { .. } => "hyperbola",
             Node::Grid(_) => "grid",
         }
@@ -124,6 +150,27 @@ pub enum ModelError {
     /// No modes.
     #[error("the plate file has no [[mode]] entries: add at least one (docs/plan.md)")]
     NoModes,
+    /// Two entries at one drive frequency that cannot be one mode.
+    #[error(
+        "[[mode]] {first} ({first_name}) and [[mode]] {second} ({second_name}) are both at \
+         {freq_hz} Hz: one drive frequency makes one vibration, so one mode; {why}. Fix the \
+         file: put all node lines of that frequency in one entry (node = {{ kind = \"lines\", \
+         lines = [...] }}), or remove one entry"
+    )]
+    SameFrequency {
+        /// The frequency (Hz).
+        freq_hz: f64,
+        /// 1-based index of the first entry.
+        first: usize,
+        /// Its name.
+        first_name: String,
+        /// 1-based index of the second entry.
+        second: usize,
+        /// Its name.
+        second_name: String,
+        /// Why they cannot be merged.
+        why: String,
+    },
     /// The file is not a plate file (syntax, types, unknown `[plate]` keys).
     #[error("{0}")]
     File(String),
@@ -278,25 +325,27 @@ fn node_of(c: &Ctx, n: &NodeEntry, size_mm: [f64; 2]) -> Result<Node, ModelError
     let diag = w.hypot(h);
     match *n {
         NodeEntry::Line { angle_deg, offset_mm } => {
-            let angle_deg = c.finite("node.angle_deg", angle_deg)?.ok_or_else(|| {
-                c.bad(
-                    "node.angle_deg",
-                    "missing",
-                    "add angle_deg = <direction of the node line, degrees CCW from plate x>",
-                )
-            })?;
-            let offset_mm = c.finite("node.offset_mm", offset_mm)?.unwrap_or(0.0);
-            if offset_mm.abs() > diag / 2.0 {
+            let l = line_of(c, "node", angle_deg, offset_mm, diag)?;
+            Ok(Node::Line { angle_deg: l.angle_deg, offset_mm: l.offset_mm })
+        }
+        NodeEntry::Lines { ref lines } => {
+            let lines = lines.as_deref().unwrap_or_default();
+            if lines.is_empty() {
                 return Err(c.bad(
-                    "node.offset_mm",
-                    offset_mm,
-                    &format!(
-                        "the line misses the plate: |offset| must be at most {:.1} mm",
-                        diag / 2.0
-                    ),
+                    "node.lines",
+                    "missing",
+                    "add lines = [{ angle_deg = .., offset_mm = .. }, ...] (at least one)",
                 ));
             }
-            Ok(Node::Line { angle_deg, offset_mm })
+            let lines = (lines.iter().enumerate())
+                .map(|(i, &LineEntry { angle_deg, offset_mm })| {
+                    line_of(c, &format!("node.lines[{i}]"), Some(angle_deg), Some(offset_mm), diag)
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            Ok(match lines[..] {
+                [one] => Node::Line { angle_deg: one.angle_deg, offset_mm: one.offset_mm },
+                _ => Node::Lines(lines),
+            })
         }
         NodeEntry::Hyperbola { center_mm, angle_deg, a_mm, b_mm } => {
             let center_mm = match center_mm {
@@ -323,6 +372,95 @@ fn node_of(c: &Ctx, n: &NodeEntry, size_mm: [f64; 2]) -> Result<Node, ModelError
         }
         NodeEntry::Grid { nx, ny, ref values } => grid_of(c, nx, ny, values.as_deref(), size_mm),
     }
+}
+
+/// One straight line (`key`: where it is written, for messages).
+fn line_of(
+    c: &Ctx,
+    key: &str,
+    angle_deg: Option<f64>,
+    offset_mm: Option<f64>,
+    diag: f64,
+) -> Result<NodeLine, ModelError> {
+    let angle_key = format!("{key}.angle_deg");
+    let angle_deg = c.finite(&angle_key, angle_deg)?.ok_or_else(|| {
+        c.bad(
+            &angle_key,
+            "missing",
+            "add angle_deg = <direction of the node line, degrees CCW from plate x>",
+        )
+    })?;
+    let offset_key = format!("{key}.offset_mm");
+    let offset_mm = c.finite(&offset_key, offset_mm)?.unwrap_or(0.0);
+    if offset_mm.abs() > diag / 2.0 {
+        return Err(c.bad(
+            &offset_key,
+            offset_mm,
+            &format!("the line misses the plate: |offset| must be at most {:.1} mm", diag / 2.0),
+        ));
+    }
+    Ok(NodeLine { angle_deg, offset_mm })
+}
+
+/// The straight lines of a line or lines node (`None` for other kinds).
+pub fn node_lines(node: &Node) -> Option<Vec<NodeLine>> {
+    match node {
+        Node::Line { angle_deg, offset_mm } => {
+            Some(vec![NodeLine { angle_deg: *angle_deg, offset_mm: *offset_mm }])
+        }
+        Node::Lines(lines) => Some(lines.clone()),
+        _ => None,
+    }
+}
+
+/// Why two modes at one frequency cannot be one mode (`None`: they can).
+fn unmergeable(a: &Mode, b: &Mode) -> Option<String> {
+    if node_lines(&a.node).is_none() || node_lines(&b.node).is_none() {
+        return Some(format!(
+            "a {} node and a {} node cannot be merged (only straight lines can)",
+            a.node.kind(),
+            b.node.kind()
+        ));
+    }
+    let differ = [
+        ("field", a.law != b.law),
+        ("gain_left", a.gain_left != b.gain_left),
+        ("gain_right", a.gain_right != b.gain_right),
+        ("amplitude", a.amplitude != b.amplitude),
+        ("speed_mm_s", a.speed_mm_s != b.speed_mm_s),
+        ("ramp_ms", a.ramp_ms != b.ramp_ms),
+    ];
+    let keys: Vec<&str> = differ.iter().filter(|d| d.1).map(|d| d.0).collect();
+    (!keys.is_empty()).then(|| format!("their lines would merge, but {} differ", keys.join(", ")))
+}
+
+/// Merges modes at one frequency (see the module docs); `Err` names the pair that cannot be.
+fn merge_same_frequency(modes: Vec<Mode>) -> Result<Vec<Mode>, ModelError> {
+    // (1-based file index of the kept mode, mode)
+    let mut kept: Vec<(usize, Mode)> = Vec::new();
+    for (i, m) in modes.into_iter().enumerate() {
+        let Some((first, k)) =
+            kept.iter_mut().find(|(_, k)| (k.freq_hz - m.freq_hz).abs() < SAME_FREQ_HZ)
+        else {
+            kept.push((i + 1, m));
+            continue;
+        };
+        if let Some(why) = unmergeable(k, &m) {
+            return Err(ModelError::SameFrequency {
+                freq_hz: k.freq_hz,
+                first: *first,
+                first_name: k.name.clone(),
+                second: i + 1,
+                second_name: m.name,
+                why,
+            });
+        }
+        let mut lines = node_lines(&k.node).unwrap_or_default();
+        lines.extend(node_lines(&m.node).unwrap_or_default());
+        k.node = Node::Lines(lines);
+        k.name = format!("{} + {}", k.name, m.name);
+    }
+    Ok(kept.into_iter().map(|(_, m)| m).collect())
 }
 
 /// A grid node: sample counts, nx·ny finite samples, normalised to max |φ| = 1.
@@ -371,6 +509,7 @@ impl PlateModel {
             .enumerate()
             .map(|(i, e)| check_mode(i + 1, e, size_mm))
             .collect::<Result<Vec<_>, _>>()?;
+        let modes = merge_same_frequency(modes)?;
         let name =
             if file.plate.name.is_empty() { "plate".to_string() } else { file.plate.name.clone() };
         Ok(PlateModel { name, size_mm, modes })
@@ -431,6 +570,56 @@ node = { kind = "grid", nx = 2, ny = 2, values = [1.0, -1.0, 0.5, -0.5] }
         assert_eq!(m.modes[1].node.kind(), "hyperbola");
         assert_eq!(m.modes[2].node.kind(), "grid");
         assert_eq!(m.modes[2].name, "mode 3");
+    }
+
+    #[test]
+    fn one_frequency_is_one_mode() {
+        let line = |f: f64, a: f64, o: f64, extra: &str| {
+            format!(
+                "[[mode]]\nname = \"{a}\"\nfreq_hz = {f}\n{extra}\nnode = {{ kind = \"line\", angle_deg = {a}, offset_mm = {o} }}\n"
+            )
+        };
+        // Two lines at 60 Hz (0.5 mHz apart) and one at 80 Hz: two modes.
+        let m = model(
+            &(line(60.0, 90.0, -50.0, "")
+                + &line(80.0, 0.0, 0.0, "")
+                + &line(60.0005, 0.0, 20.0, "")),
+        )
+        .unwrap();
+        assert_eq!(m.modes.len(), 2);
+        assert_eq!(m.modes[0].name, "90 + 0");
+        let want = vec![
+            NodeLine { angle_deg: 90.0, offset_mm: -50.0 },
+            NodeLine { angle_deg: 0.0, offset_mm: 20.0 },
+        ];
+        assert_eq!(m.modes[0].node, Node::Lines(want));
+        assert_eq!(m.modes[1].node, Node::Line { angle_deg: 0.0, offset_mm: 0.0 });
+        // 2 mHz apart: two modes.
+        assert_eq!(
+            model(&(line(60.0, 90.0, 0.0, "") + &line(60.002, 0.0, 0.0, ""))).unwrap().modes.len(),
+            2
+        );
+        // Different amplitudes: refused, naming both entries, the frequency and the key.
+        let e = model(&(line(60.0, 90.0, 0.0, "") + &line(60.0, 0.0, 0.0, "amplitude = 0.5")))
+            .unwrap_err();
+        assert!(
+            matches!(&e, ModelError::SameFrequency { first: 1, second: 2, freq_hz, .. } if *freq_hz == 60.0),
+            "{e}"
+        );
+        let text = e.to_string();
+        assert!(text.contains("amplitude") && text.contains("kind = \"lines\""), "{text}");
+        // A grid and a line at one frequency cannot merge.
+        let grid = "[[mode]]\nfreq_hz = 60.0\nnode = { kind = \"grid\", nx = 2, ny = 2, values = [1.0, -1.0, 0.5, -0.5] }\n";
+        let e = model(&(line(60.0, 90.0, 0.0, "") + grid)).unwrap_err().to_string();
+        assert!(e.contains("a line node and a grid node"), "{e}");
+        // Written as one `lines` entry; a one-line `lines` node is a line; each line checked.
+        let lines = "[[mode]]\nfreq_hz = 60.0\nnode = { kind = \"lines\", lines = [{ angle_deg = 90.0, offset_mm = 10.0 }, { angle_deg = 0.0 }] }\n";
+        assert_eq!(model(lines).unwrap().modes[0].node.kind(), "lines");
+        let one = "[[mode]]\nfreq_hz = 60.0\nnode = { kind = \"lines\", lines = [{ angle_deg = 90.0 }] }\n";
+        assert_eq!(model(one).unwrap().modes[0].node.kind(), "line");
+        let far = lines.replace("offset_mm = 10.0", "offset_mm = 900.0");
+        let e = model(&far).unwrap_err().to_string();
+        assert!(e.contains("node.lines[0].offset_mm = 900"), "{e}");
     }
 
     #[test]

@@ -95,6 +95,12 @@ pub enum NodeEntry {
         #[serde(default, skip_serializing_if = "Option::is_none")]
         offset_mm: Option<f64>,
     },
+    /// Several straight lines of one mode (see [`crate::model::plate::Node::Lines`]).
+    Lines {
+        /// The lines: `[{ angle_deg, offset_mm }, ...]`.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        lines: Option<Vec<LineEntry>>,
+    },
     /// One hyperbola branch (see [`crate::model::plate::Node::Hyperbola`]).
     Hyperbola {
         /// Centre [x, y] (mm).
@@ -124,8 +130,19 @@ pub enum NodeEntry {
     },
 }
 
+/// One line of a `lines` node, as written.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct LineEntry {
+    /// Direction (degrees CCW from plate x).
+    pub angle_deg: f64,
+    /// Signed distance from the plate centre (mm, default 0).
+    #[serde(default)]
+    pub offset_mm: f64,
+}
+
 /// The node kinds as written.
-pub const NODE_KINDS: [&str; 3] = ["line", "hyperbola", "grid"];
+pub const NODE_KINDS: [&str; 4] = ["line", "lines", "hyperbola", "grid"];
 
 /// `node`: the kind is checked first so that a wrong one is named as written.
 fn node_entry<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<NodeEntry>, D::Error> {
@@ -138,10 +155,10 @@ fn node_entry<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<NodeEntry
     };
     match table.get("kind") {
         None => Err(D::Error::custom(
-            "node.kind = missing: add kind = \"line\" | \"hyperbola\" | \"grid\"",
+            "node.kind = missing: add kind = \"line\" | \"lines\" | \"hyperbola\" | \"grid\"",
         )),
         Some(k) if !k.as_str().is_some_and(|k| NODE_KINDS.contains(&k)) => Err(D::Error::custom(
-            format!("node.kind = {k}: must be \"line\", \"hyperbola\" or \"grid\""),
+            format!("node.kind = {k}: must be \"line\", \"lines\", \"hyperbola\" or \"grid\""),
         )),
         Some(_) => NodeEntry::deserialize(value).map(Some).map_err(D::Error::custom),
     }

@@ -262,6 +262,7 @@ mod tests {
             final_orientation_deg: Some(90.0),
             period_deg: Some(180.0),
             final_position_mm: None,
+            ..PlanFile::default()
         };
         let steps = crate::motion::sim::plan_steps(&plan, &plate).unwrap();
         let setup =

@@ -4,6 +4,8 @@
 //! - straight nodes: exact, per polygon edge (split at the node, Green's theorem
 //!   ∫∫ g dA = ∮ G dη, ∫∫ η g dA = ∮ η G dη along each piece, 5-point Gauss–Legendre, exact
 //!   for the sign and linear laws);
+//! - several straight lines of one mode (`lines`): the field at a point is the nearest
+//!   line's (law and gains across that line), by the same midpoint rule as:
 //! - hyperbola and grid nodes: midpoint rule over interior sample points of the part
 //!   (about [`BODY_SAMPLES`] cells); hyperbola: distance to the branch by Newton on its
 //!   parameter; grid: Catmull–Rom bicubic φ and f = −gain·∇(φ²)/max|∇(φ²)|.
@@ -138,6 +140,15 @@ pub enum FieldModel {
         /// Gains left (ξ < 0), right (ξ > 0).
         k: [f64; 2],
     },
+    /// Several straight lines: the nearest one pulls ([`Node::Lines`]).
+    Lines {
+        /// (x̂, x̂·p on the node) of each line, as in [`FieldModel::Line`].
+        lines: Vec<([f64; 2], f64)>,
+        /// Law.
+        law: Law,
+        /// Gains left (ξ < 0), right (ξ > 0) of each line.
+        k: [f64; 2],
+    },
     /// Hyperbola branch.
     Hyperbola {
         /// Centre.
@@ -253,6 +264,15 @@ fn hyperbola_exact(
     (xi, [axis[0] * nu - axis[1] * nv, axis[1] * nu + axis[0] * nv])
 }
 
+/// A straight node's frame: x̂ = −n̂ (n̂ = (−sin α, cos α)) and x̂·p on the line, which lies
+/// at n̂·(p − ctr) = offset.
+fn line_frame(angle_deg: f64, offset_mm: f64, ctr: [f64; 2]) -> ([f64; 2], f64) {
+    let (s, c) = angle_deg.to_radians().sin_cos();
+    let nhat = [-s, c];
+    let xhat = [s, -c];
+    (xhat, -(offset_mm + nhat[0] * ctr[0] + nhat[1] * ctr[1]))
+}
+
 /// A tabulated distance field (bilinear interpolation).
 #[derive(Debug, Clone)]
 pub struct DistTable {
@@ -297,11 +317,7 @@ impl FieldModel {
         let ctr = plate.center();
         match &mode.node {
             Node::Line { angle_deg, offset_mm } => {
-                let (s, c) = angle_deg.to_radians().sin_cos();
-                let nhat = [-s, c];
-                let xhat = [s, -c];
-                // n̂·(p − ctr) = offset on the node ⇒ x̂·p = −offset − n̂·ctr... (x̂ = −n̂).
-                let cval = -(offset_mm + nhat[0] * ctr[0] + nhat[1] * ctr[1]);
+                let (xhat, cval) = line_frame(*angle_deg, *offset_mm, ctr);
                 FieldModel::Line {
                     xhat,
                     c: cval,
@@ -309,6 +325,11 @@ impl FieldModel {
                     k: [mode.gain_left, mode.gain_right],
                 }
             }
+            Node::Lines(lines) => FieldModel::Lines {
+                lines: lines.iter().map(|l| line_frame(l.angle_deg, l.offset_mm, ctr)).collect(),
+                law: mode.law,
+                k: [mode.gain_left, mode.gain_right],
+            },
             Node::Hyperbola { center_mm, angle_deg, a_mm, b_mm } => {
                 let (s, c) = angle_deg.to_radians().sin_cos();
                 let (center, axis, a, b) = (*center_mm, [c, s], *a_mm, *b_mm);
@@ -364,6 +385,14 @@ impl FieldModel {
             FieldModel::Line { xhat, c, law, k } => {
                 let xi = xhat[0] * p[0] + xhat[1] * p[1] - c;
                 let f = -k[usize::from(xi > 0.0)] * law.g(xi);
+                [f * xhat[0], f * xhat[1]]
+            }
+            FieldModel::Lines { lines, law, k } => {
+                let xi = |(xhat, c): &([f64; 2], f64)| xhat[0] * p[0] + xhat[1] * p[1] - c;
+                let nearest = lines.iter().min_by(|a, b| xi(a).abs().total_cmp(&xi(b).abs()));
+                let Some(line) = nearest else { return [0.0, 0.0] };
+                let (x, xhat) = (xi(line), line.0);
+                let f = -k[usize::from(x > 0.0)] * law.g(x);
                 [f * xhat[0], f * xhat[1]]
             }
             FieldModel::Hyperbola { center, axis, a, b, law, k, table } => {
@@ -447,7 +476,9 @@ impl FieldModel {
     /// Largest gain.
     pub fn max_gain(&self) -> f64 {
         match self {
-            FieldModel::Line { k, .. } | FieldModel::Hyperbola { k, .. } => k[0].max(k[1]),
+            FieldModel::Line { k, .. }
+            | FieldModel::Lines { k, .. }
+            | FieldModel::Hyperbola { k, .. } => k[0].max(k[1]),
             FieldModel::Grid { .. } => 1.0,
         }
     }

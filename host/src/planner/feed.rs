@@ -475,6 +475,7 @@ fn confirm(
             worst_error_deg: worst,
             rejected: 0,
         }),
+        ..Synthesis::default()
     })
 }
 

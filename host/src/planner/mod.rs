@@ -15,23 +15,23 @@
 //! 2. **Equivalence.** Orientations are taken modulo the period P = 360°/m, m = the part's
 //!    rotational symmetry order, doubled (lcm with 2) when every mode is a straight node with
 //!    equal gains (t(θ + 180°) = t(θ)).
-//! 3. **Search.** After the first step only the stable rests remain; breadth-first search
-//!    over sets of those (sorted index sets, visited once) finds the shortest sequence ending
-//!    in a single orientation. A step is only allowed if no orientation of the current set lies
-//!    within `margin_deg` of one of that step's basin boundaries (the first step acts on all
-//!    orientations and has no such constraint).
+//! 3. **Search** ([`search`]). After the first step only the stable rests remain; the search
+//!    runs over sets of those (sorted index sets; for several parts, one set per part) and
+//!    finds the shortest sequence ending in a single orientation (per part), or, with a goal
+//!    ([`PlanOptions::goal_deg`], `fix_position`, `goal_pos_mm`, `minimize`), the best plan
+//!    of at most one step more that meets it ([`goal`]). A step is only allowed if no
+//!    orientation of the current set lies within `margin_deg` of one of that step's basin
+//!    boundaries (the first step acts on all orientations and has no such constraint).
 //! 4. **Durations.** Each step is simulated from its predicted start orientations (every 15°
 //!    for the first step) and from the plate corners farthest from the node; duration = the
 //!    slowest settle time × `safety`, plus the ramp, rounded up to 10 ms.
-//! 5. **Position.** A straight node fixes the centroid's coordinate across it; if the last
-//!    two steps are perpendicular straight nodes and the earlier one leaves all predicted
-//!    orientations at the same offset, the centroid is fixed where they cross.
+//! 5. **Position** ([`position`]). A straight node moves the centroid across itself only: the
+//!    places it can be are projected onto each node line in turn; the position is fixed when
+//!    they shrink to a point (perpendicular last two nodes).
 //!
 //! With a feed region ([`PlanOptions::feed`]) planning tracks poses instead ([`feed`]): on
 //! plates with several curved node lines the rest depends on the start position, which the
 //! orientation-set search can only treat as ambiguity.
-
-use std::collections::{HashMap, VecDeque};
 
 use chladni_shared::analysis::field::Field;
 use chladni_shared::analysis::fx::Fx;
@@ -42,12 +42,18 @@ use chladni_shared::icd::units::deg_from_bam;
 
 use crate::analysis::reference::{RefField, Reference};
 use crate::model::part::Part;
-use crate::model::plan_file::{PlanFile, StepJson};
+use crate::model::plan_file::{PartPrediction, PlanFile, StepJson};
 use crate::model::plate::{Mode, Node, PlateModel};
 use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
 
 pub mod dynamic;
 pub mod feed;
+pub mod goal;
+pub mod position;
+pub mod search;
+
+pub use goal::{PartPlan, plan_parts, plan_parts_with};
+pub use search::Minimize;
 
 pub use dynamic::{DynSettings, MapCache, MapKind};
 
@@ -85,6 +91,16 @@ pub struct PlanOptions {
     pub maps: MapKind,
     /// Settings of dynamic maps.
     pub dyn_maps: DynSettings,
+    /// What the chosen plan is shortest in.
+    pub minimize: Minimize,
+    /// Plans may have this many steps more than the shortest when that meets the goal.
+    pub extra_steps: usize,
+    /// Goal orientation of the (first) part (deg, modulo its period).
+    pub goal_deg: Option<f64>,
+    /// Only plans that fix the final position.
+    pub fix_position: bool,
+    /// Among plans that fix the position, the one ending nearest to this (mm).
+    pub goal_pos_mm: Option<[f64; 2]>,
 }
 
 impl Default for PlanOptions {
@@ -100,6 +116,11 @@ impl Default for PlanOptions {
             feed_search: feed::FeedSearch::default(),
             maps: MapKind::default(),
             dyn_maps: DynSettings::default(),
+            minimize: Minimize::Steps,
+            extra_steps: 1,
+            goal_deg: None,
+            fix_position: false,
+            goal_pos_mm: None,
         }
     }
 }
@@ -427,7 +448,7 @@ pub struct PlannedStep {
 }
 
 /// A synthesised plan.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Synthesis {
     /// Steps.
     pub steps: Vec<PlannedStep>,
@@ -439,6 +460,18 @@ pub struct Synthesis {
     pub final_position_mm: Option<[f64; 2]>,
     /// Feed-region plans: what their confirmation measured.
     pub feed: Option<feed::FeedCheck>,
+    /// The goal orientation asked for (deg).
+    pub goal_deg: Option<f64>,
+    /// Final orientations that plans of at most `max_steps` steps reach (deg; empty for
+    /// feed-region plans).
+    pub reachable_deg: Vec<f64>,
+    /// The longest plan considered: the shortest plan's steps + [`PlanOptions::extra_steps`].
+    pub max_steps: usize,
+    /// With `fix_position` / `goal_pos_mm`: the largest distance (mm) of a simulated final
+    /// centroid from the predicted position.
+    pub position_check_mm: Option<f64>,
+    /// Several parts: one prediction per part (empty for a single part).
+    pub parts: Vec<PartPlan>,
 }
 
 /// Why no plan was found.
@@ -450,37 +483,80 @@ pub enum PlanFailure {
     /// A mode cannot be analysed for this part.
     #[error("{0}")]
     Model(String),
+    /// No plan of at most `max_steps` steps ends at the goal orientation.
+    #[error(
+        "{part}: no plan of at most {max_steps} steps ends at {goal_deg}° (mod {period_deg}°, \
+         within {tol_deg}°); reachable final orientations: {}{}",
+        list_deg(reachable_deg),
+        nearest_deg.map(|n| format!("; nearest {n:.2}°")).unwrap_or_default()
+    )]
+    GoalUnreachable {
+        /// The part whose goal is out of reach.
+        part: String,
+        /// Its goal (deg).
+        goal_deg: f64,
+        /// Its period (deg).
+        period_deg: f64,
+        /// How near a final orientation must be to the goal (deg, the margin).
+        tol_deg: f64,
+        /// The longest plan considered.
+        max_steps: usize,
+        /// What is reachable (deg; for several parts, with the other parts at their goals).
+        reachable_deg: Vec<f64>,
+        /// The reachable orientation nearest to the goal.
+        nearest_deg: Option<f64>,
+    },
+    /// No plan that meets the orientation goals fixes the final position.
+    #[error(
+        "{part}: no plan of at most {max_steps} steps fixes the final position (to within \
+         {tol_mm} mm): a straight node moves the part only across itself, so the last two \
+         straight nodes must be perpendicular, or non-parallel ones alternated until the \
+         spread along them is below {tol_mm} mm"
+    )]
+    PositionNotFixed {
+        /// The part.
+        part: String,
+        /// The longest plan considered.
+        max_steps: usize,
+        /// The position tolerance (mm).
+        tol_mm: f64,
+    },
+    /// The simulation does not confirm the predicted final position.
+    #[error(
+        "{part}: the plan's predicted position ({:.2}, {:.2}) mm is not confirmed: simulated \
+         starts end up to {worst_mm:.2} mm from it",
+        predicted_mm[0], predicted_mm[1]
+    )]
+    PositionNotConfirmed {
+        /// The part.
+        part: String,
+        /// The predicted position (mm).
+        predicted_mm: [f64; 2],
+        /// The largest simulated distance from it (mm).
+        worst_mm: f64,
+    },
+    /// Several parts: every part has a plan alone, but no sequence brings all of them to one
+    /// orientation each.
+    #[error(
+        "no sequence brings every part to one orientation ({searched} states searched); the \
+         closest keeps {}",
+        apart.iter().map(|(n, d, p)| format!("{n} at {} (mod {p}°)", list_deg(d))).collect::<Vec<_>>().join(", ")
+    )]
+    PartsApart {
+        /// The parts left with several orientations in the closest state: (name,
+        /// orientations in deg, period).
+        apart: Vec<(String, Vec<f64>, f64)>,
+        /// States searched.
+        searched: usize,
+    },
 }
 
-/// The image of a set of orientation ids under mode `k` (sorted, deduplicated); `None` when
-/// some orientation has no allowed transition.
-fn set_image(set: &[usize], trans: &[Vec<Option<Vec<usize>>>], k: usize) -> Option<Vec<usize>> {
-    let mut img = Vec::with_capacity(set.len());
-    for &u in set {
-        img.extend_from_slice(trans[u][k].as_deref()?);
+/// `a°, b°, …` (two decimals).
+fn list_deg(v: &[f64]) -> String {
+    if v.is_empty() {
+        return "none".into();
     }
-    img.sort_unstable();
-    img.dedup();
-    Some(img)
-}
-
-/// The steps from a start set to search node `g`: (mode, orientations after it).
-fn path_to(
-    nodes: &[(Vec<usize>, usize, usize)],
-    uni: &[f64],
-    mut g: usize,
-) -> Vec<(usize, Vec<f64>)> {
-    let mut path = Vec::new();
-    loop {
-        let (set, parent, k) = &nodes[g];
-        path.push((*k, set.iter().map(|&u| uni[u]).collect()));
-        if *parent == usize::MAX {
-            break;
-        }
-        g = *parent;
-    }
-    path.reverse();
-    path
+    v.iter().map(|d| format!("{d:.2}°")).collect::<Vec<_>>().join(", ")
 }
 
 /// Most vertices (all rings) a part may have for planning and simulation: the planner's cost
@@ -623,89 +699,25 @@ impl Problem {
         self.search_without(opt, &[])
     }
 
-    /// [`Self::search`] with some transitions (orientation, mode) ruled out.
+    /// [`Self::search`] with some transitions (orientation, mode) ruled out: the shortest
+    /// plan, the first found breadth-first ([`search`]).
     pub fn search_without(
         &self,
         opt: &PlanOptions,
         forbidden: &[(f64, usize)],
     ) -> Result<Vec<(usize, Vec<f64>)>, PlanFailure> {
-        let p = self.period;
-        let mut uni: Vec<f64> = Vec::new();
-        let id = |uni: &mut Vec<f64>, v: f64| -> usize {
-            let v = v.rem_euclid(p);
-            if let Some(i) = uni.iter().position(|&u| cdist(u, v, p) < 1e-3) {
-                i
-            } else {
-                uni.push(v);
-                uni.len() - 1
-            }
+        let one = PlanOptions { minimize: Minimize::Steps, extra_steps: 0, ..*opt };
+        let s = search::Search::new(&[self], &one, &[forbidden.to_vec()]);
+        let reach = s.reach();
+        let Some(steps) = reach.shortest else {
+            let nodes: Vec<(Vec<usize>, usize, usize)> =
+                reach.nodes.iter().map(|n| (n.0[0].clone(), n.1, n.2)).collect();
+            return Err(PlanFailure::NoPlan(self.explain(&nodes, &s.unis[0].vals, opt)));
         };
-        let nm = self.maps.len();
-        // trans[u][mode]: every orientation u may reach (several for an ambiguous
-        // orientation of a dynamic map).
-        let mut trans: Vec<Vec<Option<Vec<usize>>>> = Vec::new();
-        let mut starts: Vec<(usize, Vec<usize>)> = Vec::new();
-        for (k, map) in self.maps.iter().enumerate() {
-            if map.neutral || map.stable.is_empty() {
-                continue;
-            }
-            let mut set: Vec<usize> = map.stable.iter().map(|&s| id(&mut uni, s)).collect();
-            set.sort_unstable();
-            set.dedup();
-            starts.push((k, set));
-        }
-        let close = |uni: &mut Vec<f64>, trans: &mut Vec<Vec<Option<Vec<usize>>>>| {
-            while trans.len() < uni.len() {
-                let u = uni[trans.len()];
-                let row = (0..nm)
-                    .map(|k| {
-                        if forbidden.iter().any(|&(f, fk)| fk == k && cdist(f, u, p) < 1e-3) {
-                            return None;
-                        }
-                        let vs = self.maps[k].apply_all(u, opt.margin_deg).ok()?;
-                        Some(vs.into_iter().map(|v| id(uni, v)).collect())
-                    })
-                    .collect();
-                trans.push(row);
-            }
-        };
-        close(&mut uni, &mut trans);
-        // BFS over sets.
-        let mut nodes: Vec<(Vec<usize>, usize, usize)> = Vec::new(); // (set, parent, mode)
-        let mut seen: HashMap<Vec<usize>, usize> = HashMap::new();
-        let mut queue = VecDeque::new();
-        for (k, set) in starts {
-            if !seen.contains_key(&set) {
-                seen.insert(set.clone(), nodes.len());
-                queue.push_back(nodes.len());
-                nodes.push((set, usize::MAX, k));
-            }
-        }
-        let mut goal = None;
-        while let Some(i) = queue.pop_front() {
-            if nodes[i].0.len() == 1 {
-                goal = Some(i);
-                break;
-            }
-            if nodes.len() > opt.max_states {
-                break;
-            }
-            for k in 0..nm {
-                let Some(img) = set_image(&nodes[i].0, &trans, k) else {
-                    continue;
-                };
-                if !seen.contains_key(&img) {
-                    seen.insert(img.clone(), nodes.len());
-                    queue.push_back(nodes.len());
-                    nodes.push((img, i, k));
-                }
-            }
-            close(&mut uni, &mut trans);
-        }
-        let Some(g) = goal else {
-            return Err(PlanFailure::NoPlan(self.explain(&nodes, &uni, opt)));
-        };
-        Ok(path_to(&nodes, &uni, g))
+        let path = s
+            .select(&search::Target::default(), steps, &mut |_, _| 1, &mut |_| Vec::new())
+            .ok_or_else(|| PlanFailure::NoPlan("the search found no plan twice".into()))?;
+        Ok(path.into_iter().map(|(k, mut a)| (k, a.swap_remove(0))).collect())
     }
 
     fn explain(
@@ -897,101 +909,51 @@ pub fn plan(part: &Part, plate: &PlateModel, opt: &PlanOptions) -> Result<Synthe
     // the static maps find and the dynamic check confirms at its start points (the boundary
     // moves with the approach, sometimes to within the margin): then that plan is taken
     // rather than none, so the default finds every plan the static maps find.
-    let has_lines = plate.modes.iter().any(|m| matches!(m.node, Node::Line { .. }));
     match plan {
-        Err(PlanFailure::NoPlan(why)) if opt.maps == MapKind::Dynamic && has_lines => {
+        Err(PlanFailure::NoPlan(why)) if falls_back(plate, opt) => {
             let st = PlanOptions { maps: MapKind::Static, ..*opt };
-            // Only the straight-node maps change; the simulated ones are kept.
-            let maps = plate
-                .modes
-                .iter()
-                .zip(problem.maps)
-                .map(|(mode, map)| match mode.node {
-                    Node::Line { .. } => line_map(part, mode, opt.backend),
-                    _ => Ok(map),
-                })
-                .collect::<Result<Vec<_>, _>>()
-                .map_err(PlanFailure::Model)?;
-            plan_with(part, plate, &st, &Problem { maps, period: problem.period })
-                .map_err(|_| PlanFailure::NoPlan(why))
+            let statics = static_problem(part, plate, opt, &problem)?;
+            plan_with(part, plate, &st, &statics).map_err(|_| PlanFailure::NoPlan(why))
         }
         other => other,
     }
 }
 
-/// [`plan`] with the maps already built.
+/// Whether a search over dynamic maps that found no plan is tried again over static maps.
+pub(crate) fn falls_back(plate: &PlateModel, opt: &PlanOptions) -> bool {
+    opt.maps == MapKind::Dynamic && plate.modes.iter().any(|m| matches!(m.node, Node::Line { .. }))
+}
+
+/// `problem` with its straight-node maps replaced by the static ones (the simulated maps of
+/// curved and grid nodes are kept).
+pub(crate) fn static_problem(
+    part: &Part,
+    plate: &PlateModel,
+    opt: &PlanOptions,
+    problem: &Problem,
+) -> Result<Problem, PlanFailure> {
+    let maps = plate
+        .modes
+        .iter()
+        .zip(&problem.maps)
+        .map(|(mode, map)| match mode.node {
+            Node::Line { .. } => line_map(part, mode, opt.backend),
+            _ => Ok(map.clone()),
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(PlanFailure::Model)?;
+    Ok(Problem { maps, period: problem.period })
+}
+
+/// [`plan`] with the maps already built: the search ([`search`]) for the goal of `opt`, then a
+/// dynamic check of the plan's transitions, durations and position ([`goal`]).
 pub fn plan_with(
     part: &Part,
     plate: &PlateModel,
     opt: &PlanOptions,
     problem: &Problem,
 ) -> Result<Synthesis, PlanFailure> {
-    let body = Body::with_samples(part, 160);
-    // Search, then check every straight-node transition of the plan dynamically (approaching
-    // the node from either side, from afar and from half-way across); a transition the
-    // simulation does not confirm is ruled out and the search repeated.
-    let mut forbidden: Vec<(f64, usize)> = Vec::new();
-    let path = loop {
-        let path = problem.search_without(opt, &forbidden)?;
-        let mut bad = Vec::new();
-        for w in path.windows(2) {
-            let (k, mode) = (w[1].0, &plate.modes[w[1].0]);
-            if !matches!(mode.node, Node::Line { .. }) {
-                continue;
-            }
-            for &u in &w[0].1 {
-                let Ok(vs) = problem.maps[k].apply_all(u, opt.margin_deg) else { continue };
-                if !confirm_any(&body, mode, plate, u, &vs, problem.period) {
-                    bad.push((u, k));
-                }
-            }
-        }
-        if bad.is_empty() || forbidden.len() > 200 {
-            break path;
-        }
-        forbidden.extend(bad);
-    };
-    let mut steps = Vec::new();
-    let mut before: Vec<f64> = Vec::new();
-    for (k, after) in &path {
-        let mode = &plate.modes[*k];
-        let settle = if opt.durations {
-            let starts: Vec<f64> = if before.is_empty() {
-                let map = &problem.maps[*k];
-                (0..24)
-                    .map(|i| i as f64 * 15.0)
-                    .filter(|&t| map.apply_all(t, opt.margin_deg).is_ok())
-                    .collect()
-            } else {
-                before.clone()
-            };
-            settle_time(&body, mode, plate, &starts)
-        } else {
-            Settle::default()
-        };
-        let duration_ms = if opt.durations {
-            step_duration_ms(settle.settle_s, opt.safety, mode.ramp_ms)
-        } else {
-            1000
-        };
-        steps.push(PlannedStep {
-            mode: *k,
-            before: before.clone(),
-            after: after.clone(),
-            duration_ms,
-            settle,
-        });
-        before = after.clone();
-    }
-    let final_orientation_deg = path.last().map_or(0.0, |p| p.1[0]).rem_euclid(problem.period);
-    let final_position_mm = final_position(part, plate, &steps, final_orientation_deg);
-    Ok(Synthesis {
-        steps,
-        final_orientation_deg,
-        period_deg: problem.period,
-        final_position_mm,
-        feed: None,
-    })
+    plan_parts_with(&[part], plate, opt, &[problem], &[opt.goal_deg])
 }
 
 /// The f64 reference analysis of `part` under a straight-node mode's field law and gains.
@@ -1009,41 +971,6 @@ fn balance_offset(part: &Part, mode: &Mode, theta_deg: f64) -> f64 {
     reference_for(part, mode).balance(theta_deg - angle_deg + 90.0).0
 }
 
-fn final_position(
-    part: &Part,
-    plate: &PlateModel,
-    steps: &[PlannedStep],
-    theta: f64,
-) -> Option<[f64; 2]> {
-    let n = steps.len();
-    if n < 2 {
-        return None;
-    }
-    let (a, b) = (&plate.modes[steps[n - 2].mode], &plate.modes[steps[n - 1].mode]);
-    let (Node::Line { angle_deg: aa, offset_mm: oa }, Node::Line { angle_deg: ab, offset_mm: ob }) =
-        (&a.node, &b.node)
-    else {
-        return None;
-    };
-    if ((aa - ab).to_radians().cos()).abs() > (0.5f64).to_radians().sin() {
-        return None;
-    }
-    let offs: Vec<f64> = steps[n - 2].after.iter().map(|&t| balance_offset(part, a, t)).collect();
-    if offs.iter().any(|o| (o - offs[0]).abs() > 0.5) {
-        return None;
-    }
-    let sb = balance_offset(part, b, theta);
-    // n̂·(p − c) = offset − s for each line.
-    let c = plate.center();
-    let na = [-aa.to_radians().sin(), aa.to_radians().cos()];
-    let nb = [-ab.to_radians().sin(), ab.to_radians().cos()];
-    let (ra, rb) = (oa - offs[0], ob - sb);
-    let det = na[0] * nb[1] - na[1] * nb[0];
-    let x = (ra * nb[1] - rb * na[1]) / det;
-    let y = (na[0] * rb - nb[0] * ra) / det;
-    Some([((c[0] + x) * 1000.0).round() / 1000.0, ((c[1] + y) * 1000.0).round() / 1000.0])
-}
-
 impl Synthesis {
     /// The steps as the simulator runs them (each at its mode's own amplitude).
     pub fn sim_steps(&self) -> Vec<sim::SimStep> {
@@ -1053,7 +980,7 @@ impl Synthesis {
     /// The plan file (device steps plus predictions).
     pub fn to_file(&self, plate: &PlateModel, name: &str) -> PlanFile {
         let (name, _) = plan_name(name);
-        PlanFile {
+        let mut file = PlanFile {
             name,
             repeat: 1,
             steps: self
@@ -1069,9 +996,40 @@ impl Synthesis {
                     )
                 })
                 .collect(),
-            final_orientation_deg: Some((self.final_orientation_deg * 1e4).round() / 1e4),
+            final_orientation_deg: Some(r4(self.final_orientation_deg)),
             period_deg: Some(self.period_deg),
             final_position_mm: self.final_position_mm,
+            goal_deg: self.goal_deg,
+            reachable_deg: (!self.reachable_deg.is_empty())
+                .then(|| self.reachable_deg.iter().copied().map(r4).collect()),
+            parts: None,
+        };
+        if !self.parts.is_empty() {
+            // Several parts: the predictions are per part; none is "the" final orientation.
+            file.final_orientation_deg = None;
+            file.period_deg = None;
+            file.final_position_mm = None;
+            file.goal_deg = None;
+            file.reachable_deg = None;
+            file.parts = Some(
+                self.parts
+                    .iter()
+                    .map(|p| PartPrediction {
+                        name: p.name.clone(),
+                        final_orientation_deg: Some(r4(p.final_orientation_deg)),
+                        period_deg: Some(p.period_deg),
+                        final_position_mm: p.final_position_mm,
+                        goal_deg: p.goal_deg,
+                        reachable_deg: Some(p.reachable_deg.iter().copied().map(r4).collect()),
+                    })
+                    .collect(),
+            );
         }
+        file
     }
+}
+
+/// Rounds to 10⁻⁴ (the plan file's resolution for orientations).
+fn r4(v: f64) -> f64 {
+    (v * 1e4).round() / 1e4
 }

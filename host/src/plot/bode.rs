@@ -43,6 +43,12 @@ fn freq_range(samples: &[SweepSample]) -> Range<f64> {
     if lo.is_finite() && hi > lo { lo..hi } else { 1.0..10.0 }
 }
 
+/// A frequency tick: whole hertz (a sweep spans tens to thousands of hertz; plotters' log
+/// axis would otherwise label only powers of ten, i.e. nothing inside one decade).
+fn hz_label(f: &f64) -> String {
+    if *f >= 10.0 { format!("{f:.0}") } else { format!("{f:.1}") }
+}
+
 /// Dashed vertical lines at each resonance, from `y.start` to `y.end`.
 fn mark_resonances<X, Y>(
     chart: &mut ChartContext<'_, BitMapBackend<'_>, Cartesian2d<X, Y>>,
@@ -76,6 +82,8 @@ fn draw_magnitude(
     c.configure_mesh()
         .x_desc("frequency (Hz)")
         .y_desc("acceleration (m/s²)")
+        .x_labels(12)
+        .x_label_formatter(&hz_label)
         .label_style(("sans-serif", 12))
         .draw()
         .map_err(text)?;
@@ -111,6 +119,8 @@ fn draw_phase(
     c.configure_mesh()
         .x_desc("frequency (Hz)")
         .y_desc("phase (°)")
+        .x_labels(12)
+        .x_label_formatter(&hz_label)
         .label_style(("sans-serif", 12))
         .draw()
         .map_err(text)?;

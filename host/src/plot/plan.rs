@@ -35,20 +35,24 @@ pub fn node_polylines(mode: &Mode, plate: &PlateModel) -> Vec<Vec<(f64, f64)>> {
         out.retain(|r| r.len() > 1);
         out
     };
+    let line_runs = |angle_deg: f64, offset_mm: f64| {
+        let (s, c) = angle_deg.to_radians().sin_cos();
+        let ctr = plate.center();
+        let base = [ctr[0] - s * offset_mm, ctr[1] + c * offset_mm];
+        let d = w.hypot(h);
+        runs(
+            (0..=800)
+                .map(|i| {
+                    let t = -d + 2.0 * d * i as f64 / 800.0;
+                    [base[0] + t * c, base[1] + t * s]
+                })
+                .collect(),
+        )
+    };
     match &mode.node {
-        Node::Line { angle_deg, offset_mm } => {
-            let (s, c) = angle_deg.to_radians().sin_cos();
-            let ctr = plate.center();
-            let base = [ctr[0] - s * offset_mm, ctr[1] + c * offset_mm];
-            let d = w.hypot(h);
-            runs(
-                (0..=800)
-                    .map(|i| {
-                        let t = -d + 2.0 * d * i as f64 / 800.0;
-                        [base[0] + t * c, base[1] + t * s]
-                    })
-                    .collect(),
-            )
+        Node::Line { angle_deg, offset_mm } => line_runs(*angle_deg, *offset_mm),
+        Node::Lines(lines) => {
+            lines.iter().flat_map(|l| line_runs(l.angle_deg, l.offset_mm)).collect()
         }
         Node::Hyperbola { center_mm, angle_deg, a_mm, b_mm } => {
             let (s, c) = angle_deg.to_radians().sin_cos();

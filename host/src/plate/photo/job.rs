@@ -106,19 +106,22 @@ impl PhotoRequest {
         }
     }
 
-    /// The `[[mode]]` entries: one grid entry if there is a grid, else one line entry each.
+    /// The `[[mode]]` entries: one grid entry if there is a grid, else one entry with all the
+    /// straight lines (a photo is taken at one drive frequency: one mode).
     pub fn entries(&self, out: &PhotoOutcome) -> Vec<ModeEntry> {
         match &out.grid {
             Some(Ok(field)) => {
                 vec![modes_file::sampled_mode(&self.entry_name("nodes"), self.freq_hz, &field.grid)]
             }
             Some(Err(_)) => Vec::new(),
-            None => (out.found.lines.iter().enumerate())
-                .map(|(k, l)| {
-                    let name = self.entry_name(&format!("line {}", k + 1));
-                    modes_file::line_mode(&name, self.freq_hz, l.angle_deg, l.offset_mm)
-                })
-                .collect(),
+            None if out.found.lines.is_empty() => Vec::new(),
+            None => {
+                let lines: Vec<(f64, f64)> =
+                    out.found.lines.iter().map(|l| (l.angle_deg, l.offset_mm)).collect();
+                let what =
+                    if lines.len() == 1 { "line".into() } else { format!("{} lines", lines.len()) };
+                vec![modes_file::lines_mode(&self.entry_name(&what), self.freq_hz, &lines)]
+            }
         }
     }
 }
