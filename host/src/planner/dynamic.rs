@@ -29,6 +29,8 @@ use std::hash::{DefaultHasher, Hash, Hasher};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, OnceLock};
 
+use rayon::prelude::*;
+
 use super::{Backend, StepMap, cdist, line_map};
 use crate::model::field::Law;
 use crate::model::part::Part;
@@ -308,20 +310,32 @@ pub fn dynamic_line_map(
     let first = 0.3 * step;
     let mut clusters = Clusters { reps: Vec::new(), period };
     let starts = approach_starts(&body, mode, plate);
-    let end = |pt: [f64; 2], th: f64, clusters: &mut Clusters| {
+    // The runs are independent: simulated in parallel, gathered in order and clustered
+    // sequentially, so the map does not depend on the thread count.
+    let end = |pt: [f64; 2], th: f64| {
         let run = sim::run(&body, &field, p, Pose { x: pt[0], y: pt[1], theta: th.to_radians() });
-        run.rested.then(|| clusters.label(run.pose.theta.to_degrees()))
+        run.rested.then(|| run.pose.theta.to_degrees())
     };
-    // The independent runs (start point × orientation) could be spread over threads.
-    let labels: Vec<Vec<Option<usize>>> = starts
-        .iter()
-        .map(|&pt| (0..n).map(|i| end(pt, first + i as f64 * step, &mut clusters)).collect())
+    let finals: Vec<Vec<Option<f64>>> = starts
+        .par_iter()
+        .map(|&pt| (0..n).into_par_iter().map(|i| end(pt, first + i as f64 * step)).collect())
         .collect();
-    let changes: Vec<Vec<Option<f64>>> = starts
+    let labels: Vec<Vec<Option<usize>>> = finals
         .iter()
+        .map(|row| row.iter().map(|f| f.map(|t| clusters.label(t))).collect())
+        .collect();
+    // Does a run that ended at `f` (None: still moving) belong to outcome `a`?
+    let same = |a: Option<usize>, f: Option<f64>| match (a, f) {
+        (Some(a), Some(t)) => cdist(clusters.mean(a), t.rem_euclid(period), period) < CLUSTER_DEG,
+        (None, None) => true,
+        _ => false,
+    };
+    let changes: Vec<Vec<Option<f64>>> = starts
+        .par_iter()
         .zip(&labels)
         .map(|(&pt, l)| {
             (0..n)
+                .into_par_iter()
                 .map(|i| {
                     let (a, b) = (l[i], l[(i + 1) % n]);
                     (a != b).then(|| {
@@ -329,7 +343,7 @@ pub fn dynamic_line_map(
                             (first + i as f64 * step, first + (i + 1) as f64 * step);
                         for _ in 0..set.refine {
                             let mid = 0.5 * (lo + hi);
-                            if end(pt, mid, &mut clusters) == a { lo = mid } else { hi = mid }
+                            if same(a, end(pt, mid)) { lo = mid } else { hi = mid }
                         }
                         (0.5 * (lo + hi)).rem_euclid(360.0)
                     })
