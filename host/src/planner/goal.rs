@@ -124,7 +124,7 @@ pub fn plan_parts(
     let refs: Vec<&Problem> = problems.iter().collect();
     match plan_parts_with(&parts, plate, opt, &refs, goals) {
         // As in [`super::plan`]: the static maps' plan rather than none.
-        Err(PlanFailure::NoPlan(why)) if super::falls_back(plate, opt) => {
+        Err(e) if super::falls_back(&e, plate, opt) => {
             let st = PlanOptions { maps: super::MapKind::Static, ..*opt };
             let statics = parts
                 .iter()
@@ -132,7 +132,7 @@ pub fn plan_parts(
                 .map(|(p, pr)| super::static_problem(p, plate, opt, pr))
                 .collect::<Result<Vec<_>, _>>()?;
             let refs: Vec<&Problem> = statics.iter().collect();
-            plan_parts_with(&parts, plate, &st, &refs, goals).map_err(|_| PlanFailure::NoPlan(why))
+            plan_parts_with(&parts, plate, &st, &refs, goals).map_err(|_| e)
         }
         other => other,
     }

@@ -910,18 +910,21 @@ pub fn plan(part: &Part, plate: &PlateModel, opt: &PlanOptions) -> Result<Synthe
     // moves with the approach, sometimes to within the margin): then that plan is taken
     // rather than none, so the default finds every plan the static maps find.
     match plan {
-        Err(PlanFailure::NoPlan(why)) if falls_back(plate, opt) => {
+        Err(e) if falls_back(&e, plate, opt) => {
             let st = PlanOptions { maps: MapKind::Static, ..*opt };
             let statics = static_problem(part, plate, opt, &problem)?;
-            plan_with(part, plate, &st, &statics).map_err(|_| PlanFailure::NoPlan(why))
+            plan_with(part, plate, &st, &statics).map_err(|_| e)
         }
         other => other,
     }
 }
 
-/// Whether a search over dynamic maps that found no plan is tried again over static maps.
-pub(crate) fn falls_back(plate: &PlateModel, opt: &PlanOptions) -> bool {
-    opt.maps == MapKind::Dynamic && plate.modes.iter().any(|m| matches!(m.node, Node::Line { .. }))
+/// Whether a search over dynamic maps that found no plan (none at all, none reaching the goal
+/// orientation or fixing the position) is tried again over static maps.
+pub(crate) fn falls_back(e: &PlanFailure, plate: &PlateModel, opt: &PlanOptions) -> bool {
+    !matches!(e, PlanFailure::Model(_))
+        && opt.maps == MapKind::Dynamic
+        && plate.modes.iter().any(|m| matches!(m.node, Node::Line { .. }))
 }
 
 /// `problem` with its straight-node maps replaced by the static ones (the simulated maps of
