@@ -15,7 +15,7 @@ use crate::model::geometry::{self, inside};
 use crate::model::part::Part;
 use crate::model::plan_file::{PlanFile, PlanFileError, StepLevel};
 use crate::model::plate::{Law, Mode, Node, PlateModel};
-use crate::motion::potential::{Bicubic, boundary_wrench};
+use crate::motion::potential::Bicubic;
 use crate::plate::solver::Grid;
 
 /// Target number of interior sample points for numerical force integration.
@@ -436,21 +436,7 @@ impl FieldModel {
             }
             FieldModel::Grid { cells, k, .. } => {
                 // f = −∇(k φ²): exact along the outline (see [`crate::motion::potential`]).
-                let rings: Vec<Vec<[f64; 2]>> = body
-                    .rings
-                    .iter()
-                    .map(|r| r.iter().map(|p| [c * p[0] - s * p[1], s * p[0] + c * p[1]]).collect())
-                    .collect();
-                let [fx, fy, m] = boundary_wrench(
-                    &rings,
-                    [pose.x, pose.y],
-                    cells.spacing(),
-                    f64::INFINITY,
-                    |p| {
-                        let v = cells.value(p);
-                        k[usize::from(v > 0.0)] * v * v
-                    },
-                );
+                let [fx, fy, m] = cells.outline_wrench(&body.rings, [pose.x, pose.y], (s, c), *k);
                 Wrench { fx, fy, m }
             }
             FieldModel::Hyperbola { .. } => {

@@ -284,8 +284,8 @@ impl<'a> Tracker<'a> {
         let mut todo: Vec<Pose> = Vec::new();
         let mut queued = HashSet::new();
         for &q in poses {
-            let known = self.memo.get(&key(k, q)).is_some_and(done)
-                || self.fixed.contains_key(&fkey(q));
+            let known =
+                self.memo.get(&key(k, q)).is_some_and(done) || self.fixed.contains_key(&fkey(q));
             if !known && queued.insert(fkey(q)) {
                 todo.push(q);
             }
