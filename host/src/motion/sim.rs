@@ -4,9 +4,11 @@
 //! - straight nodes: exact, per polygon edge (split at the node, Green's theorem
 //!   ∫∫ g dA = ∮ G dη, ∫∫ η g dA = ∮ η G dη along each piece, 5-point Gauss–Legendre, exact
 //!   for the sign and linear laws);
-//! - hyperbola and grid nodes: midpoint rule over interior sample points of the part
-//!   (about [`BODY_SAMPLES`] cells); hyperbola: distance to the branch by Newton on its
-//!   parameter; grid: Catmull–Rom bicubic φ and f = −gain·∇(φ²)/max|∇(φ²)|.
+//! - hyperbola nodes: midpoint rule over interior sample points of the part (about
+//!   [`BODY_SAMPLES`] cells), distance to the branch tabulated (Newton on its parameter);
+//! - grid nodes: f = −gain·∇(φ²)/max|∇(φ²)| with Catmull–Rom bicubic φ is a gradient, so
+//!   force and moment are integrals of φ² along the part's outline, cell by cell
+//!   ([`crate::motion::potential`]): no interior samples, and far more accurate than them.
 //!
 //! Units: mm, s, rad inside (degrees in [`Pose`] helpers only where named).
 
