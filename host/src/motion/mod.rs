@@ -2,5 +2,6 @@
 //! simulation of plans, the Monte Carlo check of a plan), and the paper's particle bouncing on a vibrating string.
 
 pub mod montecarlo;
+pub mod potential;
 pub mod sim;
 pub mod string;

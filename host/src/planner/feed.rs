@@ -23,6 +23,7 @@
 use std::collections::{HashMap, HashSet};
 
 use indicatif::ProgressBar;
+use rayon::prelude::*;
 
 use super::{
     PlanFailure, PlanOptions, PlannedStep, Settle, Synthesis, cdist, on_plate_edge, plan_period,
@@ -30,7 +31,7 @@ use super::{
 };
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
-use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams, SimStep, simulate_plan};
+use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
 
 /// A rectangle of the plate (mm) where parts are dropped.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -174,33 +175,139 @@ fn interleaved_starts(
     poses(region, body, plate, (n, &frac), (s.starts.max(1), 0.8))
 }
 
-/// Simulates parts to rest under the plate's modes.
-struct Tracker<'a> {
+/// What a run to rest from one pose under one mode gave.
+#[derive(Debug, Clone, Copy)]
+struct Outcome {
+    /// Where the run stopped.
+    pose: Pose,
+    /// Settle time (s).
+    settle_s: f64,
+    /// When it stopped (s).
+    t_end: f64,
+    /// Came to rest within 5000 T₀.
+    rested: bool,
+}
+
+/// A (mode, pose) pair as a memo key: the same pose bit for bit.
+type Key = (usize, [u64; 3]);
+
+fn key(k: usize, q: Pose) -> Key {
+    (k, [q.x.to_bits(), q.y.to_bits(), q.theta.to_bits()])
+}
+
+/// The part, the plate and its fields: simulates one run (shared by the worker threads).
+struct Sim<'a> {
     body: Body,
     plate: &'a PlateModel,
     fields: Vec<FieldModel>,
     period: f64,
 }
 
+impl Sim<'_> {
+    /// Settings of a run under mode `k` stopped at `t_limit` (s): the mode's own speed, as
+    /// `simulate_plan` runs a step at the mode's amplitude.
+    fn params(&self, k: usize, t_limit: f64) -> SimParams {
+        SimParams { speed: self.plate.modes[k].speed_mm_s, t_limit, run_to_limit: false }
+    }
+
+    /// 5000 T₀ of mode `k`: the limit of a run to rest, as for simulated maps.
+    fn rest_limit(&self, k: usize) -> f64 {
+        let (mode, field) = (&self.plate.modes[k], &self.fields[k]);
+        5000.0 * (self.body.radius / (mode.speed_mm_s * field.max_gain()))
+    }
+
+    /// The run under mode `k` from `pose`, stopped at `t_limit` or at rest.
+    fn run(&self, k: usize, pose: Pose, t_limit: f64) -> Outcome {
+        let run = sim::run(&self.body, &self.fields[k], self.params(k, t_limit), pose);
+        Outcome { pose: run.pose, settle_s: run.settle_s, t_end: run.t_end, rested: run.rested }
+    }
+
+    /// A run to rest that counts: it rested and not on the plate edge.
+    fn ok(&self, o: &Outcome) -> bool {
+        o.rested && !on_plate_edge(&self.body, self.plate, o.pose)
+    }
+}
+
+/// Simulates parts to rest under the plate's modes, each (mode, pose) once: runs are
+/// memoised, and the runs a batch still needs are simulated in parallel (`rayon`; results are
+/// collected in order, so plans do not depend on the thread count).
+struct Tracker<'a> {
+    sim: Sim<'a>,
+    /// Runs to rest (limit 5000 T₀).
+    memo: HashMap<Key, Outcome>,
+    /// Runs stopped at a step duration before they rested: (mode, pose, duration bits).
+    fixed: HashMap<(Key, u64), Pose>,
+}
+
 impl<'a> Tracker<'a> {
     fn new(body: Body, plate: &'a PlateModel, period: f64) -> Self {
         let fields = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
-        Tracker { body, plate, fields, period }
+        Tracker {
+            sim: Sim { body, plate, fields, period },
+            memo: HashMap::new(),
+            fixed: HashMap::new(),
+        }
     }
 
-    /// The rest reached under mode `k` from `pose`, or `None` when the run does not come to
-    /// rest within 5000 T₀ (as for simulated maps) or ends on the plate edge.
-    fn rest(&self, k: usize, pose: Pose) -> Option<sim::Run> {
-        let (mode, field) = (&self.plate.modes[k], &self.fields[k]);
-        let t0 = self.body.radius / (mode.speed_mm_s * field.max_gain());
-        let p = SimParams { speed: mode.speed_mm_s, t_limit: 5000.0 * t0, run_to_limit: false };
-        let run = sim::run(&self.body, field, p, pose);
-        (run.rested && !on_plate_edge(&self.body, self.plate, run.pose)).then_some(run)
+    /// The run to rest (limit 5000 T₀) of every job (mode, pose), simulating those not yet
+    /// memoised in parallel.
+    fn outcomes(&mut self, jobs: &[(usize, Pose)]) -> Vec<Outcome> {
+        let mut todo: Vec<(usize, Pose)> = Vec::new();
+        let mut queued = HashSet::new();
+        for &(k, q) in jobs {
+            if !self.memo.contains_key(&key(k, q)) && queued.insert(key(k, q)) {
+                todo.push((k, q));
+            }
+        }
+        let sim = &self.sim;
+        let done: Vec<Outcome> =
+            todo.par_iter().map(|&(k, q)| sim.run(k, q, sim.rest_limit(k))).collect();
+        self.memo.extend(todo.iter().map(|&(k, q)| key(k, q)).zip(done));
+        jobs.iter().map(|&(k, q)| self.memo[&key(k, q)]).collect()
     }
 
-    /// Every pose's rest under mode `k`, or `None` as soon as one fails.
-    fn rests(&self, k: usize, poses: &[Pose]) -> Option<Vec<sim::Run>> {
-        poses.iter().map(|&q| self.rest(k, q)).collect()
+    /// Every pose's rest under mode `k`, or `None` when one does not come to rest within
+    /// 5000 T₀ or ends on the plate edge.
+    fn rests(&mut self, k: usize, poses: &[Pose]) -> Option<Vec<Outcome>> {
+        let jobs: Vec<(usize, Pose)> = poses.iter().map(|&q| (k, q)).collect();
+        let out = self.outcomes(&jobs);
+        out.iter().all(|o| self.sim.ok(o)).then_some(out)
+    }
+
+    /// Where each pose is after mode `k` for `duration_s`, as `simulate_plan` runs a step: a
+    /// memoised run that rested by then stopped at the same pose (the duration only caps the
+    /// last integration step, which it did not reach); others are run with the duration as
+    /// their limit, in parallel.
+    fn after(&mut self, k: usize, duration_s: f64, poses: &[Pose]) -> Vec<Pose> {
+        let done = |o: &Outcome| o.rested && o.t_end <= duration_s;
+        let fkey = |q: Pose| (key(k, q), duration_s.to_bits());
+        let mut todo: Vec<Pose> = Vec::new();
+        let mut queued = HashSet::new();
+        for &q in poses {
+            let known =
+                self.memo.get(&key(k, q)).is_some_and(done) || self.fixed.contains_key(&fkey(q));
+            if !known && queued.insert(fkey(q)) {
+                todo.push(q);
+            }
+        }
+        let sim = &self.sim;
+        let runs: Vec<Outcome> = todo.par_iter().map(|&q| sim.run(k, q, duration_s)).collect();
+        let limit = self.sim.rest_limit(k);
+        for (q, o) in todo.into_iter().zip(runs) {
+            if o.rested && o.t_end < limit {
+                // Also the run to rest (the same trajectory).
+                self.memo.insert(key(k, q), o);
+            } else {
+                self.fixed.insert(fkey(q), o.pose);
+            }
+        }
+        poses
+            .iter()
+            .map(|&q| match self.memo.get(&key(k, q)) {
+                Some(o) if done(o) => o.pose,
+                _ => self.fixed[&fkey(q)],
+            })
+            .collect()
     }
 }
 
@@ -295,7 +402,6 @@ impl Tally {
 /// The search: mode sequences of increasing length whose tracked poses end in one orientation.
 struct Search<'a> {
     tracker: Tracker<'a>,
-    memo: HashMap<(usize, [u64; 3]), Option<Pose>>,
     seen: HashSet<Vec<[i64; 3]>>,
     tally: Tally,
 }
@@ -304,33 +410,23 @@ impl Search<'_> {
     /// Rests of `poses` under mode `k` (memoised: the same cluster pose recurs across
     /// sequences), or `None` if one run fails.
     fn apply(&mut self, k: usize, poses: &[Pose]) -> Option<Vec<Pose>> {
-        let mut out = Vec::with_capacity(poses.len());
-        for &q in poses {
-            let key = (k, [q.x.to_bits(), q.y.to_bits(), q.theta.to_bits()]);
-            let r = match self.memo.get(&key) {
-                Some(r) => *r,
-                None => {
-                    let r = self.tracker.rest(k, q).map(|run| run.pose);
-                    self.memo.insert(key, r);
-                    r
-                }
-            };
-            out.push(r?);
-        }
-        Some(out)
+        self.tracker.rests(k, poses).map(|r| r.iter().map(|o| o.pose).collect())
     }
 
     /// One BFS level: the children of `level`, and the sequences among them that succeed.
     fn expand(&mut self, level: &[Node], tol: f64, bar: &ProgressBar) -> (Vec<Node>, Vec<Node>) {
-        let (nm, period) = (self.tracker.plate.modes.len(), self.tracker.period);
+        let (nm, period) = (self.tracker.sim.plate.modes.len(), self.tracker.sim.period);
         let (mut next, mut found) = (Vec::new(), Vec::new());
         for node in level {
-            for k in 0..nm {
+            // A mode applied twice in a row leaves every part where it rested.
+            let modes: Vec<usize> = (0..nm).filter(|&k| node.seq.last() != Some(&k)).collect();
+            // Every run this node's children need, at once (in parallel).
+            let jobs: Vec<(usize, Pose)> =
+                modes.iter().flat_map(|&k| node.poses.iter().map(move |&q| (k, q))).collect();
+            self.tracker.outcomes(&jobs);
+            bar.inc((nm - modes.len()) as u64);
+            for k in modes {
                 bar.inc(1);
-                // A mode applied twice in a row leaves every part where it rested.
-                if node.seq.last() == Some(&k) {
-                    continue;
-                }
                 self.tally.tried += 1;
                 let Some(rests) = self.apply(k, &node.poses) else {
                     self.tally.dead += 1;
@@ -365,13 +461,12 @@ pub fn plan(
 ) -> Result<Synthesis, PlanFailure> {
     let s = opt.feed_search;
     let period = plan_period(part, plate);
-    // 160 body samples, as `plan_with`'s settle times: `chladni simulate` (400) checks the
-    // plan independently.
+    // 160 body samples, as `plan_with`'s settle times (grid nodes integrate along the outline
+    // and do not use them).
     let tracker = Tracker::new(Body::with_samples(part, 160), plate, period);
-    let starts = tracked_starts(region, &tracker.body, plate, &s);
-    let mut search =
-        Search { tracker, memo: HashMap::new(), seen: HashSet::new(), tally: Tally::default() };
-    let verify = interleaved_starts(region, &search.tracker.body, plate, &s);
+    let starts = tracked_starts(region, &tracker.sim.body, plate, &s);
+    let verify = interleaved_starts(region, &tracker.sim.body, plate, &s);
+    let mut search = Search { tracker, seen: HashSet::new(), tally: Tally::default() };
     let mut level = vec![Node { seq: Vec::new(), poses: starts.clone() }];
     let mut rejected = Vec::new();
     for depth in 1..=s.depth {
@@ -379,17 +474,31 @@ pub fn plan(
         bar.set_position(0);
         bar.set_message(format!("feed plan: {depth}-step sequences"));
         let (next, found) = search.expand(&level, s.tol_deg, bar);
-        let mut best: Option<Synthesis> = None;
-        for cand in found.iter().take(s.candidates) {
-            match confirm(&search.tracker, &cand.seq, (region, &starts, &verify), opt) {
-                Ok(syn) => {
-                    if best.as_ref().is_none_or(|b| total_ms(&syn) < total_ms(b)) {
-                        best = Some(syn);
-                    }
-                }
-                Err(why) => rejected.push(why),
+        let t = &mut search.tracker;
+        // Durations first (every start tracked), then the check from the interleaved starts
+        // in order of total duration: the first confirmed is the fastest, and slower ones
+        // need no check. Rejections are listed in the order the search found them.
+        let mut why: Vec<(usize, String)> = Vec::new();
+        let mut drafts: Vec<(usize, Draft)> = Vec::new();
+        for (i, cand) in found.iter().take(s.candidates).enumerate() {
+            match track(t, &cand.seq, &starts, opt) {
+                Ok(d) => drafts.push((i, d)),
+                Err(e) => why.push((i, e)),
             }
         }
+        drafts.sort_by_key(|(i, d)| (d.total_ms(), *i));
+        let mut best = None;
+        for (i, d) in drafts {
+            match check(t, d, (region, &starts, &verify), opt) {
+                Ok(syn) => {
+                    best = Some(syn);
+                    break;
+                }
+                Err(e) => why.push((i, e)),
+            }
+        }
+        why.sort_by_key(|w| w.0);
+        rejected.extend(why.into_iter().map(|w| w.1));
         if let Some(mut syn) = best {
             if let Some(f) = syn.feed.as_mut() {
                 f.rejected = rejected.len();
@@ -402,10 +511,6 @@ pub fn plan(
         }
     }
     Err(PlanFailure::NoPlan(explain(&search.tally, &rejected, s.depth, period)))
-}
-
-fn total_ms(syn: &Synthesis) -> u64 {
-    syn.steps.iter().map(|s| s.duration_ms as u64).sum()
 }
 
 fn explain(t: &Tally, rejected: &[String], depth: usize, period: f64) -> String {
@@ -425,14 +530,33 @@ fn explain(t: &Tally, rejected: &[String], depth: usize, period: f64) -> String 
     msg
 }
 
-/// Confirms a mode sequence from scratch (see the module documentation) and builds its plan.
-fn confirm(
-    t: &Tracker,
+/// A candidate sequence with every start tracked: its steps (durations from the settle
+/// times) and where the tracked starts end.
+struct Draft {
+    modes: String,
+    steps: Vec<PlannedStep>,
+    poses: Vec<Pose>,
+    /// Circular mean orientation of the ends and their largest distance from it (deg).
+    theta: f64,
+    dev: f64,
+}
+
+impl Draft {
+    fn total_ms(&self) -> u64 {
+        self.steps.iter().map(|s| s.duration_ms as u64).sum()
+    }
+}
+
+/// Tracks every start through a mode sequence without clustering (see the module
+/// documentation): the durations, and the spread of the ends.
+fn track(
+    t: &mut Tracker,
     seq: &[usize],
-    (region, starts, verify): (&FeedRegion, &[Pose], &[Pose]),
+    starts: &[Pose],
     opt: &PlanOptions,
-) -> Result<Synthesis, String> {
+) -> Result<Draft, String> {
     let modes = seq.iter().map(|k| (k + 1).to_string()).collect::<Vec<_>>().join(", ");
+    let period = t.sim.period;
     let mut poses = starts.to_vec();
     let mut steps = Vec::with_capacity(seq.len());
     for (i, &k) in seq.iter().enumerate() {
@@ -440,38 +564,52 @@ fn confirm(
             .rests(k, &poses)
             .ok_or_else(|| format!("modes {modes}: step {} leaves a part off any node", i + 1))?;
         let (settle_s, lingering) = slowest_settled(runs.iter().map(|r| r.settle_s).collect());
-        let before = if i == 0 { Vec::new() } else { orientations(&poses, t.period) };
+        let before = if i == 0 { Vec::new() } else { orientations(&poses, period) };
         poses = runs.iter().map(|r| r.pose).collect();
         steps.push(PlannedStep {
             mode: k,
             before,
-            after: orientations(&poses, t.period),
-            duration_ms: step_duration_ms(settle_s, opt.safety, t.plate.modes[k].ramp_ms),
+            after: orientations(&poses, period),
+            duration_ms: step_duration_ms(settle_s, opt.safety, t.sim.plate.modes[k].ramp_ms),
             settle: Settle { settle_s, lingering, points: starts.len(), ends_on_edge: Vec::new() },
         });
     }
-    let (theta, dev) = spread(&poses, t.period);
+    let (theta, dev) = spread(&poses, period);
     if dev > opt.feed_search.tol_deg {
         return Err(format!("modes {modes}: tracked orientations spread ±{dev:.2}°"));
     }
+    Ok(Draft { modes, steps, poses, theta, dev })
+}
+
+/// Runs a tracked sequence with its fixed durations from the interleaved starts (and the
+/// tracked ones again when some lingered) and builds its plan if every end lies within the
+/// margin of the predicted orientation.
+fn check(
+    t: &mut Tracker,
+    d: Draft,
+    (region, starts, verify): (&FeedRegion, &[Pose], &[Pose]),
+    opt: &PlanOptions,
+) -> Result<Synthesis, String> {
     // Tracked starts settled within their step durations unless some lingered (left out of
     // the durations); only then can they end elsewhere when run with the fixed durations.
-    let lingered = steps.iter().any(|s| s.settle.lingering > 0);
+    let lingered = d.steps.iter().any(|s| s.settle.lingering > 0);
     let again = if lingered { starts } else { &[] };
-    let worst = checked_error(t, &steps, again.iter().chain(verify), theta).max(dev);
+    let runs: Vec<Pose> = again.iter().chain(verify).copied().collect();
     let bound = opt.margin_deg.max(opt.feed_search.tol_deg);
+    let worst = checked_error(t, &d.steps, &runs, d.theta, bound).max(d.dev);
     if worst > bound {
+        let modes = &d.modes;
         return Err(format!("modes {modes}: a start ends {worst:.2}° off (bound {bound}°)"));
     }
     Ok(Synthesis {
-        final_position_mm: common_position(&poses),
-        steps,
-        final_orientation_deg: theta,
-        period_deg: t.period,
+        final_position_mm: common_position(&d.poses),
+        steps: d.steps,
+        final_orientation_deg: d.theta,
+        period_deg: t.sim.period,
         feed: Some(FeedCheck {
             region: *region,
             starts: starts.len(),
-            checked: again.len() + verify.len(),
+            checked: runs.len(),
             worst_error_deg: worst,
             rejected: 0,
         }),
@@ -480,22 +618,30 @@ fn confirm(
 }
 
 /// The largest final orientation error (deg, mod the period) of the plan run as the simulator
-/// runs it (fixed step durations) from `starts`.
-fn checked_error<'p>(
-    t: &Tracker,
+/// runs it (fixed step durations, [`simulate_plan`]) from `starts`. Starts go in batches of
+/// 64 (each batch in parallel); after a batch with an error above `bound` the rest are
+/// skipped, so a rejected plan costs less (the result then exceeds `bound` but need not be
+/// the largest).
+fn checked_error(
+    t: &mut Tracker,
     steps: &[PlannedStep],
-    starts: impl Iterator<Item = &'p Pose>,
+    starts: &[Pose],
     theta: f64,
+    bound: f64,
 ) -> f64 {
-    let sim_steps: Vec<SimStep> =
-        steps.iter().map(|s| SimStep::new(s.mode, s.duration_ms, 1.0)).collect();
-    starts
-        .map(|&q| {
-            let (ends, _, _) = simulate_plan(&t.body, t.plate, &t.fields, &sim_steps, q);
-            let end = ends.last().copied().unwrap_or(q);
-            cdist(end.theta.to_degrees(), theta, t.period)
-        })
-        .fold(0.0, f64::max)
+    let mut worst = 0.0f64;
+    for batch in starts.chunks(64) {
+        let mut poses = batch.to_vec();
+        for s in steps {
+            poses = t.after(s.mode, s.duration_ms as f64 / 1000.0, &poses);
+        }
+        let err = poses.iter().map(|q| cdist(q.theta.to_degrees(), theta, t.sim.period));
+        worst = err.fold(worst, f64::max);
+        if worst > bound {
+            break;
+        }
+    }
+    worst
 }
 
 /// The mean centroid when every final pose lies within 2 mm of it (the nodes fix the

@@ -33,6 +33,8 @@
 //! plates with several curved node lines the rest depends on the start position, which the
 //! orientation-set search can only treat as ambiguity.
 
+use rayon::prelude::*;
+
 use chladni_shared::analysis::field::Field;
 use chladni_shared::analysis::fx::Fx;
 use chladni_shared::analysis::geometry::Pt;
@@ -359,8 +361,9 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
     let on_edge = |q: Pose| on_plate_edge(body, plate, q);
     let mut dead_starts = 0;
     for start in map_starts(body, mode, plate) {
+        // In parallel, collected in order (the map does not depend on the thread count).
         let runs: Vec<sim::Run> = thetas
-            .iter()
+            .par_iter()
             .map(|&th| {
                 sim::run(body, &field, p, Pose { x: start[0], y: start[1], theta: th.to_radians() })
             })
@@ -830,7 +833,7 @@ pub fn settle_time(body: &Body, mode: &Mode, plate: &PlateModel, orientations: &
     let mut ends_on_edge = Vec::new();
     for &pt in &points {
         let runs: Vec<sim::Run> = orientations
-            .iter()
+            .par_iter()
             .map(|&th| {
                 sim::run(body, &field, p, Pose { x: pt[0], y: pt[1], theta: th.to_radians() })
             })
