@@ -472,17 +472,24 @@ impl FieldModel {
                 Wrench { fx, fy, m }
             }
             FieldModel::Hyperbola { .. } | FieldModel::Lines { .. } => {
-                let mut w = Wrench::default();
-                for &(q, wt) in &body.samples {
-                    let r = [c * q[0] - s * q[1], s * q[0] + c * q[1]];
-                    let f = self.at([pose.x + r[0], pose.y + r[1]]);
-                    w.fx += wt * f[0];
-                    w.fy += wt * f[1];
-                    w.m += wt * (r[0] * f[1] - r[1] * f[0]);
-                }
-                w
+                self.sampled_wrench(body, pose)
             }
         }
+    }
+
+    /// Force and moment by the midpoint rule over the body's interior samples (the rule for
+    /// hyperbola and several-line nodes; the reference the exact rules are tested against).
+    pub fn sampled_wrench(&self, body: &Body, pose: Pose) -> Wrench {
+        let (s, c) = pose.theta.sin_cos();
+        let mut w = Wrench::default();
+        for &(q, wt) in &body.samples {
+            let r = [c * q[0] - s * q[1], s * q[0] + c * q[1]];
+            let f = self.at([pose.x + r[0], pose.y + r[1]]);
+            w.fx += wt * f[0];
+            w.fy += wt * f[1];
+            w.m += wt * (r[0] * f[1] - r[1] * f[0]);
+        }
+        w
     }
 
     /// Largest gain.
@@ -757,15 +764,7 @@ mod tests {
             let f = FieldModel::new(&m, &plate(&m));
             let pose = Pose { x: 150.0, y: 100.0, theta: 0.4 };
             let exact = f.wrench(&body, pose);
-            let mut num = Wrench::default();
-            let (s, c) = pose.theta.sin_cos();
-            for &(q, wt) in &body.samples {
-                let r = [c * q[0] - s * q[1], s * q[0] + c * q[1]];
-                let ff = f.at([pose.x + r[0], pose.y + r[1]]);
-                num.fx += wt * ff[0];
-                num.fy += wt * ff[1];
-                num.m += wt * (r[0] * ff[1] - r[1] * ff[0]);
-            }
+            let num = f.sampled_wrench(&body, pose);
             let scale = body.area * (1.0 + body.radius / 10.0);
             assert!((exact.fx - num.fx).abs() < 0.03 * scale, "{law} {exact:?} {num:?}");
             assert!((exact.fy - num.fy).abs() < 0.03 * scale, "{law} {exact:?} {num:?}");
@@ -774,20 +773,6 @@ mod tests {
                 "{law} {exact:?} {num:?}"
             );
         }
-    }
-
-    /// The old area integral (midpoint rule over the body's interior samples) of `at`.
-    fn sampled_wrench(f: &FieldModel, body: &Body, pose: Pose) -> Wrench {
-        let mut num = Wrench::default();
-        let (s, c) = pose.theta.sin_cos();
-        for &(q, wt) in &body.samples {
-            let r = [c * q[0] - s * q[1], s * q[0] + c * q[1]];
-            let ff = f.at([pose.x + r[0], pose.y + r[1]]);
-            num.fx += wt * ff[0];
-            num.fy += wt * ff[1];
-            num.m += wt * (r[0] * ff[1] - r[1] * ff[0]);
-        }
-        num
     }
 
     #[test]
@@ -824,8 +809,8 @@ mod tests {
                     y: 40.0 + (k as f64 * 0.414_214 % 1.0) * 120.0,
                     theta: k as f64 * 0.7,
                 };
-                let (exact, num) = (f.wrench(&body, pose), sampled_wrench(&f, &fine, pose));
-                let old = sampled_wrench(&f, &body, pose);
+                let (exact, num) = (f.wrench(&body, pose), f.sampled_wrench(&fine, pose));
+                let old = f.sampled_wrench(&body, pose);
                 worst[0] =
                     worst[0].max((exact.fx - num.fx).abs().max((exact.fy - num.fy).abs()) / scale);
                 worst[1] = worst[1].max((exact.m - num.m).abs() / scale / fine.radius);
