@@ -43,8 +43,24 @@ fn freq_range(samples: &[SweepSample]) -> Range<f64> {
     if lo.is_finite() && hi > lo { lo..hi } else { 1.0..10.0 }
 }
 
-/// A frequency tick: whole hertz (a sweep spans tens to thousands of hertz; plotters' log
-/// axis would otherwise label only powers of ten, i.e. nothing inside one decade).
+/// Frequency ticks: 1, 1.5, 2, 3, 5, 7 × 10ⁿ inside `range` (plotters' log axis labels only
+/// powers of ten, i.e. nothing inside the decade or so a sweep spans).
+fn ticks(range: &Range<f64>) -> Vec<f64> {
+    let mut out = Vec::new();
+    let mut decade = 10f64.powf(range.start.max(1e-3).log10().floor());
+    while decade <= range.end {
+        for m in [1.0, 1.5, 2.0, 3.0, 5.0, 7.0] {
+            let f = m * decade;
+            if range.contains(&f) {
+                out.push(f);
+            }
+        }
+        decade *= 10.0;
+    }
+    out
+}
+
+/// A frequency tick's label: whole hertz (tenths below 10 Hz).
 fn hz_label(f: &f64) -> String {
     if *f >= 10.0 { format!("{f:.0}") } else { format!("{f:.1}") }
 }
@@ -77,12 +93,11 @@ fn draw_magnitude(
         .margin(10)
         .x_label_area_size(30)
         .y_label_area_size(60)
-        .build_cartesian_2d(range.log_scale(), 0.0..top)
+        .build_cartesian_2d(range.clone().log_scale().with_key_points(ticks(&range)), 0.0..top)
         .map_err(text)?;
     c.configure_mesh()
         .x_desc("frequency (Hz)")
         .y_desc("acceleration (m/s²)")
-        .x_labels(12)
         .x_label_formatter(&hz_label)
         .label_style(("sans-serif", 12))
         .draw()
@@ -114,12 +129,11 @@ fn draw_phase(
         .margin(10)
         .x_label_area_size(30)
         .y_label_area_size(60)
-        .build_cartesian_2d(range.log_scale(), -180.0..180.0)
+        .build_cartesian_2d(range.clone().log_scale().with_key_points(ticks(&range)), -180.0..180.0)
         .map_err(text)?;
     c.configure_mesh()
         .x_desc("frequency (Hz)")
         .y_desc("phase (°)")
-        .x_labels(12)
         .x_label_formatter(&hz_label)
         .label_style(("sans-serif", 12))
         .draw()
