@@ -480,7 +480,8 @@ impl Sweep {
     }
 
     /// Frequency of point `i`, mHz: geometric spacing (equal steps on the Bode plot's log
-    /// axis), computed in f32 and rounded; the first and last are exact.
+    /// axis), computed in f32 with libm's `powf` (the same bits on the host and the controller)
+    /// and rounded; the first and last are exact.
     pub fn freq_mhz(&self, i: u16) -> u32 {
         if i == 0 {
             return self.from_mhz;
@@ -490,37 +491,8 @@ impl Sweep {
         }
         let ratio = self.to_mhz as f32 / self.from_mhz as f32;
         let t = i as f32 / (self.points - 1) as f32;
-        (self.from_mhz as f32 * pow_f32(ratio, t) + 0.5) as u32
+        (self.from_mhz as f32 * libm::powf(ratio, t) + 0.5) as u32
     }
-}
-
-/// `base^t` for `base` ≥ 1 and 0 ≤ `t` ≤ 1, to f32 precision, from binary digits of `t`
-/// (base^(1/2), base^(1/4), … by square roots), so no libm is needed on the controller.
-fn pow_f32(base: f32, t: f32) -> f32 {
-    let mut result = 1.0f32;
-    let mut root = base;
-    let mut frac = t;
-    for _ in 0..24 {
-        root = sqrt_f32(root);
-        frac *= 2.0;
-        if frac >= 1.0 {
-            result *= root;
-            frac -= 1.0;
-        }
-    }
-    result
-}
-
-/// Square root by Newton's method (a handful of iterations from a bit-level first guess).
-fn sqrt_f32(x: f32) -> f32 {
-    if x <= 0.0 {
-        return 0.0;
-    }
-    let mut y = f32::from_bits((x.to_bits() >> 1) + 0x1fc0_0000);
-    for _ in 0..4 {
-        y = 0.5 * (y + x / y);
-    }
-    y
 }
 
 impl core::fmt::Display for Refusal {
