@@ -10,11 +10,13 @@
 //!   plans by tracking simulated poses, [`planner::feed`]).
 //! - [`plot`]: figures of analyses, plans, traces and plate modes.
 //! - [`controller`]: the link client, the QEMU emulator, firmware builds.
+//! - [`cell`]: the controller served to a cell: one link owner for Modbus TCP and HTTP.
 //! - [`output`]: output files written atomically, never over one of the command's inputs.
 //! - [`rng`]: the one seeded pseudo-random generator.
 #![forbid(unsafe_code)]
 
 pub mod analysis;
+pub mod cell;
 pub mod controller;
 pub mod model;
 pub mod motion;

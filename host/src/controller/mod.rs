@@ -6,5 +6,6 @@ pub mod client;
 pub mod emulator;
 pub mod firmware;
 pub mod flash;
+pub mod json;
 pub mod proxy;
 pub mod sweep;

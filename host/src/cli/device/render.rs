@@ -5,10 +5,11 @@ use std::process::ExitCode;
 
 use chladni_shared::icd::link::{DeviceInfo, RunNumber, StatusReport, Telemetry};
 use chladni_shared::icd::plan::Level;
-use chladni_shared::icd::sense::Fault;
 use chladni_shared::icd::store::{DeviceConfig, PlanSummary};
-use chladni_shared::icd::units::{MilliDeg, MilliHz, MmPerS2, Q15};
+use chladni_shared::icd::units::{MilliHz, MmPerS2, Q15};
 use serde::Serialize;
+
+pub use chladni::controller::json::{FaultJson, PlanJson, PlansJson, StatusJson, TelemetryJson};
 
 use super::values::{CONFIG_KEYS, ConfigKey, ConfigValue};
 
@@ -18,140 +19,9 @@ pub fn print_json(value: &impl Serialize) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The `status --json` object: the keys of protocol v1's status; `fault`, `plan`,
-/// `remaining_ms`, `run` (v3); the sensing and control keys `accel_mps2`, `phase_deg`,
-/// `effort`, `target_accel_mps2`, `warning`, `reset_cause` (v4; `fault` became an object).
-#[derive(Debug, Serialize)]
-pub struct StatusJson {
-    /// Measured acceleration amplitude, m/s² (null without a measurement).
-    accel_mps2: Option<f64>,
-    amplitude: f64,
-    /// The drive output (the control effort in closed loop), fraction of full scale.
-    effort: f64,
-    elapsed_ms: f64,
-    fault: Option<FaultJson>,
-    freq_hz: f64,
-    /// Measured phase against the drive, degrees (null without a measurement).
-    phase_deg: Option<f64>,
-    plan: Option<String>,
-    remaining_ms: f64,
-    reset_cause: &'static str,
-    run: u32,
-    state: &'static str,
-    step: Option<u16>,
-    /// The closed-loop target as ramped so far, m/s² (null in open loop or idle).
-    target_accel_mps2: Option<f64>,
-    underruns: u32,
-    warning: bool,
-}
-
-/// A latched fault: `{"cause", "value", "unit", "at_s"}`.
-#[derive(Debug, Serialize)]
-pub struct FaultJson {
-    at_s: f64,
-    cause: &'static str,
-    unit: &'static str,
-    value: i32,
-}
-
-impl FaultJson {
-    fn of(f: &Fault, sample_rate: u32) -> Self {
-        FaultJson {
-            at_s: f.at_sample as f64 / f64::from(sample_rate.max(1)),
-            cause: f.cause.name(),
-            unit: f.cause.unit(),
-            value: f.value,
-        }
-    }
-
-    /// For people: cause, value with its unit, time, and the fix.
-    fn text(&self) -> String {
-        let value = if self.unit.is_empty() {
-            String::new()
-        } else {
-            format!(" {} {}", self.value, self.unit)
-        };
-        format!(
-            "{}{value} at {:.3} s (`chladni device clear-fault` clears it)",
-            self.cause, self.at_s
-        )
-    }
-}
-
 /// The latched fault of `s` for people (cause, value and unit, time, the fix), or "-".
 pub fn fault_text(s: &StatusReport) -> String {
     s.fault.map_or("-".into(), |f| FaultJson::of(&f, s.sample_rate).text())
-}
-
-impl From<&StatusReport> for StatusJson {
-    fn from(s: &StatusReport) -> Self {
-        StatusJson {
-            accel_mps2: s.measured.map(|m| MmPerS2(m.accel_mmps2).to_mps2()),
-            amplitude: Q15(s.amplitude_q15).to_fraction(),
-            effort: Q15(s.amplitude_q15).to_fraction(),
-            elapsed_ms: s.elapsed_ms(),
-            fault: s.fault.map(|f| FaultJson::of(&f, s.sample_rate)),
-            freq_hz: MilliHz(s.freq_mhz).to_hz(),
-            phase_deg: s.measured.map(|m| MilliDeg(m.phase_mdeg).to_deg()),
-            plan: s.plan.as_ref().map(|p| p.to_string()),
-            remaining_ms: s.remaining_ms(),
-            reset_cause: s.reset_cause.name(),
-            run: s.run.0,
-            state: s.state.name(),
-            step: s.step,
-            target_accel_mps2: s.level.and_then(Level::accel_mmps2).map(|a| MmPerS2(a).to_mps2()),
-            underruns: s.underruns,
-            warning: s.warning,
-        }
-    }
-}
-
-/// One line of `monitor --json`: the sample's number, how many are still to come, and the
-/// status keys of `status --json`.
-#[derive(Debug, Serialize)]
-pub struct TelemetryJson {
-    left: u32,
-    seq: u32,
-    #[serde(flatten)]
-    status: StatusJson,
-}
-
-impl From<&Telemetry> for TelemetryJson {
-    fn from(t: &Telemetry) -> Self {
-        TelemetryJson { left: t.left, seq: t.seq, status: StatusJson::from(&t.status) }
-    }
-}
-
-/// One stored plan, as `plans --json`, `upload --json` and `delete --json` print it.
-#[derive(Debug, Serialize)]
-pub struct PlanJson {
-    bytes: u32,
-    /// The plan CRC (CRC-32/ISO-HDLC), as a number; the tables print it as 8 hex digits.
-    crc: u32,
-    name: String,
-    slot: u8,
-    steps: u16,
-    total_ms: u64,
-}
-
-impl From<&PlanSummary> for PlanJson {
-    fn from(p: &PlanSummary) -> Self {
-        PlanJson {
-            bytes: p.bytes,
-            crc: p.crc,
-            name: p.name.to_string(),
-            slot: p.slot,
-            steps: p.steps,
-            total_ms: p.total_ms,
-        }
-    }
-}
-
-/// The `plans --json` object.
-#[derive(Debug, Serialize)]
-pub struct PlansJson {
-    free_bytes: u32,
-    plans: Vec<PlanJson>,
 }
 
 /// `info`.

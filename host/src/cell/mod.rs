@@ -1,0 +1,14 @@
+//! The feeder in a cell: one process owns the controller link and serves it to a PLC or robot
+//! controller and to people.
+//!
+//! - [`Cell`] (in [`owner`]) is the link's one owner: a thread that holds the
+//!   [`DeviceClient`](crate::controller::client::DeviceClient) session, runs the commands sent to
+//!   it one at a time, and polls the controller's status for everyone else. Front ends never
+//!   talk to the link themselves, so a PLC and a browser at once never interleave frames, and a
+//!   lost link shows as an error state, never as a stale "busy".
+//! - The front ends (`chladni serve`) turn their protocol into [`Cell`] calls and its
+//!   [`CellStatus`] into their registers or pages.
+
+pub mod owner;
+
+pub use owner::{Cell, CellError, CellState, CellStatus, POLL_PERIOD, RunStarted};
