@@ -16,6 +16,7 @@
 
 pub mod analysis;
 pub mod controller;
+pub mod demo;
 pub mod model;
 pub mod motion;
 pub mod output;

@@ -55,7 +55,8 @@ pub struct FaultJson {
 }
 
 impl FaultJson {
-    fn of(f: &Fault, sample_rate: u32) -> Self {
+    /// The fault `f`, its time from its sample at `sample_rate`.
+    pub fn of(f: &Fault, sample_rate: u32) -> Self {
         FaultJson {
             at_s: f.at_sample as f64 / f64::from(sample_rate.max(1)),
             cause: f.cause.name(),
@@ -65,7 +66,7 @@ impl FaultJson {
     }
 
     /// For people: cause, value with its unit, time, and the fix.
-    fn text(&self) -> String {
+    pub fn text(&self) -> String {
         let value = if self.unit.is_empty() {
             String::new()
         } else {
