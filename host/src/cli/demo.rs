@@ -92,11 +92,7 @@ impl DemoArgs {
     fn demo(&self, config: &DemoConfig) -> Result<ExitCode, DemoError> {
         let say = Say { json: self.json };
         demo::preflight(config)?;
-        say.line(format!(
-            "$ chladni demo: {} on {}",
-            config.part.display(),
-            config.plate.display()
-        ));
+        say.line(format!("planning    {} on {}", config.part.display(), config.plate.display()));
         let prepared = demo::prepare(config)?;
         show_prepared(say, &prepared, config);
         // From here on a controller may run: Ctrl-C stops the plan rather than the program.
@@ -323,18 +319,7 @@ fn show_summary(say: Say, s: &Summary) {
     if s.time_scale > 1 {
         say.line(format!("  time scale  1/{} (--fast)", s.time_scale));
     }
-    say.line(format!(
-        "  timing      steps ran {:.3} ms for {:.3} ms planned ({:+} samples); clock {} → {} at \
-         {} samples/s, then a {:.0} ms ramp to zero; wall {:.1} s",
-        r.executed_ms,
-        r.planned_ms,
-        r.difference_samples,
-        r.start_clock.map_or("-".to_string(), |c| c.to_string()),
-        r.end_clock.map_or("-".to_string(), |c| c.to_string()),
-        r.sample_rate,
-        r.final_ramp_samples as f64 * 1000.0 / f64::from(r.sample_rate.max(1)),
-        r.wall_s
-    ));
+    say.line(timing_line(r));
     say.line(format!(
         "  run         {} (run {} on {}, slot {}), {} step(s) seen, {} underrun(s)",
         r.outcome, r.run, s.controller.port, s.stored.slot, r.steps_seen, r.underruns
@@ -343,6 +328,34 @@ fn show_summary(say: Say, s: &Summary) {
         "  fault       {}",
         r.fault.map_or("none".to_string(), |f| FaultJson::of(&f, r.sample_rate).text())
     ));
+}
+
+/// The run's timing by the controller's sample clock.
+fn timing_line(r: &demo::RunReport) -> String {
+    let clock = |c: Option<u64>| c.map_or("-".to_string(), |c| c.to_string());
+    let clocks = format!(
+        "clock {} → {} at {} samples/s",
+        clock(r.start_clock),
+        clock(r.end_clock),
+        r.sample_rate
+    );
+    if r.outcome != "done" {
+        return format!(
+            "  timing      ran {:.3} ms of the {:.3} ms planned before it ended ({clocks}); wall \
+             {:.1} s",
+            r.executed_ms, r.planned_ms, r.wall_s
+        );
+    }
+    format!(
+        "  timing      steps ran {:.3} ms for {:.3} ms planned ({:+} samples: {}); {clocks}, \
+         then a {:.0} ms ramp to zero; wall {:.1} s",
+        r.executed_ms,
+        r.planned_ms,
+        r.difference_samples,
+        if r.difference_samples == 0 { "sample-exact" } else { "NOT sample-exact" },
+        r.final_ramp_samples as f64 * 1000.0 / f64::from(r.sample_rate.max(1)),
+        r.wall_s
+    )
 }
 
 /// 0 when the plan ran to its end without a fault; 130 after Ctrl-C; else 1, with the fix.
