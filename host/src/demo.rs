@@ -227,7 +227,7 @@ pub struct Files {
     pub traces: PathBuf,
     /// The simulated trials step by step.
     pub traces_plan: PathBuf,
-    /// The QEMU controller's flash (plans survive a restart) and its log (emulator only).
+    /// The QEMU controller's flash bank: the stored plan survives a restart (emulator only).
     pub flash: PathBuf,
     /// The firmware's decoded log (emulator only).
     pub firmware_log: PathBuf,
@@ -247,7 +247,7 @@ impl Files {
         }
     }
 
-    /// Every output, with the option that decides where it goes.
+    /// Every output file (each checked against the inputs before any work).
     fn all(&self) -> [&Path; 7] {
         [
             &self.plan,
