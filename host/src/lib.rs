@@ -18,6 +18,7 @@
 pub mod analysis;
 pub mod cell;
 pub mod controller;
+pub mod demo;
 pub mod model;
 pub mod motion;
 pub mod output;

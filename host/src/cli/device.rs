@@ -6,10 +6,10 @@
 //! the telemetry monitor, Ctrl-C ([`watch`]), and the frequency sweep ([`sweep`]).
 
 mod ports;
-mod render;
+pub(crate) mod render;
 mod sweep;
 mod values;
-mod watch;
+pub(crate) mod watch;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;

@@ -9,6 +9,7 @@ use chladni::plot::{PlotError, check_extension};
 use clap::{Parser, Subcommand};
 
 mod analyze;
+mod demo;
 mod device;
 mod emulator;
 mod flash;
@@ -75,6 +76,9 @@ pub struct Cli {
 enum Command {
     /// Rest orientations of a part at a straight node: turn and alignment functions.
     Analyze(analyze::AnalyzeArgs),
+    /// The feeder's whole job: plan a part, simulate it, run it on the controller (QEMU, or a
+    /// real one with --port) while watching, and sum up.
+    Demo(demo::DemoArgs),
     /// Talk to a controller (board or emulator).
     #[command(subcommand)]
     Device(device::DeviceCommand),
@@ -99,6 +103,7 @@ impl Cli {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
         match &self.command {
             Command::Analyze(args) => args.run(),
+            Command::Demo(args) => args.run(),
             Command::Device(cmd) => cmd.run(),
             Command::Emulator(args) => args.run(),
             Command::Flash(args) => args.run(),

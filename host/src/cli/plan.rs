@@ -7,12 +7,11 @@ use chladni::model::part::Part;
 use chladni::model::plan_file::PlanFile;
 use chladni::model::plate::PlateModel;
 use chladni::motion::montecarlo::{self, Report, Setup, Stats, Trials};
-use chladni::motion::sim::{self, Body, FieldModel, Pose, SimStep, simulate_plan};
+use chladni::motion::sim::{self, Body, FieldModel, Pose};
 use chladni::output::write_atomic;
 use chladni::planner::feed::{self, FeedRegion};
 use chladni::planner::{self, MapKind, Minimize, PlanFailure, PlanOptions, Synthesis};
-use chladni::plot::plan::{self as plan_plot, TracesFigure};
-use chladni::rng::Rng;
+use chladni::plot::plan as plan_plot;
 use chladni_shared::icd::plan::DeviceLimits;
 use clap::{Args, ValueEnum};
 
@@ -199,7 +198,8 @@ impl PlanArgs {
             }
         }
         if let Some(path) = &self.plot {
-            plot_plan(path, &parts[0], &plate, &syn, region.as_ref())?;
+            plan_plot::synthesis_figure(path, &parts[0], &plate, &syn, region.as_ref())
+                .map_err(plot_error)?;
             if !self.json {
                 println!("plot       {}", path.display());
             }
@@ -372,35 +372,6 @@ fn print_reach(reachable: &[f64], max_steps: usize) {
     println!("reachable  {{{list}}} in at most {max_steps} steps");
 }
 
-/// The step-by-step figure for three example starts (seed 1).
-fn plot_plan(
-    path: &Path,
-    part: &Part,
-    plate: &PlateModel,
-    syn: &Synthesis,
-    region: Option<&FeedRegion>,
-) -> anyhow::Result<()> {
-    let body = Body::new(part);
-    let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
-    let steps: Vec<SimStep> = syn.sim_steps();
-    let mut rng = Rng::seeded(1);
-    let examples: Vec<Vec<Pose>> = (0..3)
-        .map(|_| {
-            let start = montecarlo::random_pose(&mut rng, &body, plate, region);
-            simulate_plan(&body, plate, &fields, &steps, start).0
-        })
-        .collect();
-    let modes: Vec<usize> = syn.steps.iter().map(|s| s.mode).collect();
-    let title = format!(
-        "{}: {}-step plan, final θ = {:.1}° (mod {}°)",
-        part.name,
-        modes.len(),
-        syn.final_orientation_deg,
-        syn.period_deg
-    );
-    plan_plot::plan_figure(path, &title, &body, plate, &modes, &examples).map_err(plot_error)
-}
-
 /// Monte Carlo simulation of a plan: success rate and final pose spread.
 #[derive(Debug, Args)]
 pub struct SimulateArgs {
@@ -435,11 +406,6 @@ pub struct SimulateArgs {
     feed: Option<Vec<f64>>,
 }
 
-/// The step-by-step figure beside `--plot F.png`: `F-plan.png`.
-fn plan_figure_path(plot: &Path) -> PathBuf {
-    PathBuf::from(format!("{}-plan.png", plot.with_extension("").display()))
-}
-
 /// One part's `chladni simulate --json` entry in a plan for several parts.
 #[derive(serde::Serialize)]
 struct PartReport<'a> {
@@ -455,7 +421,7 @@ impl SimulateArgs {
         inputs.extend([("plate", self.plate.as_path()), ("plan", self.plan.as_path())]);
         check_plot("--plot", &self.plot, &["png"], &inputs)?;
         if let Some(path) = &self.plot {
-            check_output("--plot", &plan_figure_path(path), &inputs)?;
+            check_output("--plot", &plan_plot::trials_plan_path(path), &inputs)?;
             if self.part.len() > 1 {
                 return Err(bad(format!("--plot draws one part; {} given", self.part.len())));
             }
@@ -499,7 +465,8 @@ impl SimulateArgs {
             reports.push(Report::new(&stats, view, self.trials, self.seed, self.tol_deg));
             if let Some(path) = &self.plot {
                 let target = view.final_orientation_deg.zip(view.period_deg);
-                let fig = plot_trials(path, part, &setup, &trials, target)?;
+                let fig = plan_plot::trials_figures(path, part, &setup, &trials, target)
+                    .map_err(plot_error)?;
                 if !self.json {
                     println!("plots      {} {}", path.display(), fig.display());
                 }
@@ -608,37 +575,4 @@ fn print_misses(misses: &[Pose]) {
         range(|q| q.x),
         range(|q| q.y)
     );
-}
-
-/// The traces figure at `path` and the step-by-step figure beside it; returns the latter's
-/// path.
-fn plot_trials(
-    path: &Path,
-    part: &Part,
-    setup: &Setup<'_>,
-    trials: &Trials,
-    target: Option<(f64, f64)>,
-) -> anyhow::Result<PathBuf> {
-    let modes: Vec<usize> = setup.steps.iter().map(|s| s.mode).collect();
-    let title = format!(
-        "{} on {}: simulated plan ({} trials shown)",
-        part.name,
-        setup.plate.name,
-        trials.traces.len()
-    );
-    let fig = TracesFigure {
-        title: &title,
-        body: setup.body,
-        plate: setup.plate,
-        modes: &modes,
-        traces: &trials.traces,
-        step_ends: &trials.step_ends,
-        target,
-    };
-    plan_plot::traces_figure(path, &fig).map_err(plot_error)?;
-    let fig = plan_figure_path(path);
-    let title = format!("{}: plan step by step", part.name);
-    plan_plot::plan_figure(&fig, &title, setup.body, setup.plate, &modes, &trials.examples)
-        .map_err(plot_error)?;
-    Ok(fig)
 }

@@ -3,15 +3,20 @@
 //! the part before the step in white and after it in dark), and motion traces like Figs. 8d
 //! and 9 (centroid paths with the part drawn along them, and θ(t)).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
 
 use super::{PlotError, text, write_figure};
 
+use crate::model::part::Part;
 use crate::model::plate::{Mode, Node, PlateModel};
-use crate::motion::sim::{Body, Pose};
+use crate::motion::montecarlo::{self, Setup, Trials};
+use crate::motion::sim::{Body, FieldModel, Pose, SimStep, simulate_plan};
+use crate::planner::Synthesis;
+use crate::planner::feed::FeedRegion;
 use crate::plate::contour;
+use crate::rng::Rng;
 
 fn err<E: std::fmt::Display>(e: E) -> String {
     text(e)
@@ -349,4 +354,73 @@ where
             .map_err(err)?;
     }
     Ok(())
+}
+
+/// The step-by-step figure of a synthesised plan (`chladni plan --plot`, `chladni demo`):
+/// three example starts drawn with seed 1 (from the feed region when given), run through the
+/// plan's steps.
+pub fn synthesis_figure(
+    path: &Path,
+    part: &Part,
+    plate: &PlateModel,
+    syn: &Synthesis,
+    region: Option<&FeedRegion>,
+) -> Result<(), PlotError> {
+    let body = Body::new(part);
+    let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
+    let steps: Vec<SimStep> = syn.sim_steps();
+    let mut rng = Rng::seeded(1);
+    let examples: Vec<Vec<Pose>> = (0..3)
+        .map(|_| {
+            let start = montecarlo::random_pose(&mut rng, &body, plate, region);
+            simulate_plan(&body, plate, &fields, &steps, start).0
+        })
+        .collect();
+    let modes: Vec<usize> = syn.steps.iter().map(|s| s.mode).collect();
+    let title = format!(
+        "{}: {}-step plan, final θ = {:.1}° (mod {}°)",
+        part.name,
+        modes.len(),
+        syn.final_orientation_deg,
+        syn.period_deg
+    );
+    plan_figure(path, &title, &body, plate, &modes, &examples)
+}
+
+/// The step-by-step figure written beside a traces figure `F.png`: `F-plan.png`.
+pub fn trials_plan_path(traces: &Path) -> PathBuf {
+    PathBuf::from(format!("{}-plan.png", traces.with_extension("").display()))
+}
+
+/// The figures of a Monte Carlo run (`chladni simulate --plot`, `chladni demo`): traces of the
+/// first trials at `path`, and their step-by-step figure at [`trials_plan_path`]; returns the
+/// latter's path. `target`: the predicted orientation and its period (deg).
+pub fn trials_figures(
+    path: &Path,
+    part: &Part,
+    setup: &Setup<'_>,
+    trials: &Trials,
+    target: Option<(f64, f64)>,
+) -> Result<PathBuf, PlotError> {
+    let modes: Vec<usize> = setup.steps.iter().map(|s| s.mode).collect();
+    let title = format!(
+        "{} on {}: simulated plan ({} trials shown)",
+        part.name,
+        setup.plate.name,
+        trials.traces.len()
+    );
+    let fig = TracesFigure {
+        title: &title,
+        body: setup.body,
+        plate: setup.plate,
+        modes: &modes,
+        traces: &trials.traces,
+        step_ends: &trials.step_ends,
+        target,
+    };
+    traces_figure(path, &fig)?;
+    let fig = trials_plan_path(path);
+    let title = format!("{}: plan step by step", part.name);
+    plan_figure(&fig, &title, setup.body, setup.plate, &modes, &trials.examples)?;
+    Ok(fig)
 }
