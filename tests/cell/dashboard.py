@@ -31,7 +31,7 @@ def browser():
         sys.exit(f"dashboard.py: {DRIVER} missing: install chromium-driver with scripts/install-deps.sh")
     options = webdriver.ChromeOptions()
     for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
-                "--window-size=1280,1000", "--hide-scrollbars"):
+                "--window-size=1280,920", "--hide-scrollbars"):
         options.add_argument(arg)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     return webdriver.Chrome(service=Service(DRIVER), options=options)
