@@ -17,6 +17,7 @@ import time
 try:
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
+    from selenium.common.exceptions import StaleElementReferenceException, TimeoutException
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 except ImportError as e:
@@ -39,9 +40,12 @@ def browser():
 
 def wait_for(driver, what, condition, timeout):
     """Waits until condition(driver) is true; exits naming `what` if it is not in time."""
+    # The page rebuilds the plans table when it rereads the plans: a row may go stale.
+    wait = WebDriverWait(driver, timeout, poll_frequency=0.05,
+                         ignored_exceptions=(StaleElementReferenceException,))
     try:
-        return WebDriverWait(driver, timeout, poll_frequency=0.05).until(condition)
-    except Exception:
+        return wait.until(condition)
+    except TimeoutException:
         state = driver.find_element(By.ID, "state").text
         message = driver.find_element(By.ID, "message").text
         driver.save_screenshot(os.path.join(SHOTS, "dashboard-failed.png"))
@@ -62,11 +66,12 @@ def main(url, plan, shots):
     seen = {}
     try:
         driver.get(url)
-        row = wait_for(driver, f"the plan '{plan}' in the list", lambda d: next(
-            (r for r in d.find_elements(By.CSS_SELECTOR, "#plans tr[data-slot]")
+        slot = wait_for(driver, f"the plan '{plan}' in the list", lambda d: next(
+            (r.get_attribute("data-slot") for r in d.find_elements(By.CSS_SELECTOR, "#plans tr[data-slot]")
              if plan in r.text), False), 10)
-        seen["row"] = row.text
         wait_for(driver, "the state idle (link up)", state_is("idle"), 10)
+        row = driver.find_element(By.CSS_SELECTOR, f'#plans tr[data-slot="{slot}"]')
+        seen["row"] = row.text
         row.find_element(By.CSS_SELECTOR, "button.run").click()
         started = time.monotonic()
         wait_for(driver, "the state busy after Run", state_is("busy"), 5)
