@@ -7,6 +7,7 @@
 #   - qemu-system-arm 10 from Debian bookworm-backports (the emulated B-L475E-IOT01A)
 #   - binutils-arm-none-eabi (arm-none-eabi-size/nm/objdump: size report, image checks)
 #   - defmt-print (decodes the QEMU firmware's defmt log)
+#   - chromium, chromium-driver and python3-selenium (the cell dashboard's browser test)
 #   - for fuzzing, the pinned nightly toolchain and cargo-fuzz (scripts/fuzz.sh install; the
 #     pins are in fuzz/toolchain.env)
 # With --board it also installs probe-rs-tools (the `probe-rs` command, for
@@ -45,6 +46,10 @@ if ! qemu-system-arm --version 2>/dev/null | grep -qE 'version (9|1[0-9])\.'; th
   need_apt+=(qemu-system-arm)
 fi
 command -v arm-none-eabi-size >/dev/null || need_apt+=(binutils-arm-none-eabi)
+# The dashboard's browser test (host/tests/cli_serve_http.rs drives tests/cell/dashboard.py).
+command -v chromium >/dev/null || need_apt+=(chromium)
+command -v chromedriver >/dev/null || need_apt+=(chromium-driver)
+/usr/bin/python3 -c 'import selenium' 2>/dev/null || need_apt+=(python3-selenium)
 
 if [ ${#need_apt[@]} -gt 0 ]; then
   if ! grep -rqs 'bookworm-backports' /etc/apt/sources.list /etc/apt/sources.list.d/; then

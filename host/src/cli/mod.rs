@@ -18,6 +18,7 @@ mod part;
 mod physics;
 mod plan;
 mod plate;
+mod serve;
 
 /// Bad input from the user: exit code 2.
 #[derive(Debug, thiserror::Error)]
@@ -96,6 +97,8 @@ enum Command {
     /// Physics models (particle on a vibrating string).
     #[command(subcommand)]
     Physics(physics::PhysicsCommand),
+    /// Serve the controller to the cell: a web dashboard and JSON API (--http).
+    Serve(serve::ServeArgs),
 }
 
 impl Cli {
@@ -111,6 +114,7 @@ impl Cli {
             Command::Physics(cmd) => cmd.run(),
             Command::Plan(args) => args.run(),
             Command::Simulate(args) => args.run(),
+            Command::Serve(args) => args.run(),
         }
     }
 }

@@ -1,0 +1,105 @@
+#!/usr/bin/python3
+"""The cell dashboard in a real browser (headless Chromium through Selenium), as an operator
+uses it: the stored plan is listed, its Run button starts it, the state goes busy then done,
+the acceleration plot gets points; screenshots on the way.
+
+Usage: dashboard.py URL PLAN_NAME SCREENSHOT_DIR
+Run by host/tests/cli_serve_http.rs against `chladni serve --http` on the QEMU controller.
+Prints one JSON line of what it saw; exits 1 naming the first thing that did not happen.
+Needs Debian's chromium, chromium-driver and python3-selenium (scripts/install-deps.sh).
+"""
+
+import json
+import os
+import sys
+import time
+
+try:
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+    from selenium.common.exceptions import StaleElementReferenceException, TimeoutException
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+except ImportError as e:
+    sys.exit(f"dashboard.py: {e}: install python3-selenium with scripts/install-deps.sh")
+
+DRIVER = "/usr/bin/chromedriver"
+
+
+def browser():
+    """Headless Chromium at a desktop size; root in a container needs --no-sandbox."""
+    if not os.path.exists(DRIVER):
+        sys.exit(f"dashboard.py: {DRIVER} missing: install chromium-driver with scripts/install-deps.sh")
+    options = webdriver.ChromeOptions()
+    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
+                "--window-size=1280,920", "--hide-scrollbars"):
+        options.add_argument(arg)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    return webdriver.Chrome(service=Service(DRIVER), options=options)
+
+
+def wait_for(driver, what, condition, timeout):
+    """Waits until condition(driver) is true; exits naming `what` if it is not in time."""
+    # The page rebuilds the plans table when it rereads the plans: a row may go stale.
+    wait = WebDriverWait(driver, timeout, poll_frequency=0.05,
+                         ignored_exceptions=(StaleElementReferenceException,))
+    try:
+        return wait.until(condition)
+    except TimeoutException:
+        state = driver.find_element(By.ID, "state").text
+        message = driver.find_element(By.ID, "message").text
+        driver.save_screenshot(os.path.join(SHOTS, "dashboard-failed.png"))
+        sys.exit(f"dashboard.py: {what} did not happen within {timeout} s "
+                 f"(state {state!r}, message {message!r}; screenshot dashboard-failed.png)")
+
+
+def state_is(value):
+    return lambda d: d.find_element(By.ID, "state").text.lower() == value
+
+
+def points(driver):
+    return int(driver.find_element(By.ID, "plot").get_attribute("data-points"))
+
+
+def main(url, plan, shots):
+    driver = browser()
+    seen = {}
+    try:
+        driver.get(url)
+        slot = wait_for(driver, f"the plan '{plan}' in the list", lambda d: next(
+            (r.get_attribute("data-slot") for r in d.find_elements(By.CSS_SELECTOR, "#plans tr[data-slot]")
+             if plan in r.text), False), 10)
+        wait_for(driver, "the state idle (link up)", state_is("idle"), 10)
+        row = driver.find_element(By.CSS_SELECTOR, f'#plans tr[data-slot="{slot}"]')
+        seen["row"] = row.text
+        row.find_element(By.CSS_SELECTOR, "button.run").click()
+        started = time.monotonic()
+        wait_for(driver, "the state busy after Run", state_is("busy"), 5)
+        seen["busy_after_s"] = round(time.monotonic() - started, 2)
+        seen["message"] = driver.find_element(By.ID, "message").text
+        # Well into the run: the figure for the docs, with the plot drawn and the bar moving.
+        wait_for(driver, "the second step", lambda d: d.find_element(By.ID, "step").text == "2 of 2", 15)
+        time.sleep(1.5)
+        seen["points_busy"] = points(driver)
+        seen["progress"] = driver.find_element(By.ID, "progress-text").text
+        driver.save_screenshot(os.path.join(shots, "dashboard.png"))
+        wait_for(driver, "the state done at the plan's end", state_is("done"), 20)
+        seen["done_after_s"] = round(time.monotonic() - started, 2)
+        seen["points_done"] = points(driver)
+        driver.save_screenshot(os.path.join(shots, "dashboard-done.png"))
+        seen["errors"] = [e["message"] for e in driver.get_log("browser") if e["level"] == "SEVERE"]
+    finally:
+        driver.quit()
+    print(json.dumps(seen), flush=True)
+    if seen["points_busy"] < 10:
+        sys.exit(f"dashboard.py: the plot has {seen['points_busy']} points during the run, expected ≥ 10")
+    if seen["errors"]:
+        sys.exit(f"dashboard.py: the page logged errors: {seen['errors']}")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 4:
+        sys.exit(__doc__)
+    SHOTS = sys.argv[3]
+    os.makedirs(SHOTS, exist_ok=True)
+    main(sys.argv[1], sys.argv[2], SHOTS)
