@@ -11,7 +11,9 @@
 //! simulator uses 4 points per piece ([`Bicubic::outline_wrench`], within 10⁻⁶ of it, tested).
 //! This replaced a midpoint rule over 160–400 interior cells, each needing φ and ∇φ, whose
 //! error was about 3·10⁻³ of the largest force: fewer, better-placed points, and smaller
-//! error (docs/plan.md, "Planning time").
+//! error (docs/plan.md, "Planning time"). A hyperbola's Ψ = k·G(ξ) is smooth on either side
+//! of its node but has a kink on it (sign law, unequal gains): [`kinked_outline_wrench`] cuts
+//! the edges there and integrates the pieces the same way.
 
 use crate::plate::solver::Grid;
 
@@ -202,6 +204,86 @@ impl Bicubic {
         }
         [fx, fy, m]
     }
+}
+
+/// Force (x, y) and moment of f = −∇Ψ with Ψ = `psi(ξ)`, ξ = `xi(p)` a continuous function
+/// of the plate point (a signed distance to a curved node) and Ψ smooth on either side of
+/// ξ = 0 (a kink there: the sign law, or different gains across the node), on `rings`
+/// (relative to the centroid) turned by (sin θ, cos θ) and moved to `origin`. Each edge is cut
+/// into pieces of at most `max_piece` mm, a piece whose ends lie on different sides of the
+/// node again where ξ = 0 (regula falsi), and each piece integrated with 4-point
+/// Gauss–Legendre: the hyperbola's outline rule (accuracy: test
+/// `hyperbola_outline_wrench_matches_the_area_integral` in `motion::sim`).
+pub fn kinked_outline_wrench(
+    rings: &[Vec<[f64; 2]>],
+    origin: [f64; 2],
+    (sin, cos): (f64, f64),
+    max_piece: f64,
+    xi: impl Fn([f64; 2]) -> f64,
+    psi: impl Fn(f64) -> f64,
+) -> [f64; 3] {
+    let (mut fx, mut fy, mut m) = (0.0, 0.0, 0.0);
+    let turn = |p: [f64; 2]| [cos * p[0] - sin * p[1], sin * p[0] + cos * p[1]];
+    for ring in rings {
+        let n = ring.len();
+        for e in 0..n {
+            let (ra, rb) = (turn(ring[e]), turn(ring[(e + 1) % n]));
+            let d = [rb[0] - ra[0], rb[1] - ra[1]];
+            let a = [origin[0] + ra[0], origin[1] + ra[1]];
+            let at = |s: f64| xi([a[0] + s * d[0], a[1] + s * d[1]]);
+            let (mut i0, mut i1) = (0.0, 0.0);
+            let mut piece = |s0: f64, s1: f64| {
+                let h = s1 - s0;
+                for (x, wt) in GL4 {
+                    let s = s0 + x * h;
+                    let v = wt * h * psi(at(s));
+                    i0 += v;
+                    i1 += v * s;
+                }
+            };
+            let parts = (d[0].hypot(d[1]) / max_piece).ceil().max(1.0);
+            let (mut s0, mut x0) = (0.0, at(0.0));
+            for q in 1..=parts as usize {
+                let s1 = q as f64 / parts;
+                let x1 = at(s1);
+                if (x0 < 0.0) != (x1 < 0.0) {
+                    let c = node_crossing(&at, (s0, x0), (s1, x1));
+                    piece(s0, c);
+                    piece(c, s1);
+                } else {
+                    piece(s0, s1);
+                }
+                (s0, x0) = (s1, x1);
+            }
+            fx -= i0 * d[1];
+            fy += i0 * d[0];
+            m += i0 * (ra[0] * d[0] + ra[1] * d[1]) + i1 * (d[0] * d[0] + d[1] * d[1]);
+        }
+    }
+    [fx, fy, m]
+}
+
+/// Where ξ(s) = 0 between two edge parameters with ξ of opposite signs (Illinois regula
+/// falsi, to 10⁻¹⁰ of the edge or |ξ| < 10⁻⁹ mm).
+fn node_crossing(
+    xi: &impl Fn(f64) -> f64,
+    (mut s0, mut x0): (f64, f64),
+    (mut s1, mut x1): (f64, f64),
+) -> f64 {
+    for _ in 0..50 {
+        let s = (s0 * x1 - s1 * x0) / (x1 - x0);
+        let x = xi(s);
+        if x.abs() < 1e-9 || (s1 - s0).abs() < 1e-10 {
+            return s;
+        }
+        if (x < 0.0) != (x1 < 0.0) {
+            (s0, x0) = (s1, x1);
+        } else {
+            x0 *= 0.5;
+        }
+        (s1, x1) = (s, x);
+    }
+    (s0 * x1 - s1 * x0) / (x1 - x0)
 }
 
 /// Where the segment a → b crosses the lines x = i·h[0] and y = j·h[1] (edge parameters in

@@ -811,8 +811,8 @@ fn start_points(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]> {
 pub struct Settle {
     /// The slowest start (s), lingering ones left out.
     pub settle_s: f64,
-    /// Starts slower than 10× the median: they linger near an unstable rest (metastable;
-    /// their time is unbounded in the model).
+    /// Starts set apart by a gap in the settle times ([`slowest_settled`]): they linger near
+    /// an unstable rest (metastable; their time is unbounded in the model).
     pub lingering: usize,
     /// Start points simulated.
     pub points: usize,
@@ -852,12 +852,23 @@ pub fn settle_time(body: &Body, mode: &Mode, plate: &PlateModel, orientations: &
     Settle { settle_s, lingering, points: points.len(), ends_on_edge }
 }
 
-/// The slowest of some settle times (s) and how many were left out as lingering (slower than
-/// 10× the median: near an unstable rest, where the model's time is unbounded).
+/// Ratio between consecutive sorted settle times, above the median, beyond which the slower
+/// starts count as lingering (see [`slowest_settled`]).
+pub const LINGER_GAP: f64 = 3.0;
+
+/// The slowest of some settle times (s) and how many were left out as lingering: those above
+/// the first gap of more than [`LINGER_GAP`]× between consecutive sorted times above the
+/// median. A part near an unstable rest leaves it after a time that grows without bound as
+/// it starts closer (metastable), so such starts stand apart from the rest; parts creeping
+/// along a node settle over a continuum of times with no such gap and all count. A fixed
+/// threshold (formerly 10× the median) fell inside such a continuum, and integration error
+/// then decided which creeping runs counted; a gap of 3× is far wider than that error.
 pub(crate) fn slowest_settled(mut times: Vec<f64>) -> (f64, usize) {
     times.sort_by(f64::total_cmp);
-    let median = times.get(times.len() / 2).copied().unwrap_or(0.0);
-    let kept = times.iter().filter(|&&t| t <= 10.0 * median.max(1e-3)).count();
+    let mid = times.len() / 2;
+    let kept = (mid..times.len())
+        .find(|&i| times.get(i + 1).is_some_and(|&next| next > LINGER_GAP * times[i].max(1e-3)))
+        .map_or(times.len(), |i| i + 1);
     (times[..kept].last().copied().unwrap_or(0.0), times.len() - kept)
 }
 
@@ -1038,4 +1049,34 @@ impl Synthesis {
 /// Rounds to 10⁻⁴ (the plan file's resolution for orientations).
 fn r4(v: f64) -> f64 {
     (v * 1e4).round() / 1e4
+}
+
+#[cfg(test)]
+mod tests {
+    use super::slowest_settled;
+
+    #[test]
+    fn lingering_starts_are_those_beyond_a_gap() {
+        // Most starts settle in 50–90 s; creeping ones over a continuum up to 40× that
+        // (consecutive ratios ≤ 1.3): all count, however far above the median.
+        let mut times: Vec<f64> = (0..60).map(|i| 50.0 + 0.7 * i as f64).collect();
+        let mut t = 100.0;
+        while t < 3000.0 {
+            times.push(t);
+            t *= 1.3;
+        }
+        let slowest = *times.last().unwrap();
+        assert_eq!(slowest_settled(times.clone()), (slowest, 0));
+        // Two starts set apart by a gap of more than 3×: left out, whatever their times.
+        for far in [3.2 * slowest, 100.0 * slowest] {
+            let mut with = times.clone();
+            with.extend([far, 1.1 * far]);
+            assert_eq!(slowest_settled(with), (slowest, 2), "{far}");
+        }
+        // A gap below the median is no cut (the fast half may settle at once).
+        let mut fast: Vec<f64> = vec![0.0; 10];
+        fast.extend((0..11).map(|i| 40.0 + i as f64));
+        assert_eq!(slowest_settled(fast), (50.0, 0));
+        assert_eq!(slowest_settled(Vec::new()), (0.0, 0));
+    }
 }
