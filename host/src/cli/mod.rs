@@ -17,6 +17,7 @@ mod part;
 mod physics;
 mod plan;
 mod plate;
+mod serve;
 
 /// Bad input from the user: exit code 2.
 #[derive(Debug, thiserror::Error)]
@@ -92,6 +93,8 @@ enum Command {
     /// Physics models (particle on a vibrating string).
     #[command(subcommand)]
     Physics(physics::PhysicsCommand),
+    /// Serve the controller to a cell: Modbus TCP for a PLC, HTTP for people (docs/cell.md).
+    Serve(serve::ServeArgs),
 }
 
 impl Cli {
@@ -106,6 +109,7 @@ impl Cli {
             Command::Physics(cmd) => cmd.run(),
             Command::Plan(args) => args.run(),
             Command::Simulate(args) => args.run(),
+            Command::Serve(args) => args.run(),
         }
     }
 }
