@@ -63,7 +63,7 @@ pub mod input {
     pub const FREQ: u16 = 8;
     /// Fault code ([`super::fault_code`], [`super::FAULT_LINK_DOWN`]); 0: none.
     pub const FAULT: u16 = 9;
-    /// The last command's result ([`super::CommandResult`]); 0: ok.
+    /// The last write's result ([`super::CommandResult`]): 0 ok, else why it was refused.
     pub const RESULT: u16 = 10;
     /// Status reads from the controller so far, low 16 bits: it counts while the link is up.
     pub const HEARTBEAT: u16 = 11;
@@ -108,10 +108,11 @@ impl Command {
     }
 }
 
-/// The result register's values: why the last command (or register write) was refused.
+/// The result register's values: why the last write (a command, or a bad slot or command
+/// value) was refused; 0 once a write succeeds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum CommandResult {
-    /// 0: carried out (or nothing written yet).
+    /// 0: written and carried out (or nothing written yet).
     #[default]
     Ok = 0,
     /// 1: the command register was written with a value that is no command.
@@ -390,6 +391,8 @@ impl Registers {
         let (slot, repeat) = self.update(|h| {
             h.slot = write.slot.unwrap_or(h.slot);
             h.repeat = write.repeat.unwrap_or(h.repeat);
+            // The result is the last write's: a good one clears an old refusal's reason.
+            h.result = CommandResult::Ok;
             (h.slot, h.repeat)
         });
         let Some(command) = write.command else { return Ok(()) };

@@ -228,6 +228,10 @@ async fn the_service_answers_reads_writes_and_refusals_without_a_controller() {
     assert_eq!(bad, Err(ExceptionCode::IllegalDataValue));
     assert_eq!(registers.holding().result, CommandResult::BadSlot);
     assert_eq!(registers.holding().slot, 5);
+    // A good write clears the reason again.
+    let good = registers.handle(Request::WriteSingleRegister(HOLDING_REPEAT, 3)).await;
+    assert_eq!(good, Ok(Response::WriteSingleRegister(HOLDING_REPEAT, 3)));
+    assert_eq!(registers.holding().result, CommandResult::Ok);
     // Run with the link down: the gateway exception, and the result says why.
     let run = registers.handle(Request::WriteSingleRegister(HOLDING_COMMAND, 1)).await;
     assert_eq!(run, Err(ExceptionCode::GatewayTargetDevice));
