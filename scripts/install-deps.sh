@@ -6,6 +6,8 @@
 #     `cargo` call does not do)
 #   - qemu-system-arm 10 from Debian bookworm-backports (the emulated B-L475E-IOT01A)
 #   - binutils-arm-none-eabi (arm-none-eabi-size/nm/objdump: size report, image checks)
+#   - python3-pymodbus 3.6 from bookworm-backports: the Modbus client that plays the PLC in
+#     host/tests/cli_serve_modbus.rs (tests/cell/modbus_client.py, run by /usr/bin/python3)
 #   - defmt-print (decodes the QEMU firmware's defmt log)
 #   - chromium, chromium-driver and python3-selenium (the cell dashboard's browser test)
 #   - for fuzzing, the pinned nightly toolchain and cargo-fuzz (scripts/fuzz.sh install; the
@@ -50,6 +52,7 @@ command -v arm-none-eabi-size >/dev/null || need_apt+=(binutils-arm-none-eabi)
 command -v chromium >/dev/null || need_apt+=(chromium)
 command -v chromedriver >/dev/null || need_apt+=(chromium-driver)
 /usr/bin/python3 -c 'import selenium' 2>/dev/null || need_apt+=(python3-selenium)
+/usr/bin/python3 -c 'import pymodbus' 2>/dev/null || need_apt+=(python3-pymodbus)
 
 if [ ${#need_apt[@]} -gt 0 ]; then
   if ! grep -rqs 'bookworm-backports' /etc/apt/sources.list /etc/apt/sources.list.d/; then
@@ -60,15 +63,18 @@ if [ ${#need_apt[@]} -gt 0 ]; then
   echo "install-deps: apt-get install ${need_apt[*]}"
   $SUDO apt-get update -qq
   for pkg in "${need_apt[@]}"; do
-    if [ "$pkg" = qemu-system-arm ]; then
+    if [ "$pkg" = qemu-system-arm ] || [ "$pkg" = python3-pymodbus ]; then
+      # Backports: QEMU ≥ 9 (checked above); pymodbus 3.6, the version the client script is
+      # written and tested against (bookworm's own is 3.0).
       $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
-        -t bookworm-backports qemu-system-arm
+        -t bookworm-backports "$pkg"
     else
       $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "$pkg"
     fi
   done
 fi
 qemu-system-arm --version | head -n 1
+/usr/bin/python3 -c 'import pymodbus; print("pymodbus", pymodbus.__version__)'
 
 # 3. Cargo-installed tools (into $CARGO_HOME/bin).
 if ! command -v defmt-print >/dev/null; then

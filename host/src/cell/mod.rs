@@ -7,9 +7,11 @@
 //!   talk to the link themselves, so a PLC and a browser at once never interleave frames, and a
 //!   lost link shows as an error state, never as a stale "busy".
 //! - The front ends (`chladni serve`) turn their protocol into [`Cell`] calls and its
-//!   [`CellStatus`] into their registers or pages: [`http`] is the dashboard and JSON API.
+//!   [`CellStatus`] into their registers or pages: [`modbus`] (Modbus TCP for a PLC; the
+//!   register map is in docs/cell.md) and [`http`] (the dashboard and JSON API for people).
 
 pub mod http;
+pub mod modbus;
 pub mod owner;
 
 pub use owner::{Cell, CellError, CellState, CellStatus, POLL_PERIOD, RunStarted};

@@ -284,9 +284,12 @@ impl Owner {
             match queue.recv_timeout(wait) {
                 Ok(job) => {
                     let answer = self.execute(job.command);
+                    // Published before the answer: a front end that reads the state right
+                    // after its run was accepted sees `busy`, never the last run's `done`.
+                    self.publish.send_replace(self.snapshot());
                     // The asker may have given up (a closed HTTP request): nothing to do.
                     let _ = job.reply.send(answer);
-                    // A command changes the state: show it without waiting for the next poll.
+                    // A command changes the state: read it without waiting for the next poll.
                     next_poll = Instant::now();
                 }
                 Err(RecvTimeoutError::Timeout) => {

@@ -97,7 +97,7 @@ enum Command {
     /// Physics models (particle on a vibrating string).
     #[command(subcommand)]
     Physics(physics::PhysicsCommand),
-    /// Serve the controller to the cell: a web dashboard and JSON API (--http).
+    /// Serve the controller to a cell: Modbus TCP for a PLC, HTTP for people (docs/cell.md).
     Serve(serve::ServeArgs),
 }
 

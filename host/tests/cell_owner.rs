@@ -1,0 +1,104 @@
+//! The cell's link owner against the controller in QEMU: a run goes busy then done (never the
+//! last run's done first), bad slots and empty slots are named, a stopped run reads idle, a
+//! killed controller reads error within seconds, and a restarted one is picked up again.
+
+use std::time::{Duration, Instant};
+
+use chladni::cell::{Cell, CellError, CellState, CellStatus};
+use chladni::controller::emulator::{Emulator, EmulatorConfig};
+use chladni_shared::icd::plan::{Level, Plan, Step};
+
+const SLOT: u8 = 2;
+
+fn emulator() -> Emulator {
+    let base = std::env::temp_dir().join(format!("chladni-cell-owner-{}", std::process::id()));
+    let flash = base.with_extension("flash");
+    let _ = std::fs::remove_file(&flash);
+    let config = EmulatorConfig {
+        time_limit: Some(Duration::from_secs(120)),
+        log_file: Some(base.with_extension("log")),
+        flash_file: Some(flash),
+        ..Default::default()
+    };
+    Emulator::start(&config).expect("start the emulator")
+}
+
+/// Two steps of 800 ms, open loop, into [`SLOT`].
+fn upload_plan(emu: &Emulator) {
+    let step =
+        |freq_mhz| Step { freq_mhz, level: Level::Drive(8_000), duration_ms: 800, ramp_ms: 50 };
+    let plan = Plan {
+        name: heapless::String::try_from("owner").unwrap(),
+        repeat: 1,
+        steps: heapless::Vec::from_slice(&[step(110_000), step(140_000)]).unwrap(),
+    };
+    let mut client = emu.connect("cell_owner upload").expect("connect");
+    client.upload(&plan, Some(SLOT), |_, _| {}).expect("upload");
+}
+
+/// The states published until `wanted` holds (that status last); panics after `limit`.
+async fn until(
+    cell: &Cell,
+    limit: Duration,
+    wanted: impl Fn(&CellStatus) -> bool,
+) -> Vec<CellStatus> {
+    let mut watch = cell.watch();
+    let deadline = Instant::now() + limit;
+    let mut seen = vec![watch.borrow_and_update().clone()];
+    while !wanted(seen.last().unwrap()) {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let changed = tokio::time::timeout(left, watch.changed()).await;
+        assert!(
+            matches!(changed, Ok(Ok(()))),
+            "gave up after {limit:?}; last {:?}",
+            seen.last().map(|s| (s.state, &s.error))
+        );
+        seen.push(watch.borrow_and_update().clone());
+    }
+    seen
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_owner_runs_stops_and_reports_a_lost_and_found_link() {
+    let mut emu = emulator();
+    upload_plan(&emu);
+    let cell = Cell::start(&emu.address(), "cell_owner test");
+    until(&cell, Duration::from_secs(10), |s| s.link_up && s.state == CellState::Idle).await;
+
+    let started = cell.run(u32::from(SLOT), None).await.expect("run");
+    assert_eq!((started.slot, started.plan.as_str()), (SLOT, "owner"));
+    // Published before the answer: busy at once.
+    assert_eq!(cell.status().state, CellState::Busy);
+    let seen = until(&cell, Duration::from_secs(10), |s| s.state != CellState::Busy).await;
+    assert_eq!(seen.last().unwrap().state, CellState::Done, "{:?}", seen.last().unwrap().error);
+    assert_eq!(seen.last().unwrap().last_run, Some(started.run));
+
+    assert!(matches!(cell.run(70, None).await, Err(CellError::BadSlot { slot: 70 })));
+    match cell.run(9, None).await {
+        Err(CellError::NoPlan { slot: 9, stored }) => assert_eq!(stored, SLOT.to_string()),
+        other => panic!("slot 9 holds no plan, got {other:?}"),
+    }
+    let (plans, _) = cell.plans().await.expect("plans");
+    assert_eq!(plans.iter().map(|p| p.slot).collect::<Vec<_>>(), [SLOT]);
+
+    cell.run(u32::from(SLOT), None).await.expect("run again");
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let stop = cell.stop().await.expect("stop");
+    assert!(stop > started.run);
+    let seen = until(&cell, Duration::from_secs(5), |s| s.state != CellState::Busy).await;
+    assert_eq!(seen.last().unwrap().state, CellState::Idle, "a stopped run reads idle");
+
+    emu.kill();
+    let killed = Instant::now();
+    let seen = until(&cell, Duration::from_secs(8), |s| s.state == CellState::Error).await;
+    let lost = seen.last().unwrap();
+    assert!(!lost.link_up);
+    assert!(lost.error.as_deref().unwrap().contains("link down"), "{:?}", lost.error);
+    eprintln!("link loss seen after {:.1} s", killed.elapsed().as_secs_f64());
+    assert!(matches!(cell.run(u32::from(SLOT), None).await, Err(CellError::LinkDown { .. })));
+
+    emu.restart().expect("restart the emulator");
+    let back = Instant::now();
+    until(&cell, Duration::from_secs(15), |s| s.link_up && s.state != CellState::Error).await;
+    eprintln!("link back after {:.1} s", back.elapsed().as_secs_f64());
+}
