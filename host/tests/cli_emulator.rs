@@ -42,3 +42,19 @@ fn an_emulator_on_a_busy_port_says_so_and_never_claims_ready() {
     assert!(stderr.contains(&format!("port {port} is in use")), "{stderr}");
     assert!(!stdout.contains("controller ready"), "{stdout}");
 }
+
+#[test]
+fn json_prints_the_port_and_pid_as_one_object() {
+    let log =
+        std::env::temp_dir().join(format!("chladni-emulator-json-{}.log", std::process::id()));
+    let out =
+        chladni(&["emulator", "--time-limit-s", "3", "--json", "--log", log.to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let ready: serde_json::Value = serde_json::from_str(stdout.trim())
+        .unwrap_or_else(|e| panic!("{e}: stdout is not one JSON object:\n{stdout}"));
+    let port = ready["port"].as_str().unwrap_or_else(|| panic!("no port in {ready}"));
+    assert!(port.starts_with("tcp://127.0.0.1:"), "{ready}");
+    assert!(ready["pid"].as_u64().is_some_and(|pid| pid > 0), "{ready}");
+    let _ = std::fs::remove_file(log);
+}

@@ -28,6 +28,9 @@ pub struct EmulatorArgs {
     /// the limit is the end asked for: exit code 0, with a message saying so.
     #[arg(long, value_name = "S", value_parser = time_limit)]
     time_limit_s: Option<u64>,
+    /// Print the ready line as JSON (`{"port": "tcp://127.0.0.1:PORT", "pid": QEMU's pid}`).
+    #[arg(long)]
+    json: bool,
 }
 
 /// `--time-limit-s`: whole seconds, at least 1.
@@ -55,8 +58,15 @@ impl EmulatorArgs {
             EmulatorError::FlashFile { .. } => anyhow::Error::new(InputError(e.to_string())),
             e => e.into(),
         })?;
-        println!("controller ready on {}", emulator.address());
-        println!("try: chladni device info --port {}", emulator.address());
+        if self.json {
+            let ready = serde_json::json!({ "port": emulator.address(), "pid": emulator.pid() });
+            println!("{ready}");
+        } else {
+            println!("controller ready on {}", emulator.address());
+            println!("try: chladni device info --port {}", emulator.address());
+        }
+        // A script reads the address from the first line while the emulator keeps running.
+        std::io::Write::flush(&mut std::io::stdout())?;
         // Wait for a signal, or for QEMU to end on its own (time limit, firmware exit).
         loop {
             if stop_rx.recv_timeout(std::time::Duration::from_millis(200)).is_ok() {
