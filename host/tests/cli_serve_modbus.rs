@@ -1,15 +1,19 @@
 //! `chladni serve --modbus` end to end: the built binary serves the QEMU controller, and a
 //! Modbus client nobody here wrote (pymodbus, through tests/cell/modbus_client.py) reads the
 //! register map, is refused a bad slot, runs a stored plan and follows it to `done`; then QEMU
-//! is killed and the state must read `error` with the link-lost fault code.
+//! is killed and the state must read `error` with the link-lost fault code. The same process
+//! serves HTTP meanwhile, and a second client polls `/api/status` all through the run: both
+//! front ends share the one link owner, so both must see the same run, in order.
 //!
 //! Needs Debian's python3-pymodbus (scripts/install-deps.sh installs it); without it the test
 //! fails naming that script, it never skips.
 
-use std::io::{BufRead, BufReader};
-use std::net::SocketAddr;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{SocketAddr, TcpStream};
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use chladni::cell::modbus::{CommandResult, FAULT_LINK_DOWN};
@@ -77,20 +81,65 @@ impl Drop for Served {
     }
 }
 
-/// `chladni serve` on a free port; its address from the first line it prints.
-fn serve(emu: &Emulator) -> (Served, SocketAddr) {
+/// `chladni serve` on free ports, Modbus and HTTP; their addresses from the lines it prints.
+fn serve(emu: &Emulator) -> (Served, SocketAddr, SocketAddr) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_chladni"))
-        .args(["serve", "--port", &emu.address(), "--modbus", "127.0.0.1:0", "--json"])
+        .args(["serve", "--port", &emu.address(), "--json"])
+        .args(["--modbus", "127.0.0.1:0", "--http", "127.0.0.1:0"])
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
         .expect("start chladni serve");
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).expect("read stdout");
-    let printed: Value =
-        serde_json::from_str(line.trim()).unwrap_or_else(|e| panic!("{e}: {line}"));
-    let address = printed["modbus"].as_str().unwrap_or_else(|| panic!("no address in {line}"));
-    (Served(child), address.parse().expect("a socket address"))
+    let mut stdout = BufReader::new(child.stdout.take().unwrap());
+    let mut printed = serde_json::Map::new();
+    for _ in 0..2 {
+        let mut line = String::new();
+        stdout.read_line(&mut line).expect("read stdout");
+        let object: Value =
+            serde_json::from_str(line.trim()).unwrap_or_else(|e| panic!("{e}: {line}"));
+        printed.extend(object.as_object().cloned().unwrap_or_default());
+    }
+    let modbus = printed["modbus"].as_str().expect("the modbus address").parse().unwrap();
+    let url = printed["http"].as_str().expect("the http URL");
+    let http = url.trim_start_matches("http://").trim_end_matches('/').parse().unwrap();
+    (Served(child), modbus, http)
+}
+
+/// `GET /api/status` over a plain socket: the status code and the JSON body.
+fn http_status(address: SocketAddr) -> (u16, Value) {
+    let mut stream = TcpStream::connect(address).expect("connect to the HTTP front end");
+    stream.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    write!(stream, "GET /api/status HTTP/1.1\r\nHost: cell\r\nConnection: close\r\n\r\n").unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).expect("read the HTTP response");
+    let (head, body) = response.split_once("\r\n\r\n").unwrap_or_else(|| panic!("{response}"));
+    let code = head.split(' ').nth(1).and_then(|c| c.parse().ok()).unwrap_or(0);
+    (code, serde_json::from_str(body).unwrap_or_else(|e| panic!("{e}: {body}")))
+}
+
+/// Polls `/api/status` every 50 ms until `stop`; every answer's (state, last_run, device run).
+fn poll_http(address: SocketAddr, stop: Arc<AtomicBool>) -> Vec<(String, u64, u64)> {
+    let mut seen = Vec::new();
+    while !stop.load(Ordering::Relaxed) {
+        let (code, status) = http_status(address);
+        assert_eq!(code, 200, "{status}");
+        let state = status["state"].as_str().unwrap_or_default().to_owned();
+        let last_run = status["last_run"].as_u64().unwrap_or(0);
+        let device_run = status["device"]["run"].as_u64().unwrap_or(0);
+        seen.push((state, last_run, device_run));
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    seen
+}
+
+/// What the HTTP client saw while the PLC ran the plan: the same run, busy then done, and the
+/// controller's run number never going back (answers of one session, in order).
+fn check_http_alongside(seen: &[(String, u64, u64)], plc: &Value) {
+    let run = plc["seen"].as_array().unwrap().last().unwrap()["command_run"].as_u64().unwrap();
+    let ours: Vec<&(String, u64, u64)> = seen.iter().filter(|s| s.1 == run).collect();
+    assert!(ours.iter().any(|s| s.0 == "busy"), "HTTP never saw run {run} busy: {seen:?}");
+    assert_eq!(ours.last().map(|s| s.0.as_str()), Some("done"), "{seen:?}");
+    assert!(seen.windows(2).all(|w| w[1].2 >= w[0].2), "device run went back: {seen:?}");
 }
 
 /// Runs the client script; its transcript and the JSON object it printed last.
@@ -150,16 +199,25 @@ fn check_run(out: &Value) {
 }
 
 #[test]
-fn a_plc_runs_a_plan_through_modbus_and_sees_the_link_lost() {
+fn a_plc_runs_a_plan_through_modbus_while_http_watches_and_both_see_the_link_lost() {
     require_pymodbus();
     let mut emu = emulator();
     upload_plan(&emu);
-    let (mut serve, address) = serve(&emu);
+    let (mut serve, address, http) = serve(&emu);
+    let stop = Arc::new(AtomicBool::new(false));
+    let poller = std::thread::spawn({
+        let stop = stop.clone();
+        move || poll_http(http, stop)
+    });
     let (transcript, out) = client(address, &["run", &SLOT.to_string()]);
+    stop.store(true, Ordering::Relaxed);
+    let by_http = poller.join().expect("the HTTP poller");
+    eprintln!("HTTP polled the status {} times during the Modbus run", by_http.len());
     let saved = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("modbus_transcript.txt");
     std::fs::write(&saved, &transcript).expect("save the transcript");
     eprintln!("transcript: {}", saved.display());
     check_run(&out);
+    check_http_alongside(&by_http, &out);
 
     emu.kill();
     let killed = Instant::now();
@@ -172,6 +230,12 @@ fn a_plc_runs_a_plan_through_modbus_and_sees_the_link_lost() {
         "{lost}"
     );
     assert_eq!(last["link_up"], 0);
+    let (code, status) = http_status(http);
+    assert_eq!(code, 200);
+    assert_eq!(
+        (&status["state"], &status["link_up"]),
+        (&Value::from("error"), &Value::from(false))
+    );
     eprintln!("link lost read as error after {:.1} s", took.as_secs_f64());
     let both =
         format!("{transcript}\n--- QEMU killed; polling until the link-lost error ---\n{lost}");
