@@ -11,15 +11,7 @@ use chladni_shared::icd::plan::{Level, Plan, Step};
 const SLOT: u8 = 2;
 
 fn emulator() -> Emulator {
-    let base = std::env::temp_dir().join(format!("chladni-cell-owner-{}", std::process::id()));
-    let flash = base.with_extension("flash");
-    let _ = std::fs::remove_file(&flash);
-    let config = EmulatorConfig {
-        time_limit: Some(Duration::from_secs(120)),
-        log_file: Some(base.with_extension("log")),
-        flash_file: Some(flash),
-        ..Default::default()
-    };
+    let config = EmulatorConfig::scratch("cell-owner", Duration::from_secs(120));
     Emulator::start(&config).expect("start the emulator")
 }
 

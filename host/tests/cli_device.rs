@@ -11,16 +11,7 @@ use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 
 fn emulator(name: &str) -> Emulator {
-    let base =
-        std::env::temp_dir().join(format!("chladni-cli-device-{name}-{}", std::process::id()));
-    let flash = base.with_extension("flash");
-    let _ = std::fs::remove_file(&flash);
-    let config = EmulatorConfig {
-        time_limit: Some(Duration::from_secs(300)),
-        log_file: Some(base.with_extension("log")),
-        flash_file: Some(flash),
-        ..Default::default()
-    };
+    let config = EmulatorConfig::scratch(&format!("cli-device-{name}"), Duration::from_secs(300));
     Emulator::start(&config).expect("start the emulator")
 }
 

@@ -25,15 +25,7 @@ const PLAN: &str = r#"{"name": "cell-http-2step", "repeat": 1, "steps": [
     {"freq_hz": 185, "accel_mps2": 25, "duration_ms": 3000, "ramp_ms": 300}]}"#;
 
 fn emulator() -> Emulator {
-    let base = std::env::temp_dir().join(format!("chladni-cli-serve-http-{}", std::process::id()));
-    let flash = base.with_extension("flash");
-    let _ = std::fs::remove_file(&flash);
-    let config = EmulatorConfig {
-        time_limit: Some(Duration::from_secs(120)),
-        log_file: Some(base.with_extension("log")),
-        flash_file: Some(flash),
-        ..Default::default()
-    };
+    let config = EmulatorConfig::scratch("cli-serve-http", Duration::from_secs(120));
     Emulator::start(&config).expect("start the emulator")
 }
 

@@ -43,16 +43,7 @@ fn require_pymodbus() {
 }
 
 fn emulator() -> Emulator {
-    let base =
-        std::env::temp_dir().join(format!("chladni-cli-serve-modbus-{}", std::process::id()));
-    let flash = base.with_extension("flash");
-    let _ = std::fs::remove_file(&flash);
-    let config = EmulatorConfig {
-        time_limit: Some(Duration::from_secs(120)),
-        log_file: Some(base.with_extension("log")),
-        flash_file: Some(flash),
-        ..Default::default()
-    };
+    let config = EmulatorConfig::scratch("cli-serve-modbus", Duration::from_secs(120));
     Emulator::start(&config).expect("start the emulator")
 }
 

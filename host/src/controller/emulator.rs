@@ -43,6 +43,24 @@ pub struct EmulatorConfig {
     pub flash_file: Option<PathBuf>,
 }
 
+impl EmulatorConfig {
+    /// A throw-away controller for a test or a try-out: an erased flash bank and the log in
+    /// the temp folder, named after `name` and this process (so parallel runs never share
+    /// them), and QEMU killed after `time_limit` even if the caller hangs.
+    pub fn scratch(name: &str, time_limit: Duration) -> Self {
+        let base = std::env::temp_dir().join(format!("chladni-{name}-{}", std::process::id()));
+        let flash = base.with_extension("flash");
+        // A bank left by an earlier process of the same pid would not be erased.
+        let _ = std::fs::remove_file(&flash);
+        EmulatorConfig {
+            time_limit: Some(time_limit),
+            log_file: Some(base.with_extension("log")),
+            flash_file: Some(flash),
+            ..Default::default()
+        }
+    }
+}
+
 /// Size of the flash bank the QEMU board keeps in [`EmulatorConfig::flash_file`].
 pub const FLASH_FILE_SIZE: u64 = 512 * 1024;
 
