@@ -1034,6 +1034,47 @@ mod tests {
         assert!(worst < 1e-4, "{worst}");
     }
 
+    #[test]
+    fn lazy_distance_table_matches_the_exact_distance_at_its_points() {
+        let m = mode(
+            "freq_hz = 50.0\nnode = { kind = \"hyperbola\", center_mm = [60.0, 100.0], angle_deg = 10.0, a_mm = 70.0, b_mm = 60.0 }",
+        );
+        let f = FieldModel::new(&m, &plate(&m));
+        let FieldModel::Hyperbola { table, center, axis, a, b, .. } = &f else { unreachable!() };
+        // Grid points (corners of cells in different tiles, on tile seams too) read back
+        // exactly; between them the bilinear value lies within the corners' range.
+        for k in 0..400 {
+            let (i, j) = ((k * 37) % 590, (k * 53) % 490);
+            let p = [table.lo[0] + i as f64 * table.step, table.lo[1] + j as f64 * table.step];
+            let exact = hyperbola_exact(*center, *axis, *a, *b, p).0;
+            assert_eq!(table.xi(p), Some(exact), "{p:?}");
+            let q = [p[0] + 0.5 * table.step, p[1] + 0.25 * table.step];
+            let x = table.xi(q).unwrap();
+            assert!((x - hyperbola_exact(*center, *axis, *a, *b, q).0).abs() < 0.01, "{q:?}");
+        }
+        assert_eq!(table.xi([-1e4, 0.0]), None);
+    }
+
+    #[test]
+    fn a_symmetric_part_turned_by_its_symmetry_runs_the_same() {
+        // sampled_map simulates a part of symmetry order m from 360°/m of start orientations
+        // only: the run from θ + 180° of a rectangle must be the run from θ, turned.
+        let body = Body::with_samples(&rect(), 160);
+        let m = mode(
+            "freq_hz = 50.0\nnode = { kind = \"hyperbola\", center_mm = [60.0, 100.0], angle_deg = 0.0, a_mm = 70.0, b_mm = 60.0 }",
+        );
+        let f = FieldModel::new(&m, &plate(&m));
+        let p = SimParams { speed: 100.0, t_limit: 1e3, run_to_limit: false };
+        for th in [25.3f64, 140.0] {
+            let q = |t: f64| Pose { x: 20.6, y: 20.6, theta: t.to_radians() };
+            let (r0, r1) = (run(&body, &f, p, q(th)), run(&body, &f, p, q(th + 180.0)));
+            assert_eq!(r0.rested, r1.rested);
+            assert!((r0.pose.x - r1.pose.x).abs() < 1e-6 && (r0.pose.y - r1.pose.y).abs() < 1e-6);
+            let dth = (r1.pose.theta - r0.pose.theta).to_degrees() - 180.0;
+            assert!(dth.abs() < 1e-6, "{th}: {dth}");
+        }
+    }
+
     /// The pull of a law at 20 mm (a scale for force errors).
     fn law_scale(law: Law) -> f64 {
         law.g(20.0).abs()
