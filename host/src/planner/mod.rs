@@ -345,7 +345,8 @@ pub fn map_starts(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]>
 /// Final orientations are clustered (2°, modulo the period); an orientation whose outcome
 /// differs between start points is ambiguous and treated as lying on a basin boundary, and
 /// so is one whose run does not come to rest within 5000 T₀ (T₀: time to travel one radius
-/// at full pull).
+/// at full pull). A part of rotational symmetry order m (dividing `n`) is simulated from the
+/// first n/m start orientations of each point only; the others are those runs turned.
 ///
 /// Grid modes only: a start point from which some run ends with the centroid within half the
 /// part's radius of the plate edge reached no interior node (near a clamped edge φ and ∂φ/∂x
