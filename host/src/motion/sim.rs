@@ -33,8 +33,11 @@ use crate::plate::solver::Grid;
 pub const BODY_SAMPLES: usize = 400;
 
 /// Longest outline piece of the hyperbola's outline rule, as a fraction of the part's
-/// radius (4 Gauss points per piece).
-pub const HYPERBOLA_PIECE: f64 = 0.25;
+/// radius (4 Gauss points per piece). Its error against pieces of R/50 is below 5·10⁻⁵ of
+/// the largest force from R/4 to R alike (the bilinear distance table's kinks at every cell
+/// line set that floor; test `hyperbola_outline_pieces_are_converged`), so R/2 halves the
+/// table reads of R/4 at no measurable cost.
+pub const HYPERBOLA_PIECE: f64 = 0.5;
 
 /// A pose: centroid (x, y) in mm, orientation θ in radians.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -289,35 +292,81 @@ fn line_frame(angle_deg: f64, offset_mm: f64, ctr: [f64; 2]) -> ([f64; 2], f64) 
     (xhat, -(offset_mm + nhat[0] * ctr[0] + nhat[1] * ctr[1]))
 }
 
-/// A tabulated distance field (bilinear interpolation).
-#[derive(Debug, Clone)]
+/// Cells per side of a [`DistTable`] tile.
+const TILE: usize = 16;
+
+/// A tabulated distance field (bilinear interpolation), filled lazily tile by tile.
+///
+/// The table spans the plate and a wide margin, but parts only ever visit a band along the
+/// branch and their paths to it: computing all of its ~300 000 points (a Newton solve each)
+/// took 0.16 s, serially, before the first run could start, more than the runs of a whole
+/// triangle map. Each tile of [`TILE`]² cells is computed on first use instead (its points
+/// exactly as the whole table computed them, so the field is the same bit for bit).
+#[derive(Debug)]
 pub struct DistTable {
     lo: [f64; 2],
     step: f64,
     nx: usize,
     ny: usize,
-    xi: Vec<f64>,
-    n: Vec<[f64; 2]>,
+    /// The branch: centre, axis (cos α, sin α), semi-axes a, b.
+    branch: ([f64; 2], [f64; 2], f64, f64),
+    /// Tiles in rows of `tiles_x`.
+    tiles_x: usize,
+    tiles: Vec<OnceLock<Tile>>,
+}
+
+/// Points per tile row.
+const TILE_PTS: usize = TILE + 1;
+
+/// One tile's (TILE + 1)² points, row by row: ξ and the unit normal (fixed-size arrays: the
+/// cell's corner indices are provably in range, no bounds checks in the hot read).
+#[derive(Debug)]
+struct Tile {
+    xi: Box<[f64; TILE_PTS * TILE_PTS]>,
+    n: Box<[[f64; 2]; TILE_PTS * TILE_PTS]>,
 }
 
 impl DistTable {
-    /// ξ alone (bilinear), `None` off the table.
-    fn xi(&self, p: [f64; 2]) -> Option<f64> {
+    /// The tile holding cell (i, j) (computed now if it is new) and the index of the cell's
+    /// first corner in it.
+    fn tile(&self, i: usize, j: usize) -> (&Tile, usize) {
+        let (ti, tj) = (i / TILE, j / TILE);
+        let tile = self.tiles[tj * self.tiles_x + ti].get_or_init(|| {
+            let (center, axis, a, b) = self.branch;
+            let mut xi = Box::new([0.0; TILE_PTS * TILE_PTS]);
+            let mut n = Box::new([[0.0; 2]; TILE_PTS * TILE_PTS]);
+            for q in 0..TILE_PTS * TILE_PTS {
+                let (i, j) = (ti * TILE + q % TILE_PTS, tj * TILE + q / TILE_PTS);
+                let p = [self.lo[0] + i as f64 * self.step, self.lo[1] + j as f64 * self.step];
+                (xi[q], n[q]) = hyperbola_exact(center, axis, a, b, p);
+            }
+            Tile { xi, n }
+        });
+        (tile, (j % TILE) * TILE_PTS + i % TILE)
+    }
+
+    /// The cell holding `p` and the local coordinates in it, `None` off the table.
+    fn locate(&self, p: [f64; 2]) -> Option<(usize, usize, f64, f64)> {
         let u = (p[0] - self.lo[0]) / self.step;
         let v = (p[1] - self.lo[1]) / self.step;
         if !(u >= 0.0 && v >= 0.0 && u < (self.nx - 1) as f64 && v < (self.ny - 1) as f64) {
             return None;
         }
         let (i, j) = (u as usize, v as usize);
-        let (fu, fv) = (u - i as f64, v - j as f64);
-        let k = j * self.nx + i;
-        let (x0, x1) = (self.xi[k], self.xi[k + 1]);
-        let (x2, x3) = (self.xi[k + self.nx], self.xi[k + self.nx + 1]);
+        Some((i, j, u - i as f64, v - j as f64))
+    }
+
+    /// ξ alone (bilinear), `None` off the table.
+    fn xi(&self, p: [f64; 2]) -> Option<f64> {
+        let (i, j, fu, fv) = self.locate(p)?;
+        let (t, k) = self.tile(i, j);
+        let (x0, x1) = (t.xi[k], t.xi[k + 1]);
+        let (x2, x3) = (t.xi[k + TILE_PTS], t.xi[k + TILE_PTS + 1]);
         Some((x0 + fu * (x1 - x0)) * (1.0 - fv) + (x2 + fu * (x3 - x2)) * fv)
     }
 
-    /// The table of a hyperbola branch on a plate, built once per branch and plate size
-    /// (the planner builds a mode's field many times; a table takes tens of milliseconds).
+    /// The table of a hyperbola branch on a plate, one per branch and plate size (the
+    /// planner builds a mode's field many times; its tiles are kept).
     fn cached(center: [f64; 2], axis: [f64; 2], a: f64, b: f64, size: [f64; 2]) -> Arc<DistTable> {
         type Cache = Mutex<HashMap<[u64; 8], Arc<DistTable>>>;
         static CACHE: OnceLock<Cache> = OnceLock::new();
@@ -325,56 +374,42 @@ impl DistTable {
             [center[0], center[1], axis[0], axis[1], a, b, size[0], size[1]].map(f64::to_bits);
         let cache = CACHE.get_or_init(Cache::default);
         // A poisoned lock only means another thread panicked between whole inserts.
-        if let Some(t) = cache.lock().unwrap_or_else(|e| e.into_inner()).get(&key) {
-            return Arc::clone(t);
-        }
-        let table = Arc::new(DistTable::build(center, axis, a, b, size));
-        cache.lock().unwrap_or_else(|e| e.into_inner()).insert(key, Arc::clone(&table));
-        table
+        let mut map = cache.lock().unwrap_or_else(|e| e.into_inner());
+        let table =
+            map.entry(key).or_insert_with(|| Arc::new(DistTable::new(center, axis, a, b, size)));
+        Arc::clone(table)
     }
 
     /// ξ and the normal on a 1 mm grid (finer for small plates) over the plate and a margin
     /// of half its larger side: parts creeping along a branch can leave the plate (the
     /// motion model has no edges), and points off the table need a Newton solve each.
-    fn build(center: [f64; 2], axis: [f64; 2], a: f64, b: f64, [w, h]: [f64; 2]) -> DistTable {
+    fn new(center: [f64; 2], axis: [f64; 2], a: f64, b: f64, [w, h]: [f64; 2]) -> DistTable {
         let step = (w.max(h) / 300.0).min(1.0);
         let margin = (0.5 * w.max(h)).max(20.0);
         let lo = [-margin, -margin];
         let nx = ((w + 2.0 * margin) / step) as usize + 2;
         let ny = ((h + 2.0 * margin) / step) as usize + 2;
-        let mut xi = Vec::with_capacity(nx * ny);
-        let mut n = Vec::with_capacity(nx * ny);
-        for j in 0..ny {
-            for i in 0..nx {
-                let p = [lo[0] + i as f64 * step, lo[1] + j as f64 * step];
-                let (x, nn) = hyperbola_exact(center, axis, a, b, p);
-                xi.push(x);
-                n.push(nn);
-            }
-        }
-        DistTable { lo, step, nx, ny, xi, n }
+        // Cells 0..nx − 1 (and rows alike) in tiles of TILE.
+        let tiles_x = (nx - 1).div_ceil(TILE);
+        let tiles_y = (ny - 1).div_ceil(TILE);
+        let tiles = (0..tiles_x * tiles_y).map(|_| OnceLock::new()).collect();
+        DistTable { lo, step, nx, ny, branch: (center, axis, a, b), tiles_x, tiles }
     }
 
     fn eval(&self, p: [f64; 2]) -> Option<(f64, [f64; 2])> {
-        let u = (p[0] - self.lo[0]) / self.step;
-        let v = (p[1] - self.lo[1]) / self.step;
-        if !(u >= 0.0 && v >= 0.0 && u < (self.nx - 1) as f64 && v < (self.ny - 1) as f64) {
-            return None;
-        }
-        let (i, j) = (u as usize, v as usize);
-        let (fu, fv) = (u - i as f64, v - j as f64);
-        let idx = |i: usize, j: usize| j * self.nx + i;
+        let (i, j, fu, fv) = self.locate(p)?;
+        let (t, k) = self.tile(i, j);
         let wts = [
-            (idx(i, j), (1.0 - fu) * (1.0 - fv)),
-            (idx(i + 1, j), fu * (1.0 - fv)),
-            (idx(i, j + 1), (1.0 - fu) * fv),
-            (idx(i + 1, j + 1), fu * fv),
+            (k, (1.0 - fu) * (1.0 - fv)),
+            (k + 1, fu * (1.0 - fv)),
+            (k + TILE_PTS, (1.0 - fu) * fv),
+            (k + TILE_PTS + 1, fu * fv),
         ];
         let (mut xi, mut n) = (0.0, [0.0, 0.0]);
         for (k, w) in wts {
-            xi += w * self.xi[k];
-            n[0] += w * self.n[k][0];
-            n[1] += w * self.n[k][1];
+            xi += w * t.xi[k];
+            n[0] += w * t.n[k][0];
+            n[1] += w * t.n[k][1];
         }
         let nn = n[0].hypot(n[1]).max(1e-12);
         Some((xi, [n[0] / nn, n[1] / nn]))
@@ -955,6 +990,89 @@ mod tests {
         // Relative to the largest force (area × gain × the law's pull at one radius).
         assert!(worst[0] < 1e-3 && worst[1] < 1e-3, "{worst:?}");
         assert!(worst[0] < worst[2] && worst[1] < worst[3], "{worst:?}");
+    }
+
+    #[test]
+    fn hyperbola_outline_pieces_are_converged() {
+        // The outline rule at HYPERBOLA_PIECE against the same rule at R/50: the error of the
+        // piece length alone (the area-integral test above is limited by its reference).
+        let part =
+            Part::new("t".into(), vec![[0.0, 0.0], [30.0, 0.0], [8.0, 20.0]], vec![]).unwrap();
+        let mut worst = 0.0f64;
+        for (law, extra) in [("linear", ""), ("sign", ""), ("sine", "wavelength_mm = 80.0\n")] {
+            let m = mode(&format!(
+                "freq_hz = 50.0\nfield = \"{law}\"\n{extra}gain_left = 1.8\nnode = {{ kind = \"hyperbola\", center_mm = [60.0, 100.0], angle_deg = 10.0, a_mm = 70.0, b_mm = 60.0 }}"
+            ));
+            let f = FieldModel::new(&m, &plate(&m));
+            let FieldModel::Hyperbola { law, k, table, center, axis, a, b } = &f else {
+                unreachable!()
+            };
+            let xi = |p: [f64; 2]| {
+                table.xi(p).unwrap_or_else(|| hyperbola_exact(*center, *axis, *a, *b, p).0)
+            };
+            let psi = |x: f64| k[usize::from(x > 0.0)] * law.big_g(x);
+            for body in [Body::with_samples(&rect(), 160), Body::with_samples(&part, 160)] {
+                let scale = body.area * f.max_gain() * law_scale(*law);
+                for n in 0..60 {
+                    let t = -1.5 + 3.0 * (n as f64 * 0.618_034 % 1.0);
+                    let off = -25.0 + 50.0 * (n as f64 * 0.414_214 % 1.0);
+                    let (u, v) = (70.0 * t.cosh() + off, 60.0 * t.sinh());
+                    let (ca, sa) = (10f64.to_radians().cos(), 10f64.to_radians().sin());
+                    let o = [60.0 + ca * u - sa * v, 100.0 + sa * u + ca * v];
+                    let sc = (n as f64 * 0.9).sin_cos();
+                    let r = body.radius;
+                    let [x0, y0, m0] =
+                        kinked_outline_wrench(&body.rings, o, sc, HYPERBOLA_PIECE * r, xi, psi);
+                    let [x1, y1, m1] = kinked_outline_wrench(&body.rings, o, sc, 0.02 * r, xi, psi);
+                    worst = worst
+                        .max((x0 - x1).abs().max((y0 - y1).abs()) / scale)
+                        .max((m0 - m1).abs() / scale / r);
+                }
+            }
+        }
+        eprintln!("hyperbola outline pieces {HYPERBOLA_PIECE} R vs R/50: {worst:.1e}");
+        assert!(worst < 1e-4, "{worst}");
+    }
+
+    #[test]
+    fn lazy_distance_table_matches_the_exact_distance_at_its_points() {
+        let m = mode(
+            "freq_hz = 50.0\nnode = { kind = \"hyperbola\", center_mm = [60.0, 100.0], angle_deg = 10.0, a_mm = 70.0, b_mm = 60.0 }",
+        );
+        let f = FieldModel::new(&m, &plate(&m));
+        let FieldModel::Hyperbola { table, center, axis, a, b, .. } = &f else { unreachable!() };
+        // Grid points (corners of cells in different tiles, on tile seams too) read back
+        // exactly; between them the bilinear value lies within the corners' range.
+        for k in 0..400 {
+            let (i, j) = ((k * 37) % 590, (k * 53) % 490);
+            let p = [table.lo[0] + i as f64 * table.step, table.lo[1] + j as f64 * table.step];
+            let exact = hyperbola_exact(*center, *axis, *a, *b, p).0;
+            assert_eq!(table.xi(p), Some(exact), "{p:?}");
+            let q = [p[0] + 0.5 * table.step, p[1] + 0.25 * table.step];
+            let x = table.xi(q).unwrap();
+            assert!((x - hyperbola_exact(*center, *axis, *a, *b, q).0).abs() < 0.01, "{q:?}");
+        }
+        assert_eq!(table.xi([-1e4, 0.0]), None);
+    }
+
+    #[test]
+    fn a_symmetric_part_turned_by_its_symmetry_runs_the_same() {
+        // sampled_map simulates a part of symmetry order m from 360°/m of start orientations
+        // only: the run from θ + 180° of a rectangle must be the run from θ, turned.
+        let body = Body::with_samples(&rect(), 160);
+        let m = mode(
+            "freq_hz = 50.0\nnode = { kind = \"hyperbola\", center_mm = [60.0, 100.0], angle_deg = 0.0, a_mm = 70.0, b_mm = 60.0 }",
+        );
+        let f = FieldModel::new(&m, &plate(&m));
+        let p = SimParams { speed: 100.0, t_limit: 1e3, run_to_limit: false };
+        for th in [25.3f64, 140.0] {
+            let q = |t: f64| Pose { x: 20.6, y: 20.6, theta: t.to_radians() };
+            let (r0, r1) = (run(&body, &f, p, q(th)), run(&body, &f, p, q(th + 180.0)));
+            assert_eq!(r0.rested, r1.rested);
+            assert!((r0.pose.x - r1.pose.x).abs() < 1e-6 && (r0.pose.y - r1.pose.y).abs() < 1e-6);
+            let dth = (r1.pose.theta - r0.pose.theta).to_degrees() - 180.0;
+            assert!(dth.abs() < 1e-6, "{th}: {dth}");
+        }
     }
 
     /// The pull of a law at 20 mm (a scale for force errors).

@@ -245,8 +245,12 @@ impl StepMap {
 /// Rotational symmetry order of a part (largest m such that turning it by 360°/m about its
 /// centroid maps it onto itself, vertex for vertex, within 10⁻⁶ of its size).
 pub fn symmetry_order(part: &Part) -> u32 {
-    let body = Body::new(part);
-    let n = part.outline.len();
+    body_symmetry_order(&Body::new(part))
+}
+
+/// [`symmetry_order`] of a prepared part.
+fn body_symmetry_order(body: &Body) -> u32 {
+    let n = body.rings[0].len();
     let tol = 1e-6 * body.radius.max(1e-9);
     for m in (2..=n).rev() {
         if !n.is_multiple_of(m) {
@@ -341,7 +345,8 @@ pub fn map_starts(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]>
 /// Final orientations are clustered (2°, modulo the period); an orientation whose outcome
 /// differs between start points is ambiguous and treated as lying on a basin boundary, and
 /// so is one whose run does not come to rest within 5000 T₀ (T₀: time to travel one radius
-/// at full pull).
+/// at full pull). A part of rotational symmetry order m (dividing `n`) is simulated from the
+/// first n/m start orientations of each point only; the others are those runs turned.
 ///
 /// Grid modes only: a start point from which some run ends with the centroid within half the
 /// part's radius of the plate edge reached no interior node (near a clamped edge φ and ∂φ/∂x
@@ -360,25 +365,44 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
     let mut labels: Vec<Vec<Option<usize>>> = Vec::new();
     let on_edge = |q: Pose| on_plate_edge(body, plate, q);
     let mut dead_starts = 0;
-    for start in map_starts(body, mode, plate) {
-        // In parallel, collected in order (the map does not depend on the thread count).
-        let runs: Vec<sim::Run> = thetas
-            .par_iter()
-            .map(|&th| {
-                sim::run(body, &field, p, Pose { x: start[0], y: start[1], theta: th.to_radians() })
-            })
-            .collect();
-        if matches!(mode.node, Node::Grid(_)) && runs.iter().any(|r| on_edge(r.pose)) {
+    // A part of symmetry order m started at θ + 360°/m is the same body at the same place as
+    // at θ: its run is that run turned by 360°/m (to rounding), so only the first n/m start
+    // orientations of each point are simulated.
+    let m = body_symmetry_order(body) as usize;
+    let m = if m > 1 && n.is_multiple_of(m) { m } else { 1 };
+    let (distinct, turn) = (n / m, std::f64::consts::TAU / m as f64);
+    // Every start point's runs at once, in parallel (no wait for the slowest run of each
+    // point), collected in order: the map does not depend on the thread count.
+    let poses: Vec<Pose> = map_starts(body, mode, plate)
+        .iter()
+        .flat_map(|s| {
+            thetas[..distinct].iter().map(|th| Pose { x: s[0], y: s[1], theta: th.to_radians() })
+        })
+        .collect();
+    let all: Vec<(Pose, bool)> = poses
+        .par_iter()
+        .map(|&q| {
+            let r = sim::run(body, &field, p, q);
+            (r.pose, r.rested)
+        })
+        .collect();
+    for simulated in all.chunks(distinct.max(1)) {
+        // (end pose, rested) for each of the n start orientations.
+        let runs = (0..n).map(|i| {
+            let (q, rested) = simulated[i % distinct];
+            (Pose { theta: q.theta + (i / distinct) as f64 * turn, ..q }, rested)
+        });
+        if matches!(mode.node, Node::Grid(_)) && simulated.iter().any(|r| on_edge(r.0)) {
             dead_starts += 1;
             continue;
         }
         let mut label = Vec::with_capacity(n);
-        for r in &runs {
-            if !r.rested {
+        for (end, rested) in runs {
+            if !rested {
                 label.push(None);
                 continue;
             }
-            let fc = r.pose.theta.to_degrees().rem_euclid(period);
+            let fc = end.theta.to_degrees().rem_euclid(period);
             match reps.iter().position(|r| cdist(r.0 + r.1 / r.2 as f64, fc, period) < 2.0) {
                 Some(k) => {
                     let r = &mut reps[k];
