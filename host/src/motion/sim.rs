@@ -901,12 +901,7 @@ mod tests {
             mode("freq_hz = 50.0\ngain_left = 0.7\nnode = { kind = \"line\", angle_deg = 0.0 }");
         m.node = Node::Grid(Grid { nx, ny, size_mm: [300.0, 200.0], values });
         let f = FieldModel::new(&m, &plate(&m));
-        let holed = Part::new(
-            "h".into(),
-            vec![[0.0, 0.0], [40.0, 0.0], [31.0, 16.0], [5.0, 26.0]],
-            vec![vec![[10.0, 5.0], [14.0, 12.0], [20.0, 5.0]]],
-        )
-        .unwrap();
+        let holed = holed_part();
         let mut worst = [0.0f64; 4];
         for part in [rect(), holed] {
             let fine = Body::with_samples(&part, 40_000);
@@ -941,14 +936,19 @@ mod tests {
         );
     }
 
-    #[test]
-    fn hyperbola_outline_wrench_matches_the_area_integral() {
-        let holed = Part::new(
+    /// An irregular quadrilateral with a triangular hole: wrench accuracy tests.
+    fn holed_part() -> Part {
+        Part::new(
             "h".into(),
             vec![[0.0, 0.0], [40.0, 0.0], [31.0, 16.0], [5.0, 26.0]],
             vec![vec![[10.0, 5.0], [14.0, 12.0], [20.0, 5.0]]],
         )
-        .unwrap();
+        .unwrap()
+    }
+
+    #[test]
+    fn hyperbola_outline_wrench_matches_the_area_integral() {
+        let holed = holed_part();
         let mut worst = [0.0f64; 4];
         for (law, extra) in [("linear", ""), ("sign", ""), ("sine", "wavelength_mm = 80.0\n")] {
             let m = mode(&format!(
