@@ -3,25 +3,17 @@
 //! confirms; agreement with the static maps where the part does not turn while crossing; the
 //! map cache.
 
-use std::path::Path;
+mod support {
+    pub mod examples;
+}
 
 use chladni::model::part::Part;
 use chladni::model::plate::PlateModel;
-use chladni::model::plate_file::PlateFile;
 use chladni::motion::sim::{Body, FieldModel, Pose, simulate_plan};
 use chladni::planner::{
     self, Backend, DynSettings, MapCache, MapKind, PlanOptions, Problem, cdist, plan_period,
 };
-
-fn part(name: &str) -> Part {
-    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/parts"));
-    Part::load(&root.join(name)).unwrap()
-}
-
-fn plate_text(modes: &str) -> PlateModel {
-    let text = format!("[plate]\nname = \"t\"\nsize_mm = [300.0, 200.0]\n{modes}");
-    PlateModel::from_file(&PlateFile::parse(&text, "t").unwrap()).unwrap()
-}
+use support::examples::{part, plate_text};
 
 fn line(law: &str, gain_right: f64, angle: f64, offset: f64) -> String {
     // Distinct frequencies (modes at one frequency must be one node).

@@ -1,31 +1,16 @@
 //! Goal plans (docs/plan.md): a goal orientation, a fixed or goal position, least time, and
 //! several parts at once, each plan checked by simulating it (`motion`) from spread starts.
 
-use std::path::Path;
+mod support {
+    pub mod examples;
+}
 
 use chladni::model::part::Part;
 use chladni::model::plate::PlateModel;
-use chladni::model::plate_file::PlateFile;
 use chladni::motion::sim::{Body, FieldModel, Pose, SimStep, simulate_plan};
 use chladni::planner::position::{self, diameter, reachable_region};
 use chladni::planner::{self, Minimize, PlanFailure, PlanOptions, Synthesis, cdist};
-
-fn root() -> &'static Path {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
-}
-
-fn part(name: &str) -> Part {
-    Part::load(&root().join("examples/parts").join(name)).unwrap()
-}
-
-fn plate(name: &str) -> PlateModel {
-    PlateModel::load(&root().join("examples/plates").join(name)).unwrap()
-}
-
-fn plate_text(modes: &str) -> PlateModel {
-    let text = format!("[plate]\nname = \"t\"\nsize_mm = [300.0, 200.0]\n{modes}");
-    PlateModel::from_file(&PlateFile::parse(&text, "t").unwrap()).unwrap()
-}
+use support::examples::{part, plate, plate_text};
 
 /// A straight-node mode entry.
 fn line(freq: f64, angle: f64, offset: f64, extra: &str) -> String {

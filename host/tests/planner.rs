@@ -2,33 +2,18 @@
 //! fine grid, rotational symmetry, a case with no plan, fixed-point vs f64 maps, simulated
 //! (grid) maps vs the exact line analysis.
 
-use std::path::Path;
+mod support {
+    pub mod examples;
+}
 
 use chladni::model::part::Part;
 use chladni::model::plate::{Node, PlateModel};
-use chladni::model::plate_file::PlateFile;
 use chladni::motion::sim::{Body, FieldModel, Pose, SimStep, simulate_plan};
 use chladni::planner::{
     self, Backend, MapKind, PlanFailure, PlanOptions, Problem, cdist, symmetry_order,
 };
 use chladni::plate::solver::Grid;
-
-fn root() -> &'static Path {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
-}
-
-fn part(name: &str) -> Part {
-    Part::load(&root().join("examples/parts").join(name)).unwrap()
-}
-
-fn plate(name: &str) -> PlateModel {
-    PlateModel::load(&root().join("examples/plates").join(name)).unwrap()
-}
-
-fn plate_text(modes: &str) -> PlateModel {
-    let text = format!("[plate]\nname = \"t\"\nsize_mm = [300.0, 200.0]\n{modes}");
-    PlateModel::from_file(&PlateFile::parse(&text, "t").unwrap()).unwrap()
-}
+use support::examples::{part, plate, plate_text};
 
 fn polygon(n: usize, r: f64) -> Part {
     let pts = (0..n)
