@@ -255,7 +255,12 @@ mod tests {
         let faces_of: Vec<_> = f.of.iter().map(|o| (o.source, o.face)).collect();
         assert_eq!(faces_of, vec![(0, Some(Face::Up)), (0, Some(Face::Flipped)), (1, None)]);
         assert_eq!(f.self_mirrored, vec![("p".to_string(), 0.0)]);
-        let flips = Part { flips: true, ..tri };
+        let flips = Part::from_json(
+            r#"{"name": "t", "outline": [[0, 0], [30, 0], [8, 20]], "flips": true}"#,
+            "t",
+        )
+        .unwrap();
+        assert!(flips.flips && !tri.flips);
         assert_eq!(faces(&[flips], false).parts.len(), 2);
     }
 }
