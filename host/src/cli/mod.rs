@@ -9,6 +9,7 @@ use chladni::plot::{PlotError, check_extension};
 use clap::{Parser, Subcommand};
 
 mod analyze;
+mod calibrate;
 mod demo;
 mod device;
 mod emulator;

@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use chladni::model::part::Part;
+use chladni::model::part::mirror::{self, Face, Faces};
 use chladni::model::plan_file::PlanFile;
 use chladni::model::plate::PlateModel;
 use chladni::motion::montecarlo::{self, Report, Setup, Stats, Trials};
@@ -110,6 +111,10 @@ pub struct PlanArgs {
     /// or the static alignment function checked by simulation afterwards (static).
     #[arg(long, value_enum, default_value_t = Maps::Dynamic)]
     maps: Maps,
+    /// Every part may land on either face: plan for it and its mirror image at once (as a
+    /// part file's `"flips": true` does for that part; docs/plan.md, "Both faces").
+    #[arg(long)]
+    both_faces: bool,
 }
 
 /// `--maps`: which step maps straight-node modes use ([`MapKind`]).
@@ -124,15 +129,7 @@ impl PlanArgs {
     /// before any work.
     fn goals(&self) -> anyhow::Result<Vec<Option<f64>>> {
         let n = self.part.len();
-        if n > 1 && self.feed.is_some() {
-            return Err(bad(format!("--feed plans one part; {n} parts were given")));
-        }
-        if n > 1 && self.plot.is_some() {
-            return Err(bad(format!("--plot draws one part; {n} parts were given")));
-        }
-        if n > 1 && self.goal_pos.is_some() {
-            return Err(bad(format!("--goal-pos places one part; {n} parts were given")));
-        }
+        self.one_part_flags(n, "parts were given")?;
         let goal_flags = self.goal_deg.is_some() || self.fix_position || self.goal_pos.is_some();
         if self.feed.is_some() && (goal_flags || self.minimize != MinimizeArg::Steps) {
             return Err(bad(
@@ -151,6 +148,21 @@ impl PlanArgs {
         }
     }
 
+    /// `--feed`, `--plot` and `--goal-pos` take one part (`what`: "parts were given", or
+    /// "faces to plan" once both faces are counted).
+    fn one_part_flags(&self, n: usize, what: &str) -> anyhow::Result<()> {
+        if n > 1 && self.feed.is_some() {
+            return Err(bad(format!("--feed plans one part; {n} {what}")));
+        }
+        if n > 1 && self.plot.is_some() {
+            return Err(bad(format!("--plot draws one part; {n} {what}")));
+        }
+        if n > 1 && self.goal_pos.is_some() {
+            return Err(bad(format!("--goal-pos places one part; {n} {what}")));
+        }
+        Ok(())
+    }
+
     pub fn run(&self) -> anyhow::Result<ExitCode> {
         let mut inputs: Vec<(&str, &Path)> =
             self.part.iter().map(|p| ("part", p.as_path())).collect();
@@ -159,14 +171,22 @@ impl PlanArgs {
         if let Some(out) = &self.out {
             check_output("--out", out, &inputs)?;
         }
-        let goals = self.goals()?;
-        let parts =
+        let given_goals = self.goals()?;
+        let given =
             self.part.iter().map(|p| self.read.load(p)).collect::<anyhow::Result<Vec<_>>>()?;
         let plate = load_plate(&self.plate)?;
-        for part in &parts {
+        for part in &given {
             planner::check_input(part, &plate).map_err(|e| bad(e.to_string()))?;
         }
-        let name = parts.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join("+");
+        let name = given.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join("+");
+        let faces = mirror::faces(&given, self.both_faces);
+        self.one_part_flags(faces.parts.len(), "faces to plan (both faces of a part that flips)")?;
+        note_self_mirrored(&faces);
+        // A goal is the face-up one; a flipped face takes no goal.
+        let goals: Vec<Option<f64>> = (faces.of.iter())
+            .map(|o| if o.face == Some(Face::Flipped) { None } else { given_goals[o.source] })
+            .collect();
+        let parts = faces.parts.clone();
         if let (_, Some(warning)) = planner::plan_name(&name) {
             eprintln!("warning: {warning}");
         }
@@ -181,7 +201,12 @@ impl PlanArgs {
                 return Ok(ExitCode::from(1));
             }
         };
-        let file = syn.to_file(&plate, &name);
+        let mut file = syn.to_file(&plate, &name);
+        if let Some(preds) = &mut file.parts {
+            for (p, o) in preds.iter_mut().zip(&faces.of) {
+                p.face = o.face;
+            }
+        }
         file.to_plan(&DeviceLimits::DEFAULT)
             .map_err(|e| anyhow::anyhow!("planned steps refused: {e}"))?;
         let json = file.to_json();
@@ -242,6 +267,16 @@ impl PlanArgs {
             }
             None => planner::plan_parts(parts, plate, &opt, goals),
         }
+    }
+}
+
+/// Says which flipping parts are their own mirror image turned (one face planned for them).
+fn note_self_mirrored(faces: &Faces) {
+    for (name, turn) in &faces.self_mirrored {
+        eprintln!(
+            "note: {name} is its own mirror image turned by {turn:.2}°: its flipped face rests \
+             as the face up turned, so one face is planned and simulated"
+        );
     }
 }
 
@@ -404,14 +439,36 @@ pub struct SimulateArgs {
     /// Draw the random start poses in this rectangle (mm), where a feed-region plan holds.
     #[arg(long, num_args = 4, value_names = ["X0", "Y0", "X1", "Y1"], allow_negative_numbers = true)]
     feed: Option<Vec<f64>>,
+    /// Every part may land on either face: half of the trials drop it face up, half flipped
+    /// (its mirror image), reported per face; the plan must have been made for both faces.
+    #[arg(long)]
+    both_faces: bool,
 }
 
-/// One part's `chladni simulate --json` entry in a plan for several parts.
+/// One part's `chladni simulate --json` entry in a plan for several parts (or faces).
 #[derive(serde::Serialize)]
 struct PartReport<'a> {
+    /// The face, for a part simulated on both faces.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    face: Option<Face>,
     part: &'a str,
     #[serde(flatten)]
     report: Report,
+}
+
+/// The trials and seed of each face: a part dropped on both faces lands face up in the
+/// first ⌈N/2⌉ trials and flipped in the other ⌊N/2⌋, each face from its own seed (drawn
+/// from `seed`), so the faces' start poses are independent; any other part runs all N.
+fn face_trials(faces: &Faces, trials: u32, seed: u64) -> Vec<(u32, u64)> {
+    let mut rng = chladni::rng::Rng::seeded(seed);
+    let flipped_seed = rng.next_u64();
+    (faces.of.iter())
+        .map(|o| match o.face {
+            None => (trials, seed),
+            Some(Face::Up) => (trials.div_ceil(2), seed),
+            Some(Face::Flipped) => (trials / 2, flipped_seed),
+        })
+        .collect()
 }
 
 impl SimulateArgs {
@@ -426,15 +483,28 @@ impl SimulateArgs {
                 return Err(bad(format!("--plot draws one part; {} given", self.part.len())));
             }
         }
-        let parts =
+        let given =
             self.part.iter().map(|p| self.read.load(p)).collect::<anyhow::Result<Vec<_>>>()?;
         let plate = load_plate(&self.plate)?;
-        for part in &parts {
+        for part in &given {
             planner::check_input(part, &plate).map_err(|e| bad(e.to_string()))?;
         }
+        let faces = mirror::faces(&given, self.both_faces);
+        if self.plot.is_some() && faces.parts.len() > 1 {
+            return Err(bad(format!(
+                "--plot draws one part; {} faces to simulate",
+                faces.parts.len()
+            )));
+        }
+        if self.trials < 2 && faces.of.iter().any(|o| o.face.is_some()) {
+            return Err(bad("--trials 1: both faces need at least 2 trials (half each)".into()));
+        }
+        note_self_mirrored(&faces);
+        let parts = &faces.parts;
         let region = feed_region(&self.feed, &plate)?;
         let file = self.read_plan()?;
-        let views = self.part_views(&file, &parts)?;
+        let views = self.part_views(&file, parts, &faces)?;
+        let runs = face_trials(&faces, self.trials, self.seed);
         let steps = sim::plan_steps(&file, &plate).map_err(|e| match e {
             sim::PlanStepsError::NoMode(e) => bad(format!(
                 "plan step {}: no mode of {} at {} Hz (modes: {})",
@@ -448,7 +518,7 @@ impl SimulateArgs {
         let fields: Vec<FieldModel> =
             plate.modes.iter().map(|m| FieldModel::new(m, &plate)).collect();
         let mut reports = Vec::new();
-        for (part, view) in parts.iter().zip(&views) {
+        for ((part, view), &(trials, seed)) in parts.iter().zip(&views).zip(&runs) {
             let body = Body::new(part);
             let setup = Setup {
                 body: &body,
@@ -457,15 +527,15 @@ impl SimulateArgs {
                 steps: &steps,
                 feed: region.as_ref(),
             };
-            let trials = self.trials_of(&setup);
-            let stats = montecarlo::statistics(&trials, view, self.tol_deg);
+            let sims = self.trials_of(&setup, trials, seed);
+            let stats = montecarlo::statistics(&sims, view, self.tol_deg);
             if !self.json {
-                self.print(part, steps.len(), &stats);
+                self.print(part, steps.len(), &stats, (trials, seed));
             }
-            reports.push(Report::new(&stats, view, self.trials, self.seed, self.tol_deg));
+            reports.push(Report::new(&stats, view, trials, seed, self.tol_deg));
             if let Some(path) = &self.plot {
                 let target = view.final_orientation_deg.zip(view.period_deg);
-                let fig = plan_plot::trials_figures(path, part, &setup, &trials, target)
+                let fig = plan_plot::trials_figures(path, part, &setup, &sims, target)
                     .map_err(plot_error)?;
                 if !self.json {
                     println!("plots      {} {}", path.display(), fig.display());
@@ -473,50 +543,78 @@ impl SimulateArgs {
             }
         }
         if self.json {
-            self.print_json(&parts, reports)?;
+            self.print_json(&faces, reports)?;
         }
         Ok(ExitCode::SUCCESS)
     }
 
-    /// `--json`: one part, the report; several, `{"parts": [{"part": name, ...report}]}`.
-    fn print_json(&self, parts: &[Part], reports: Vec<Report>) -> anyhow::Result<()> {
-        if parts.len() == 1
+    /// `--json`: one part, the report; several (or both faces), `{"parts": [{"part": name,
+    /// "face"?: "up" | "flipped", ...report}]}`.
+    fn print_json(&self, faces: &Faces, reports: Vec<Report>) -> anyhow::Result<()> {
+        if faces.parts.len() == 1
             && let Some(r) = reports.first()
         {
             println!("{}", serde_json::to_string(r)?);
             return Ok(());
         }
-        let entries: Vec<PartReport> = parts
-            .iter()
+        let entries: Vec<PartReport> = (faces.parts.iter().zip(&faces.of))
             .zip(reports)
-            .map(|(p, report)| PartReport { part: &p.name, report })
+            .map(|((p, o), report)| PartReport { face: o.face, part: &p.name, report })
             .collect();
         println!("{}", serde_json::json!({ "parts": entries }));
         Ok(())
     }
 
-    /// The random trials of one part (a progress bar for 100 or more, not with --json).
-    fn trials_of(&self, setup: &Setup<'_>) -> Trials {
-        let bar = if !self.json && self.trials >= 100 {
-            indicatif::ProgressBar::new(self.trials as u64)
+    /// `trials` random trials of one part from `seed` (a progress bar for 100 or more, not
+    /// with --json).
+    fn trials_of(&self, setup: &Setup<'_>, trials: u32, seed: u64) -> Trials {
+        let bar = if !self.json && trials >= 100 {
+            indicatif::ProgressBar::new(trials as u64)
         } else {
             indicatif::ProgressBar::hidden()
         };
-        let trials = montecarlo::run_trials(setup, self.trials, self.seed, || bar.inc(1));
+        let trials = montecarlo::run_trials(setup, trials, seed, || bar.inc(1));
         bar.finish_and_clear();
         trials
     }
 
     /// The plan as each part sees it (its own predictions): a plan for several parts needs
     /// as many parts, in its order; a one-part plan, one part.
-    fn part_views(&self, file: &PlanFile, parts: &[Part]) -> anyhow::Result<Vec<PlanFile>> {
+    fn part_views(
+        &self,
+        file: &PlanFile,
+        parts: &[Part],
+        faces: &Faces,
+    ) -> anyhow::Result<Vec<PlanFile>> {
+        let preds = file.parts.as_deref().unwrap_or_default();
         let planned = file.parts.as_ref().map_or(1, Vec::len);
         if planned != parts.len() {
+            let planned_faces = preds.iter().any(|p| p.face == Some(Face::Flipped));
+            let hint = if planned_faces && faces.of.iter().all(|o| o.face != Some(Face::Flipped)) {
+                "; it was planned for both faces: give --both-faces (or \"flips\": true)"
+            } else {
+                " (give the parts in the plan's order)"
+            };
             return Err(bad(format!(
-                "plan {} is for {planned} part(s), {} given (give the parts in the plan's order)",
+                "plan {} is for {planned} part(s) or face(s), {} given{hint}",
                 self.plan.display(),
                 parts.len()
             )));
+        }
+        // Each face against the plan's entry for that face.
+        for (i, (p, o)) in preds.iter().zip(&faces.of).enumerate() {
+            if p.face != o.face {
+                let says = |f: Option<Face>| f.map_or("no face".to_string(), |f| f.to_string());
+                return Err(bad(format!(
+                    "plan {} entry {i} ({}) is for {}, the parts given make it {} ({}): plan and \
+                     simulate with the same parts and --both-faces",
+                    self.plan.display(),
+                    p.name,
+                    says(p.face),
+                    says(o.face),
+                    parts[i].name
+                )));
+            }
         }
         Ok((0..parts.len()).filter_map(|i| file.for_part(i)).collect())
     }
@@ -533,9 +631,9 @@ impl SimulateArgs {
     }
 
     /// The statistics as a table.
-    fn print(&self, part: &Part, steps: usize, stats: &Stats) {
+    fn print(&self, part: &Part, steps: usize, stats: &Stats, (trials, seed): (u32, u64)) {
         println!("part       {}", part.name);
-        println!("plan       {steps} step(s), {} trials, seed {}", self.trials, self.seed);
+        println!("plan       {steps} step(s), {trials} trials, seed {seed}");
         match (stats.success_rate, stats.orientation_error_deg) {
             (Some(s), Some(err)) => {
                 println!(

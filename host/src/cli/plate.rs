@@ -25,6 +25,8 @@ pub enum PlateCommand {
     Modes(ModesArgs),
     /// Node lines and curves from a photo of sand gathered on the nodes of a vibrating plate.
     FromPhoto(FromPhotoArgs),
+    /// Fit a mode's settle speed (speed_mm_s) to observed parts and write it to the plate file.
+    CalibrateSpeed(super::calibrate::CalibrateArgs),
 }
 
 impl PlateCommand {
@@ -32,6 +34,7 @@ impl PlateCommand {
         match self {
             PlateCommand::Modes(a) => a.run(),
             PlateCommand::FromPhoto(a) => a.run(),
+            PlateCommand::CalibrateSpeed(a) => a.run(),
         }
     }
 }

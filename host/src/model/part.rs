@@ -1,13 +1,14 @@
 //! Planar parts: import from JSON (format in docs/physics.md), SVG or DXF ([`dxf`]),
 //! validation, conversion to the fixed-point rings of `chladni_shared::analysis::rest`.
 //!
-//! JSON: `{"name": "...", "outline": [[x,y],...], "holes": [[[x,y],...],...]}`, mm, any
-//! winding, y up. SVG: every `<polygon>` and every sub-path of every `<path>` (straight
-//! segments only: M/L/H/V/Z, absolute or relative; `transform` attributes are applied) is a
-//! ring; the ring of largest area is the outline, the others are holes. SVG user units are
-//! taken as mm and SVG's y-down axis is flipped, so the part looks as drawn. DXF: closed
-//! polylines, circles and LINE/ARC chains of the model space (or of one layer), arcs
-//! flattened to a chord tolerance, scaled from `$INSUNITS` to mm (see [`dxf`]).
+//! JSON: `{"name": "...", "outline": [[x,y],...], "holes": [[[x,y],...],...], "flips": false}`,
+//! mm, any winding, y up; `flips: true` says the part can land on either face (plan and
+//! simulate it and its mirror image, [`mirror`]). SVG: every `<polygon>` and every sub-path
+//! of every `<path>` (straight segments only: M/L/H/V/Z, absolute or relative; `transform`
+//! attributes are applied) is a ring; the ring of largest area is the outline, the others are
+//! holes. SVG user units are taken as mm and SVG's y-down axis is flipped, so the part looks
+//! as drawn. DXF: closed polylines, circles and LINE/ARC chains of the model space (or of one
+//! layer), arcs flattened to a chord tolerance, scaled from `$INSUNITS` to mm (see [`dxf`]).
 //!
 //! After import every ring is checked and the winding normalised (outline counter-clockwise,
 //! holes clockwise). Errors name the problem, the ring and the vertex index (0-based, as in
@@ -24,6 +25,7 @@ pub use crate::model::geometry::{inside, signed_area};
 pub use dxf::{DxfError, ImportOptions};
 
 pub mod dxf;
+pub mod mirror;
 
 /// Coordinates beyond this (mm) are rejected as absurd.
 pub const MAX_COORD_MM: f64 = 1.0e5;
@@ -232,6 +234,10 @@ pub struct Part {
     pub outline: Vec<[f64; 2]>,
     /// Holes, clockwise.
     pub holes: Vec<Vec<[f64; 2]>>,
+    /// The part can land on either face (JSON `"flips": true`): plans and simulations take
+    /// its mirror image too ([`mirror`]). False for parts from SVG and DXF drawings and from
+    /// [`Part::new`].
+    pub flips: bool,
 }
 
 #[derive(serde::Deserialize)]
@@ -241,6 +247,8 @@ struct PartJson {
     outline: Vec<[f64; 2]>,
     #[serde(default)]
     holes: Vec<Vec<[f64; 2]>>,
+    #[serde(default)]
+    flips: bool,
 }
 
 impl Part {
@@ -276,7 +284,9 @@ impl Part {
     /// Parses the JSON part format; `default_name` is used when the file has none.
     pub fn from_json(text: &str, default_name: &str) -> Result<Part, PartError> {
         let j: PartJson = serde_json::from_str(text).map_err(|e| json_error(text, e))?;
-        Part::new(j.name.unwrap_or_else(|| default_name.to_string()), j.outline, j.holes)
+        let part =
+            Part::new(j.name.unwrap_or_else(|| default_name.to_string()), j.outline, j.holes)?;
+        Ok(Part { flips: j.flips, ..part })
     }
 
     /// Parses an SVG drawing (see the module docs).
@@ -385,7 +395,7 @@ impl Part {
             }
         }
         let outline = rings.remove(0);
-        Ok(Part { name, outline, holes: rings })
+        Ok(Part { name, outline, holes: rings, flips: false })
     }
 
     /// All rings (outline first).

@@ -147,6 +147,10 @@ pub struct PartPrediction {
     /// Its reachable final orientations (deg).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reachable_deg: Option<Vec<f64>>,
+    /// The face on the plate, for a part planned for both faces (`"up"` or `"flipped"`;
+    /// see `model::part::mirror`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub face: Option<crate::model::part::mirror::Face>,
 }
 
 fn default_name() -> String {

@@ -1062,6 +1062,7 @@ impl Synthesis {
                         final_position_mm: p.final_position_mm,
                         goal_deg: p.goal_deg,
                         reachable_deg: Some(p.reachable_deg.iter().copied().map(r4).collect()),
+                        face: None,
                     })
                     .collect(),
             );

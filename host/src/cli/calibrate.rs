@@ -1,0 +1,187 @@
+//! `chladni plate calibrate-speed PLATE.toml --mode NAME --observations obs.csv`: fits the
+//! mode's `speed_mm_s` to observed parts (`chladni::plate::calibrate`) and writes it into the
+//! plate file (docs/plate.md, "Calibrating the settle speed").
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use chladni::model::observations;
+use chladni::model::part::Part;
+use chladni::model::plate::PlateModel;
+use chladni::model::plate_edit;
+use chladni::output::write_atomic;
+use chladni::plate::calibrate::{self, CalPart, DEFAULT_WITHIN_MM, Fit, FitError};
+use clap::Args;
+use serde_json::json;
+
+use super::parse::positive;
+use super::{InputError, output_error};
+
+/// Fit a mode's settle speed (speed_mm_s) to observed parts and write it to the plate file.
+#[derive(Debug, Args)]
+pub struct CalibrateArgs {
+    /// Plate file (TOML); its `speed_mm_s` of the mode is replaced in place, the rest kept.
+    plate: PathBuf,
+    /// The mode observed (its name in the plate file, as `chladni plan` prints it).
+    #[arg(long, value_name = "NAME")]
+    mode: String,
+    /// Observations (CSV: part,x_mm,y_mm,theta_deg,t_s[,end_x_mm,end_y_mm,end_theta_deg]).
+    #[arg(long, value_name = "obs.csv")]
+    observations: PathBuf,
+    /// Part files the CSV's `part` column may name (by path, file name or part name); other
+    /// names are part files relative to the CSV's directory.
+    #[arg(long, value_name = "P.json", num_args = 1..)]
+    part: Vec<PathBuf>,
+    /// A part counts as on the node when its centroid is this close to where it comes to
+    /// rest (mm): the end of a time-to-node observation.
+    #[arg(long, value_name = "MM", default_value_t = DEFAULT_WITHIN_MM, value_parser = positive("within-mm"))]
+    within_mm: f64,
+    /// Fit and report, but leave the plate file as it is.
+    #[arg(long)]
+    dry_run: bool,
+    /// Print one JSON object (also for failures).
+    #[arg(long)]
+    json: bool,
+}
+
+/// A failure and its `--json` name.
+struct Failure {
+    kind: &'static str,
+    error: anyhow::Error,
+}
+
+fn bad(msg: String) -> Failure {
+    Failure { kind: "bad_input", error: InputError(msg).into() }
+}
+
+/// A fit that failed: undetermined (or no rows) is the observations' fault, bad input.
+fn fit_failure(e: FitError) -> Failure {
+    let (kind, input) = match e {
+        FitError::Undetermined(_) => ("undetermined", true),
+        FitError::Empty => ("empty", true),
+        FitError::NoRest { .. } => ("no_rest", false),
+        FitError::AtBound { .. } => ("at_bound", false),
+    };
+    let error = if input { InputError(e.to_string()).into() } else { e.into() };
+    Failure { kind, error }
+}
+
+impl CalibrateArgs {
+    pub fn run(&self) -> anyhow::Result<ExitCode> {
+        self.calibrate().map_err(|f| {
+            if self.json {
+                println!("{}", json!({"error": f.kind, "message": format!("{:#}", f.error)}));
+            }
+            f.error
+        })
+    }
+
+    fn calibrate(&self) -> Result<ExitCode, Failure> {
+        let plate = PlateModel::load(&self.plate).map_err(bad)?;
+        let Some(mode) = plate.modes.iter().position(|m| m.name == self.mode) else {
+            let names: Vec<String> =
+                plate.modes.iter().map(|m| format!("\"{}\"", m.name)).collect();
+            return Err(bad(format!(
+                "--mode {:?}: no such mode in {} (modes: {})",
+                self.mode,
+                self.plate.display(),
+                names.join(", ")
+            )));
+        };
+        let (parts, obs) = self.observations(&plate)?;
+        let cal: Vec<CalPart> = parts.iter().map(CalPart::new).collect();
+        let fit = calibrate::fit(&cal, &plate, mode, &obs, self.within_mm).map_err(fit_failure)?;
+        let m = &plate.modes[mode];
+        let written =
+            if self.dry_run { None } else { Some(self.write(m.freq_hz, fit.speed_mm_s)?) };
+        if self.json {
+            println!(
+                "{}",
+                json!({"plate": self.plate, "mode": m.name, "freq_hz": m.freq_hz,
+                    "previous_speed_mm_s": m.speed_mm_s, "within_mm": self.within_mm,
+                    "speed_mm_s": fit.speed_mm_s, "method": fit.method,
+                    "rms_time_s": fit.rms_time_s, "rms_pose_mm": fit.rms_pose_mm,
+                    "residuals": fit.residuals, "written": written})
+            );
+        } else {
+            self.print(&plate, mode, &fit, written.as_deref());
+        }
+        Ok(ExitCode::SUCCESS)
+    }
+
+    /// The CSV's rows, the parts they name and the observations (every problem bad input).
+    fn observations(
+        &self,
+        plate: &PlateModel,
+    ) -> Result<(Vec<Part>, Vec<calibrate::Observation>), Failure> {
+        let label = self.observations.display();
+        let given = (self.part.iter())
+            .map(|p| {
+                Part::load(p)
+                    .map(|part| (p.clone(), part))
+                    .map_err(|e| bad(format!("--part {}: {e}", p.display())))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let rows =
+            observations::load(&self.observations).map_err(|e| bad(format!("{label}: {e}")))?;
+        observations::check_on_plate(&rows, plate.size_mm)
+            .map_err(|e| bad(format!("{label}: {e}")))?;
+        let dir = self.observations.parent().unwrap_or(Path::new("."));
+        observations::resolve(&rows, dir, &given).map_err(|e| bad(format!("{label}: {e}")))
+    }
+
+    /// Writes the speed into the plate file (atomically; everything else kept).
+    fn write(&self, freq_hz: f64, speed: f64) -> Result<String, Failure> {
+        let text = std::fs::read_to_string(&self.plate)
+            .map_err(|e| bad(format!("cannot read {}: {e}", self.plate.display())))?;
+        let failed = |error: anyhow::Error| Failure { kind: "write", error };
+        let out = plate_edit::set_speed(&text, freq_hz, speed).map_err(|e| failed(e.into()))?;
+        write_atomic(&self.plate, out.as_bytes()).map_err(|e| failed(output_error(e)))?;
+        Ok(self.plate.display().to_string())
+    }
+
+    fn print(&self, plate: &PlateModel, mode: usize, fit: &Fit, written: Option<&str>) {
+        let m = &plate.modes[mode];
+        let (times, poses) = fit
+            .residuals
+            .iter()
+            .fold((0, 0), |(t, p), r| if r.kind == "time" { (t + 1, p) } else { (t, p + 1) });
+        println!(
+            "plate      {}, mode \"{}\" ({} Hz, amplitude {})",
+            plate.name, m.name, m.freq_hz, m.amplitude
+        );
+        println!(
+            "observed   {times} time(s) to the node (centroid within {} mm of its rest), {poses} pose(s) after a time",
+            self.within_mm
+        );
+        println!(
+            "fit        speed_mm_s = {} mm/s ({}; the file had {})",
+            fit.speed_mm_s, fit.method, m.speed_mm_s
+        );
+        println!(
+            "{:<6} {:<20} {:>10} {:>10} {:>10}",
+            "line", "part", "observed", "model", "residual"
+        );
+        for r in &fit.residuals {
+            let (obs, model, unit) = match (r.observed_s, r.model_s, r.model_pose) {
+                (Some(o), Some(md), _) => (format!("{o:.2} s"), format!("{md:.2} s"), "s"),
+                (_, _, Some(q)) => ("pose".into(), format!("({:.1}, {:.1})", q[0], q[1]), "mm"),
+                _ => (String::new(), String::new(), ""),
+            };
+            println!(
+                "{:<6} {:<20} {obs:>10} {model:>10} {:>+8.3} {unit}",
+                r.line, r.part, r.residual
+            );
+        }
+        if let Some(t) = fit.rms_time_s {
+            println!("rms        time {t:.3} s");
+        }
+        if let Some(p) = fit.rms_pose_mm {
+            println!("rms        pose {p:.3} mm");
+        }
+        match written {
+            Some(path) => println!("written    {path} (speed_mm_s of mode \"{}\")", m.name),
+            None => println!("written    nothing (--dry-run)"),
+        }
+    }
+}
