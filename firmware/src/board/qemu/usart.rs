@@ -8,6 +8,11 @@
 //! leaves the byte in RDR; QEMU then holds further input back (it only delivers while RXNE is
 //! clear), so no byte is ever lost, and reading re-enables the interrupt. TX polls TXE, which
 //! QEMU sets again as soon as a byte is written.
+//!
+//! Speed: QEMU hands the model one byte per pass of its main loop and is not told when RDR is
+//! read, so without help the link gets one byte per SysTick period (1 kB/s). After each read
+//! the handler wakes QEMU's main loop ([`super::time_driver::wake_host_loop`]), so the next
+//! byte comes as soon as the core has taken this one.
 
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::pipe::Pipe;
@@ -56,6 +61,7 @@ fn USART1() {
             usart.cr1().modify(|w| w.set_rxneie(false));
         } else {
             let byte = usart.rdr().read().dr() as u8;
+            super::time_driver::wake_host_loop();
             let _ = RX.try_write(&[byte]);
         }
     }
