@@ -97,7 +97,8 @@ impl SysTickDriver {
 /// and the simulated watchdog counts the ticks completed here as it counts interrupts.
 pub fn wake_host_loop() {
     let ticks = critical_section::with(|cs| {
-        let reload = SYST::get_reload();
+        // The reload `start` set (not read back: each register access costs QEMU an exit).
+        let reload = CYCLES_PER_TICK - 1;
         let current = SYST::get_current();
         // SAFETY: a write to SYST_CVR only restarts the count (any value clears it); this
         // critical section keeps the SysTick interrupt from running in between.
