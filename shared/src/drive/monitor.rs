@@ -201,7 +201,7 @@ impl Monitors {
         if i.retuned || self.armed_from == u64::MAX {
             // A change of the drive: judge collapse again once the plate's transient is over.
             self.reference = None;
-            self.armed_from = i.now + ms(self.cfg.check_ms);
+            self.armed_from = i.now.saturating_add(ms(self.cfg.check_ms));
         }
         if i.response_mmps2.is_some() {
             self.last_response = i.response_mmps2;
@@ -245,7 +245,7 @@ impl Monitors {
             // (and lags it): start again after the transient.
             Some(r) if (i.effort_q15 as u32) * 10 < r.effort_q15 as u32 * 9 => {
                 self.reference = None;
-                self.armed_from = i.now + ms(self.cfg.check_ms);
+                self.armed_from = i.now.saturating_add(ms(self.cfg.check_ms));
                 return None;
             }
             Some(r) if r.response_mmps2 >= y => r,
@@ -367,5 +367,75 @@ mod tests {
         assert_eq!(m.check(&idle), None);
         assert_eq!(m.check(&MonitorInput { now: 1_000_001, ..idle }), None);
         assert_eq!(m.check(&MonitorInput { now: 1_000_002, ..i }), None);
+    }
+
+    /// Open loop at a steady effort: `y` at sample `now`.
+    fn measured(now: u64, effort_q15: u16, y: u32) -> MonitorInput {
+        MonitorInput {
+            now,
+            driving: true,
+            effort_q15,
+            response_mmps2: Some(y),
+            closed: None,
+            retuned: false,
+        }
+    }
+
+    #[test]
+    fn collapse_waits_out_the_transient_and_follows_the_effort() {
+        let cfg = ControlConfig::DEFAULT;
+        let hold = ms(cfg.check_ms);
+        let mut m = Monitors::new(cfg);
+        let mut t = 0;
+        let feed = |m: &mut Monitors, t: &mut u64, effort, y| {
+            *t += 250;
+            m.data(*t);
+            m.check(&measured(*t, effort, y))
+        };
+        // Within check_ms of the start a collapse is not judged (the plate's transient).
+        assert_eq!(feed(&mut m, &mut t, 2000, 10_000), None);
+        assert_eq!(feed(&mut m, &mut t, 2000, 100), None);
+        while t < hold + 250 {
+            assert_eq!(feed(&mut m, &mut t, 2000, 10_000), None);
+        }
+        // Armed: 1/8 of the reference is the limit.
+        assert_eq!(feed(&mut m, &mut t, 2000, 1_300), None);
+        let f = feed(&mut m, &mut t, 2100, 1_200).expect("collapsed");
+        assert_eq!((f.cause, f.value), (FaultCause::LoopOpen, 1_200));
+        // An effort that falls by more than a tenth starts the reference again.
+        let mut m = Monitors::new(cfg);
+        while t < 4 * hold {
+            assert_eq!(feed(&mut m, &mut t, 2000, 10_000), None);
+        }
+        assert_eq!(feed(&mut m, &mut t, 1700, 1_000), None);
+        assert_eq!(feed(&mut m, &mut t, 1700, 1_000), None, "held off after the effort fell");
+    }
+
+    #[test]
+    fn short_of_the_model_is_saturation_after_saturation_ms() {
+        let cfg = ControlConfig::DEFAULT;
+        let mut m = Monitors::new(cfg);
+        let closed = ClosedInput {
+            target_mmps2: 10_000,
+            ramp_end: 0,
+            demand_q15: 9_000,
+            model_mmps2: 10_000,
+            ceiling_q15: 32_767,
+        };
+        let at = |now, y| MonitorInput { closed: Some(closed), ..measured(now, 9_000, y) };
+        m.data(1_000);
+        assert_eq!(m.check(&at(1_000, 9_900)), None);
+        // Just under half of the model from sample 2000 on: saturation saturation_ms later.
+        let start = 2_000;
+        let end = start + ms(cfg.saturation_ms);
+        let mut now = start;
+        while now < end {
+            m.data(now);
+            assert_eq!(m.check(&at(now, 4_999)), None, "{now}");
+            now += 250;
+        }
+        m.data(end);
+        let f = m.check(&at(end, 4_999)).expect("saturated");
+        assert_eq!((f.cause, f.value, f.at_sample), (FaultCause::Saturation, 9_000, end));
     }
 }
