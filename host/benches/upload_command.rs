@@ -66,11 +66,13 @@ fn main() {
     summary("chladni device info (whole command)", info);
     let ping = (0..20).map(|_| time_command(&["device", "ping", "--port", &port])).collect();
     summary("chladni device ping (whole command)", ping);
-    // Slots 0..8 in turn: each upload replaces a plan, as a user re-uploading does.
+    // Slots 0..8 in turn, each under its own name: each upload replaces a plan, as a user
+    // re-uploading does.
     let upload = (0..40u32)
         .map(|i| {
-            let slot = (i % 8).to_string();
-            time_command(&["device", "upload", "--port", &port, "--slot", &slot, plan_arg])
+            let (slot, name) = ((i % 8).to_string(), format!("bench-{}", i % 8));
+            let args = ["device", "upload", "--port", &port, "--slot", &slot, "--name", &name];
+            time_command(&[&args[..], &[plan_arg]].concat())
         })
         .collect();
     summary("chladni device upload, 256 steps (whole command)", upload);
