@@ -235,6 +235,7 @@ impl ClosedLoop {
                 target_mmps2: target,
                 ramp_end: c.ramp().end(),
                 demand_q15: c.demand_q15(),
+                model_mmps2: c.model_mmps2(),
                 ceiling_q15: input.effort_ceiling_q15,
             }),
             _ => None,
@@ -245,6 +246,7 @@ impl ClosedLoop {
             effort_q15: effort.unwrap_or(input.open_effort_q15),
             response_mmps2: measurement.map(|m| m.accel_mmps2),
             closed,
+            retuned: self.mark_switched,
         };
         if self.fault.is_none() {
             self.fault = self.monitors.check(&mi);

@@ -174,6 +174,12 @@ impl AmplitudeController {
         self.effort
     }
 
+    /// The reference model's response at the last update, mm/s²: what the plate should answer
+    /// by now (the fault monitors compare the response with it).
+    pub fn model_mmps2(&self) -> u32 {
+        (self.model.max(0.0) + 0.5) as u32
+    }
+
     /// The last effort asked for before clamping, Q15 (may exceed the ceiling).
     pub fn demand_q15(&self) -> u32 {
         if self.demand <= 0.0 { 0 } else { (self.demand + 0.5) as u32 }

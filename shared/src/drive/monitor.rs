@@ -4,9 +4,11 @@
 //! | monitor | trips when | value |
 //! |---|---|---|
 //! | over-acceleration | one measurement > `max_accel_mmps2` (at once) | mm/s² |
-//! | loop open | effort ≥ `open_loop_effort_q15` and response < `open_loop_mmps2` for `open_loop_ms` | mm/s² |
+//! | loop open (collapse) | a measurement below 1/[`COLLAPSE_RATIO`] of the reference response | mm/s² |
+//! | loop open (absent) | effort ≥ `open_loop_effort_q15` and response < `open_loop_mmps2` for `open_loop_ms` | mm/s² |
 //! | no data | driving and no sensor sample for `no_data_ms` | ms |
-//! | saturation | closed loop and the controller's demand ≥ its ceiling for `saturation_ms` | Q15 demand |
+//! | saturation (short) | closed loop, response below 1/[`SHORT_RATIO`] of the controller's model for `saturation_ms` | Q15 demand |
+//! | saturation (ceiling) | closed loop and the controller's demand ≥ its ceiling for `saturation_ms` | Q15 demand |
 //! | out of band | closed loop, settled, outside ± `abort_band_mdb` for `band_ms` | mdB |
 //! | sensor | a sensor error passed in (at once) | 0 |
 //!
@@ -15,6 +17,29 @@
 //! `band_ms` after the ramp's end, whichever is first, so a slow plate still gets watched.
 //! The loop check's own fault ([`crate::icd::sense::FaultCause::LoopCheck`]) is raised by
 //! [`crate::drive::closed_loop`], which runs the check.
+//!
+//! **Loop open, fast.** When the shaker's force goes, the plate rings down freely: its response
+//! falls as e^(−t/τ) (τ = 1/(ζω₀), 17.7 ms for the simulated plate) however hard it is driven.
+//! The collapse rule compares each measurement with the reference response: the largest one
+//! since the last change of the drive (a new frequency or phase, a new closed-loop setpoint,
+//! or the effort falling by more than a tenth), once `check_ms` have passed after that change
+//! (the plate's own transient has died down by then, as for the loop check). A response that
+//! falls to under 1/8 of it at an effort that did not fall is a shaker that no longer drives
+//! the plate: 1/8 is τ·ln 8 = 37 ms of free decay. Why 1/8 and not less: a clipping amplifier
+//! also cuts the response, to 4c/πA of it (c the clip level, A the drive's peak: 1/4.75 for the
+//! QEMU rig's 2 % clip under a 12 % drive), and off resonance the plate's ringing at its own
+//! frequency beats against the drive's, dipping the clipped response to about 1/6 for a
+//! moment; 1/8 keeps that a saturation. The floor is the plate's: a plate of higher Q rings
+//! longer, and no accelerometer-only rule can see its force gone sooner than its ring-down.
+//! The absent rule (absolute threshold, `open_loop_ms`) stays for drives that never had a
+//! response to compare with (a drive started on a cut cable).
+//!
+//! **Saturation, fast.** In closed loop the controller's reference model says what the
+//! response should be by now. A response under half of it for `saturation_ms` is a drive that
+//! does not get through in full (a clipping amplifier, a ceiling): it would take the integrator
+//! hundreds of milliseconds to climb to the ceiling and show it there (the ceiling rule, kept).
+//! A cut shaker also falls short of the model, so the collapse rule, checked first, names it
+//! before `saturation_ms` pass.
 //!
 //! Time is the DAC sample clock; a timer condition is tested once per block (5 ms), so a
 //! timed fault trips between its threshold and one block after it. Conditions on the response
@@ -37,6 +62,25 @@ pub struct MonitorInput {
     /// Closed loop: the target (final, not ramped), the ramp's end sample, and the
     /// controller's demand (Q15, before clamping) and ceiling.
     pub closed: Option<ClosedInput>,
+    /// The drive's waveform changed since the last check (a new frequency or phase).
+    pub retuned: bool,
+}
+
+/// The collapse rule's ratio: a response under 1/8 of the reference is loop open (see the
+/// module docs for why 8).
+pub const COLLAPSE_RATIO: u32 = 8;
+/// The least reference response the collapse rule judges by, in multiples of
+/// `open_loop_mmps2` (smaller responses are too close to the noise for a ratio).
+pub const COLLAPSE_MIN_MULTIPLE: u32 = 4;
+/// The short-saturation ratio: a response under half of the controller's model.
+pub const SHORT_RATIO: u32 = 2;
+
+/// The collapse rule's reference: the largest response since the last change, and the effort
+/// that gave it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Reference {
+    response_mmps2: u32,
+    effort_q15: u16,
 }
 
 /// The closed-loop part of [`MonitorInput`].
@@ -48,6 +92,8 @@ pub struct ClosedInput {
     pub ramp_end: u64,
     /// The controller's demand before clamping, Q15.
     pub demand_q15: u32,
+    /// The controller's reference model: the response expected by now, mm/s².
+    pub model_mmps2: u32,
     /// The effort ceiling, Q15.
     pub ceiling_q15: u16,
 }
@@ -59,6 +105,10 @@ pub struct Monitors {
     last_data: u64,
     open_since: Option<u64>,
     saturated_since: Option<u64>,
+    short_since: Option<u64>,
+    reference: Option<Reference>,
+    /// The collapse rule judges from this sample on (`check_ms` after the last change).
+    armed_from: u64,
     out_since: Option<u64>,
     settled: bool,
     warning: bool,
@@ -79,6 +129,10 @@ impl Monitors {
             last_data: 0,
             open_since: None,
             saturated_since: None,
+            short_since: None,
+            reference: None,
+            // Armed `check_ms` after the first check that drives.
+            armed_from: u64::MAX,
             out_since: None,
             settled: false,
             warning: false,
@@ -113,6 +167,9 @@ impl Monitors {
         self.settled = false;
         self.out_since = None;
         self.warning = false;
+        self.short_since = None;
+        self.reference = None;
+        self.armed_from = u64::MAX;
     }
 
     /// Whether the response is outside the warn band (settled, closed loop).
@@ -141,6 +198,11 @@ impl Monitors {
             self.was_driving = true;
             self.last_data = self.last_data.max(i.now);
         }
+        if i.retuned || self.armed_from == u64::MAX {
+            // A change of the drive: judge collapse again once the plate's transient is over.
+            self.reference = None;
+            self.armed_from = i.now.saturating_add(ms(self.cfg.check_ms));
+        }
         if i.response_mmps2.is_some() {
             self.last_response = i.response_mmps2;
         }
@@ -149,6 +211,9 @@ impl Monitors {
         {
             return Some(fault(FaultCause::OverAcceleration, y as i64));
         }
+        if let Some(y) = self.collapse(i) {
+            return Some(fault(FaultCause::LoopOpen, y as i64));
+        }
         if let Some(f) = self.loop_open(i) {
             return Some(fault(FaultCause::LoopOpen, f as i64));
         }
@@ -156,11 +221,57 @@ impl Monitors {
         if gap >= ms(self.cfg.no_data_ms) {
             return Some(fault(FaultCause::NoData, (gap / SAMPLES_PER_MS as u64) as i64));
         }
-        let c = i.closed?;
+        let Some(c) = i.closed else {
+            self.short_since = None;
+            return None;
+        };
+        if let Some(d) = self.short(i, &c) {
+            return Some(fault(FaultCause::Saturation, d as i64));
+        }
         if let Some(d) = self.saturation(i.now, &c) {
             return Some(fault(FaultCause::Saturation, d as i64));
         }
         self.band(i, &c).map(|mdb| fault(FaultCause::OutOfBand, mdb as i64))
+    }
+
+    /// The collapse rule (see the module docs): the response now, if it collapsed.
+    fn collapse(&mut self, i: &MonitorInput) -> Option<u32> {
+        let y = i.response_mmps2?;
+        if i.now < self.armed_from {
+            return None;
+        }
+        let reference = match self.reference {
+            // The effort fell by more than a tenth: the response falls with it, legitimately
+            // (and lags it): start again after the transient.
+            Some(r) if (i.effort_q15 as u32) * 10 < r.effort_q15 as u32 * 9 => {
+                self.reference = None;
+                self.armed_from = i.now.saturating_add(ms(self.cfg.check_ms));
+                return None;
+            }
+            Some(r) if r.response_mmps2 >= y => r,
+            _ => {
+                self.reference = Some(Reference { response_mmps2: y, effort_q15: i.effort_q15 });
+                return None;
+            }
+        };
+        let floor = self.cfg.open_loop_mmps2.saturating_mul(COLLAPSE_MIN_MULTIPLE);
+        let collapsed = reference.response_mmps2 >= floor
+            && y.saturating_mul(COLLAPSE_RATIO) < reference.response_mmps2;
+        collapsed.then_some(y)
+    }
+
+    /// The short-saturation rule: the demand, once the response has stayed under half of the
+    /// controller's model for `saturation_ms`.
+    fn short(&mut self, i: &MonitorInput, c: &ClosedInput) -> Option<u32> {
+        if let Some(y) = i.response_mmps2 {
+            if y.saturating_mul(SHORT_RATIO) >= c.model_mmps2 {
+                self.short_since = None;
+                return None;
+            }
+            self.short_since.get_or_insert(i.now);
+        }
+        let since = self.short_since?;
+        (i.now - since >= ms(self.cfg.saturation_ms)).then_some(c.demand_q15)
     }
 
     fn loop_open(&mut self, i: &MonitorInput) -> Option<u32> {
@@ -247,6 +358,7 @@ mod tests {
             effort_q15: 0,
             response_mmps2: None,
             closed: None,
+            retuned: false,
         };
         assert_eq!(m.check(&i).map(|f| f.cause), Some(FaultCause::Sensor(SensorFault::Bus)));
         // Not driving: a sensor error is forgotten, and no no-data fault however long.
@@ -255,5 +367,75 @@ mod tests {
         assert_eq!(m.check(&idle), None);
         assert_eq!(m.check(&MonitorInput { now: 1_000_001, ..idle }), None);
         assert_eq!(m.check(&MonitorInput { now: 1_000_002, ..i }), None);
+    }
+
+    /// Open loop at a steady effort: `y` at sample `now`.
+    fn measured(now: u64, effort_q15: u16, y: u32) -> MonitorInput {
+        MonitorInput {
+            now,
+            driving: true,
+            effort_q15,
+            response_mmps2: Some(y),
+            closed: None,
+            retuned: false,
+        }
+    }
+
+    #[test]
+    fn collapse_waits_out_the_transient_and_follows_the_effort() {
+        let cfg = ControlConfig::DEFAULT;
+        let hold = ms(cfg.check_ms);
+        let mut m = Monitors::new(cfg);
+        let mut t = 0;
+        let feed = |m: &mut Monitors, t: &mut u64, effort, y| {
+            *t += 250;
+            m.data(*t);
+            m.check(&measured(*t, effort, y))
+        };
+        // Within check_ms of the start a collapse is not judged (the plate's transient).
+        assert_eq!(feed(&mut m, &mut t, 2000, 10_000), None);
+        assert_eq!(feed(&mut m, &mut t, 2000, 100), None);
+        while t < hold + 250 {
+            assert_eq!(feed(&mut m, &mut t, 2000, 10_000), None);
+        }
+        // Armed: 1/8 of the reference is the limit.
+        assert_eq!(feed(&mut m, &mut t, 2000, 1_300), None);
+        let f = feed(&mut m, &mut t, 2100, 1_200).expect("collapsed");
+        assert_eq!((f.cause, f.value), (FaultCause::LoopOpen, 1_200));
+        // An effort that falls by more than a tenth starts the reference again.
+        let mut m = Monitors::new(cfg);
+        while t < 4 * hold {
+            assert_eq!(feed(&mut m, &mut t, 2000, 10_000), None);
+        }
+        assert_eq!(feed(&mut m, &mut t, 1700, 1_000), None);
+        assert_eq!(feed(&mut m, &mut t, 1700, 1_000), None, "held off after the effort fell");
+    }
+
+    #[test]
+    fn short_of_the_model_is_saturation_after_saturation_ms() {
+        let cfg = ControlConfig::DEFAULT;
+        let mut m = Monitors::new(cfg);
+        let closed = ClosedInput {
+            target_mmps2: 10_000,
+            ramp_end: 0,
+            demand_q15: 9_000,
+            model_mmps2: 10_000,
+            ceiling_q15: 32_767,
+        };
+        let at = |now, y| MonitorInput { closed: Some(closed), ..measured(now, 9_000, y) };
+        m.data(1_000);
+        assert_eq!(m.check(&at(1_000, 9_900)), None);
+        // Just under half of the model from sample 2000 on: saturation saturation_ms later.
+        let start = 2_000;
+        let end = start + ms(cfg.saturation_ms);
+        let mut now = start;
+        while now < end {
+            m.data(now);
+            assert_eq!(m.check(&at(now, 4_999)), None, "{now}");
+            now += 250;
+        }
+        m.data(end);
+        let f = m.check(&at(end, 4_999)).expect("saturated");
+        assert_eq!((f.cause, f.value, f.at_sample), (FaultCause::Saturation, 9_000, end));
     }
 }

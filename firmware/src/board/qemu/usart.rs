@@ -6,8 +6,20 @@
 //!
 //! RX is interrupt-driven into a pipe. When the pipe is full the interrupt masks itself and
 //! leaves the byte in RDR; QEMU then holds further input back (it only delivers while RXNE is
-//! clear), so no byte is ever lost, and reading re-enables the interrupt. TX polls TXE, which
+//! clear), so no byte is ever lost, and the next read re-enables the interrupt. TX polls TXE, which
 //! QEMU sets again as soon as a byte is written.
+//!
+//! Speed: QEMU hands the model one byte per pass of its main loop and is not told when RDR is
+//! read, so without help the link gets one byte per SysTick period (1 kB/s). After each read
+//! the handler wakes QEMU's main loop ([`super::time_driver::wake_host_loop`]), so the next
+//! byte comes as soon as the core has taken this one.
+//!
+//! Speed: QEMU hands the model one byte per pass of its main loop and is not told when RDR is
+//! read, so without help the link gets one byte per SysTick period (1 kB/s). After each read
+//! the handler wakes QEMU's main loop ([`super::time_driver::wake_host_loop`]), so the next
+//! byte comes as soon as the core has taken this one.
+
+use core::sync::atomic::{AtomicBool, Ordering};
 
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::pipe::Pipe;
@@ -15,6 +27,10 @@ use stm32_metapac::{self as pac, interrupt};
 
 const RX_CAPACITY: usize = 512;
 static RX: Pipe<CriticalSectionRawMutex, RX_CAPACITY> = Pipe::new();
+/// The handler masked itself (back-pressure): `read` must unmask it. Kept so that a read in
+/// the common case touches no USART register (each access is an exit from QEMU's translated
+/// code, and `read` runs once per byte in a burst).
+static MASKED: AtomicBool = AtomicBool::new(false);
 
 /// The USART1 link (PB6 TX, PB7 RX on the board; a host chardev in QEMU).
 pub struct Usart1 {
@@ -54,8 +70,10 @@ fn USART1() {
         if RX.is_full() {
             // Back-pressure: leave the byte in RDR; `read` unmasks us once there is room.
             usart.cr1().modify(|w| w.set_rxneie(false));
+            MASKED.store(true, Ordering::Release);
         } else {
             let byte = usart.rdr().read().dr() as u8;
+            super::time_driver::wake_host_loop();
             let _ = RX.try_write(&[byte]);
         }
     }
@@ -69,12 +87,14 @@ impl embedded_io_async::ErrorType for Usart1 {
 impl embedded_io_async::Read for Usart1 {
     async fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
         let n = RX.read(buf).await;
-        pac::USART1.cr1().modify(|w| w.set_rxneie(true));
-        // A byte the handler left in RDR when the pipe was full is still there: raise the
-        // interrupt for it by hand rather than count on the USART model raising it again
-        // when RXNEIE is set while RXNE already is.
-        if pac::USART1.isr().read().rxne() {
-            cortex_m::peripheral::NVIC::pend(pac::Interrupt::USART1);
+        if MASKED.swap(false, Ordering::AcqRel) {
+            pac::USART1.cr1().modify(|w| w.set_rxneie(true));
+            // The byte the handler left in RDR when the pipe was full is still there: raise
+            // the interrupt for it by hand rather than count on the USART model raising it
+            // again when RXNEIE is set while RXNE already is.
+            if pac::USART1.isr().read().rxne() {
+                cortex_m::peripheral::NVIC::pend(pac::Interrupt::USART1);
+            }
         }
         Ok(n)
     }
