@@ -167,7 +167,7 @@ fn monitor_prints_one_json_object_per_sample_and_stops_at_count() {
     assert_eq!(lines[4]["left"], 0);
     assert_eq!(lines[0]["state"], "idle");
     // The status's keys (`device status --json`) and the stream's `seq` and `left`.
-    assert_eq!(lines[0].as_object().unwrap().len(), 18, "{}", lines[0]);
+    assert_eq!(lines[0].as_object().unwrap().len(), 20, "{}", lines[0]);
 }
 
 #[test]
