@@ -5,6 +5,8 @@
 #   scripts/firmware.sh clippy qemu|stm32l475
 #   scripts/firmware.sh test   qemu             -> on-target tests in QEMU
 #   scripts/firmware.sh size   qemu|stm32l475
+#   scripts/firmware.sh sizes  all             -> the size table of docs/firmware.md for every
+#                                                  board; `sizes doc` writes it into the doc
 #   scripts/firmware.sh run    qemu             -> boot in QEMU, defmt log on stdout (Ctrl-C ends;
 #                                                  `chladni emulator` is the one with a link)
 #   scripts/firmware.sh run    stm32l475        -> flash the board with probe-rs, then its defmt
@@ -16,8 +18,27 @@
 # take it like stm32l475.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cmd=${1:?usage: firmware.sh build|clippy|test|size|run|bench BOARD}
-board=${2:?usage: firmware.sh build|clippy|test|size|run|bench BOARD}
+cmd=${1:?usage: firmware.sh build|clippy|test|size|sizes|run|bench BOARD}
+board=${2:?usage: firmware.sh build|clippy|test|size|sizes|run|bench BOARD}
+# The size table of docs/firmware.md, one row per board (a markdown table on stdout).
+size_table() {
+  echo "| image | flash | static RAM | stack (SRAM2) |"
+  echo "|-------|------:|-----------:|--------------:|"
+  for b in qemu stm32l475 stm32l475-pwm; do
+    "$0" size "$b" | awk -v b="$b" '{printf "| %s | %d B | %d B | 32768 B |\n", b, $4, $8}'
+  done
+}
+if [ "$cmd" = sizes ]; then
+  case "$board" in
+    all) size_table; exit ;;
+    doc) table=$(size_table) || exit 1
+         # Between the markers in docs/firmware.md, nothing else touched.
+         awk -v table="$table" '/<!-- sizes:begin/ {print; print table; skip=1; next}
+              /<!-- sizes:end/ {skip=0} !skip {print}' docs/firmware.md >docs/firmware.md.new &&
+         mv docs/firmware.md.new docs/firmware.md && printf '%s\n' "$table"; exit ;;
+    *) echo "usage: firmware.sh sizes all|doc" >&2; exit 2 ;;
+  esac
+fi
 case "$board" in
   qemu|stm32l475) features="board-$board" ;;
   stm32l475-pwm) features="board-stm32l475,drive-pwm" ;;

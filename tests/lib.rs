@@ -8,7 +8,7 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
 use chladni::controller::client::{DeviceClient, DeviceError};
-use chladni::controller::emulator::{Emulator, EmulatorConfig};
+use chladni::controller::emulator::{EmulatedSpeed, Emulator, EmulatorConfig};
 use chladni_shared::icd::link::{Board, StatusReport};
 use chladni_shared::icd::plan::{Plan, Step};
 
@@ -115,11 +115,17 @@ pub fn flash_path(name: &str) -> PathBuf {
 
 /// Builds the QEMU firmware if needed and starts it; panics with the log's tail on failure.
 pub fn start_emulator(name: &str) -> Emulator {
+    start_emulator_at(name, None)
+}
+
+/// [`start_emulator`] with the core at a fixed emulated speed (`chladni emulator --mips`).
+pub fn start_emulator_at(name: &str, speed: Option<EmulatedSpeed>) -> Emulator {
     let log = log_path(name);
     let config = EmulatorConfig {
         log_file: Some(log.clone()),
         time_limit: Some(EMULATOR_TIME_LIMIT),
         flash_file: Some(flash_path(name)),
+        speed,
         ..Default::default()
     };
     match Emulator::start(&config) {

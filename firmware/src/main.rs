@@ -1,6 +1,10 @@
 //! Controller firmware entry point: bring the board up, then run one task per concern: the
 //! link (requests, store, telemetry), the drive (samples, closed loop, faults), the sense task
-//! (the accelerometer) and the watchdog (fed only while the other three check in).
+//! (the accelerometer), the watchdog (fed only while the other three check in) and the stack
+//! gauge (the painted stack's high water, into the status).
+//!
+//! The drive runs on the board's interrupt executor, above all the others (thread mode), so a
+//! long request on the link never makes a refill late.
 //!
 //! The image exists only for the controller (`target_os = "none"`); a host build of this
 //! binary says where to build it instead.
@@ -26,6 +30,8 @@ mod image {
         Supervisor::new(TaskSet::of(&[Task::Link, Task::Drive, Task::Sense]));
     /// How often the watchdog task looks at the check-ins (the dog's timeout is 1 s).
     const WATCHDOG_POLL: Duration = Duration::from_millis(250);
+    /// How often the stack gauge reads the painted stack (a read is ≤ 8 Ki words).
+    const STACK_POLL: Duration = Duration::from_millis(200);
 
     #[embassy_executor::task]
     async fn link_task(mut port: board::Link, flash: Option<board::Flash>) -> ! {
@@ -57,6 +63,21 @@ mod image {
     }
 
     #[embassy_executor::task]
+    async fn stack_task() -> ! {
+        let mut reported = 0;
+        loop {
+            let used = board::stack::high_water();
+            DRIVE.set_stack_high_water(used);
+            // Logged in 256-byte steps, so a slowly deepening stack does not flood the log.
+            if used >= reported + 256 {
+                reported = used;
+                defmt::info!("stack: high water {=u32} B of {=u32}", used, board::stack::size());
+            }
+            embassy_time::Timer::after(STACK_POLL).await;
+        }
+    }
+
+    #[embassy_executor::task]
     async fn watchdog_task(dog: board::Watchdog) -> ! {
         app::watchdog::watchdog_task(&SUPERVISOR, dog, WATCHDOG_POLL).await
     }
@@ -73,11 +94,13 @@ mod image {
             chladni_firmware::BUILD_ID,
             cause
         );
+        let drive = board::start_drive_executor();
+        drive.spawn(drive_task(board.drive).expect("drive task: spawn pool exhausted"));
         board::run(|spawner| {
             spawner.spawn(
                 link_task(board.link, board.flash).expect("link task: spawn pool exhausted"),
             );
-            spawner.spawn(drive_task(board.drive).expect("drive task: spawn pool exhausted"));
+            spawner.spawn(stack_task().expect("stack task: spawn pool exhausted"));
             spawner.spawn(sense_task(board.sensor).expect("sense task: spawn pool exhausted"));
             spawner
                 .spawn(watchdog_task(board.watchdog).expect("watchdog task: spawn pool exhausted"));

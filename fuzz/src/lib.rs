@@ -151,6 +151,8 @@ fn status() -> StatusReport {
         measured: Some(Measurement { accel_mmps2: 19_987, phase_mdeg: -12_345 }),
         clock: 1_000_000,
         commands: 5,
+        least_slack_us: Some(1_234),
+        stack_high_water: 12_000,
         ..StatusReport::IDLE
     }
 }

@@ -43,11 +43,13 @@ fn status_info_ping_config_and_list_print_their_json_shapes() {
             "elapsed_ms",
             "fault",
             "freq_hz",
+            "least_slack_us",
             "phase_deg",
             "plan",
             "remaining_ms",
             "reset_cause",
             "run",
+            "stack_high_water",
             "state",
             "step",
             "target_accel_mps2",
@@ -165,7 +167,7 @@ fn monitor_prints_one_json_object_per_sample_and_stops_at_count() {
     assert_eq!(lines[4]["left"], 0);
     assert_eq!(lines[0]["state"], "idle");
     // The status's keys (`device status --json`) and the stream's `seq` and `left`.
-    assert_eq!(lines[0].as_object().unwrap().len(), 18, "{}", lines[0]);
+    assert_eq!(lines[0].as_object().unwrap().len(), 20, "{}", lines[0]);
 }
 
 #[test]

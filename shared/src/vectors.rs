@@ -167,7 +167,7 @@ fn drive_link_frames() -> Result<u64, &'static str> {
         let env = Envelope { version: link::PROTOCOL_VERSION, session: 77, id: i as u32 + 1, body };
         d.bytes(link::encode(&env, &mut buf).map_err(|_| "encode failed")?);
     }
-    let mut runner = Runner::new(DeviceLimits::DEFAULT);
+    let mut runner = Runner::<Plan>::new(DeviceLimits::DEFAULT);
     runner.drive(55_000, Level::Drive(1000)).map_err(|_| "drive refused")?;
     let responses = [
         Response::Status(runner.status()),

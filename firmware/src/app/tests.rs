@@ -25,10 +25,15 @@ struct VecOutput {
 }
 
 impl SampleOutput for VecOutput {
-    async fn write_block(&mut self, block: &[u16]) -> Result<(), Underrun> {
+    async fn write_block(&mut self, block: &[u16]) -> Result<Option<u32>, Underrun> {
         self.samples.extend_from_slice(block);
         self.blocks += 1;
-        if self.dry.contains(&(self.blocks - 1)) { Err(Underrun) } else { Ok(()) }
+        if self.dry.contains(&(self.blocks - 1)) {
+            Err(Underrun)
+        } else {
+            // A slack that shrinks block by block, so the least is the last one's.
+            Ok(Some(5_000 - 10 * self.blocks as u32))
+        }
     }
 }
 
@@ -144,6 +149,35 @@ fn a_submitted_plan_shows_up_in_status_with_its_run_number_and_remaining_time() 
     assert_eq!(out.samples.len(), 8 * BLOCK_LEN);
     assert!(out.samples.iter().any(|&c| c != DAC_MID), "the plan drove the output");
     assert_eq!(*out.samples.last().unwrap(), DAC_MID, "ends at mid-scale");
+}
+
+/// Plans change hands through the two plan buffers: a second plan staged while the first runs
+/// starts at the next block; a third before the drive took the second is refused, and once
+/// taken, the first's buffer is free again for the next. The status keeps the least slack.
+#[test]
+fn plans_switch_through_two_buffers_and_the_least_slack_is_kept() {
+    let drive = DriveShared::new();
+    let mut core = DriveCore::new(&drive);
+    let mut out = VecOutput::default();
+    assert_eq!(drive.status().least_slack_us, None);
+    let a = plan("a", &[(100_000, 10_000, 1_000, 2)]);
+    let b = plan("b", &[(150_000, 9_000, 1_000, 2), (160_000, 9_000, 500, 2)]);
+    let c = plan("c", &[(170_000, 8_000, 1_000, 2)]);
+    drive.run_plan(&a).unwrap();
+    play(&mut core, &mut out, 2);
+    assert_eq!(drive.status().plan.as_deref(), Some("a"));
+    let run_b = drive.run_plan(&b).unwrap();
+    assert_eq!(drive.run_plan(&c), Err(DriveError::QueueFull), "b still waits");
+    play(&mut core, &mut out, 1);
+    let s = drive.status();
+    assert_eq!((s.plan.as_deref(), s.run, s.freq_mhz), (Some("b"), run_b, 150_000));
+    assert_eq!(s.remaining_samples, (1_500 * SAMPLES_PER_MS) as u64 - BLOCK_LEN as u64);
+    // a's buffer was released when b started: c goes into it and runs.
+    drive.run_plan(&c).unwrap();
+    play(&mut core, &mut out, 1);
+    assert_eq!(drive.status().plan.as_deref(), Some("c"));
+    // VecOutput reports 5000 - 10·n µs for its n-th block: the least is the last one's.
+    assert_eq!(drive.status().least_slack_us, Some(5_000 - 10 * out.blocks as u32));
 }
 
 #[test]

@@ -35,3 +35,5 @@ const fn board_tag(name: &str) -> [u8; BOARD_TAG_LEN] {
     }
     tag
 }
+
+pub mod stack;

@@ -21,14 +21,15 @@
 //! - A panic, HardFault or unexpected NMI parks the output at mid-scale first, then detaches
 //!   from USB ([`failsafe`]).
 //!
-//! Scheduling: every task (link, drive, USB device, ...) runs on one thread-mode executor, so
-//! none preempts another; the drive must refill half its ring within one block (5 ms). The USB
-//! task only wakes on bus events (an interrupt) and handles each in microseconds (descriptor
-//! copies, at most 64-byte FIFO transfers), as do the link's reads and writes; flash operations
-//! wait for the FLASH interrupt instead of spinning. The interrupt handlers (OTG_FS, FLASH,
-//! DMA1_CHANNEL3..5, I2C2_EV/ER, EXTI15_10) all keep embassy-stm32's default priority, so
-//! they never preempt each other, and each does a bounded amount of work (OTG_FS: drain the RX
-//! FIFO, at most a few packets; I2C2 and its DMA: wake the waiting task).
+//! Scheduling: the drive task runs on embassy's `InterruptExecutor`, polled from UART4's
+//! vector (UART4 is unused on this board) at NVIC priority 14 ([`start_drive_executor`]);
+//! everything else (link, store, USB device, sense, watchdog) runs on the thread-mode executor
+//! below it, so no link or store work can delay a refill: the drive must refill half its ring
+//! within one block (5 ms) and now only waits for interrupt handlers and critical sections.
+//! The interrupt handlers (OTG_FS, FLASH, DMA1_CHANNEL3..5, I2C2_EV/ER, EXTI15_10, TIM2 for
+//! embassy-time) keep embassy-stm32's default priority 0, above the drive, so they never
+//! preempt each other, and each does a bounded amount of work (OTG_FS: drain the RX FIFO, at
+//! most a few packets; I2C2 and its DMA: wake the waiting task).
 //! The DMA keeps playing the ring whatever the CPU does.
 //!
 //! Hardware status: everything USB and flash-related here is built and checked against the
@@ -134,7 +135,9 @@ bind_interrupts!(struct Irqs {
 /// Brings the board up: clocks, the debug console's banner, USB, flash bank 2, then the drive
 /// output (last, so that nothing blocking runs once its DMA plays).
 pub fn init() -> Board {
-    // The reset flags first, whoever asks for them later: reading also clears them.
+    // The stack first (nothing deep has run yet), then the reset flags, whoever asks for them
+    // later: reading also clears them.
+    super::stack::paint();
     let cause = reset_cause();
     let p = embassy_stm32::init(clocks::config());
     clocks::check();
@@ -157,6 +160,32 @@ pub fn init() -> Board {
 /// Spawns this board's background tasks: the USB device ([`usb::run`]). Call once.
 pub fn spawn_tasks(spawner: embassy_executor::Spawner, tasks: BoardTasks) {
     spawner.spawn(usb::run(tasks.usb).expect("usb task: spawn pool exhausted"));
+}
+
+/// The slack of a refill handed to a DMA ring of `capacity` samples with `free` of them free
+/// (`WritableRingBuffer::len`): the samples still queued ahead of it, in µs at the sample rate;
+/// `None` if the ring has just overrun (the write then reports the underrun).
+fn slack_us<E>(capacity: usize, free: Result<usize, E>) -> Option<u32> {
+    let queued = capacity.saturating_sub(free.ok()?) as u64;
+    Some((queued * 1_000_000 / u64::from(chladni_shared::drive::dds::SAMPLE_RATE)) as u32)
+}
+
+/// The drive's executor (see the module docs).
+static DRIVE_EXECUTOR: embassy_executor::InterruptExecutor =
+    embassy_executor::InterruptExecutor::new();
+
+#[interrupt]
+unsafe fn UART4() {
+    // SAFETY: the executor's own interrupt handler, and nothing else calls it.
+    unsafe { DRIVE_EXECUTOR.on_interrupt() }
+}
+
+/// Starts the drive's interrupt executor at NVIC priority 14 (below every interrupt handler,
+/// above thread mode) and returns its spawner. Call once.
+pub fn start_drive_executor() -> embassy_executor::SendSpawner {
+    use embassy_stm32::interrupt::{InterruptExt, Priority};
+    interrupt::UART4.set_priority(Priority::P14);
+    DRIVE_EXECUTOR.start(interrupt::UART4)
 }
 
 /// Runs embassy's thread-mode executor forever; `init` spawns the first tasks.

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::mpsc;
 
-use chladni::controller::emulator::{Emulator, EmulatorConfig, EmulatorError};
+use chladni::controller::emulator::{EmulatedSpeed, Emulator, EmulatorConfig, EmulatorError};
 
 use super::InputError;
 use clap::Args;
@@ -28,9 +28,23 @@ pub struct EmulatorArgs {
     /// the limit is the end asked for: exit code 0, with a message saying so.
     #[arg(long, value_name = "S", value_parser = time_limit)]
     time_limit_s: Option<u64>,
+    /// Run the core at this emulated speed, million instructions per second, instead of as
+    /// fast as the host goes (QEMU `-icount`): the nearest of 1000/2^N, so 62 runs at 62.5 and
+    /// 31 at 31.25 (the ready line says which). 31 is an 80 MHz STM32L475 at 2.56 cycles per
+    /// instruction, a pessimistic real chip.
+    #[arg(long, value_name = "M", value_parser = mips)]
+    mips: Option<EmulatedSpeed>,
     /// Print the ready line as JSON (`{"port": "tcp://127.0.0.1:PORT", "pid": QEMU's pid}`).
     #[arg(long)]
     json: bool,
+}
+
+/// `--mips`: a speed the icount clock can give, as the nearest shift.
+fn mips(s: &str) -> Result<EmulatedSpeed, String> {
+    let value = s.trim().parse::<f64>().map_err(|_| {
+        format!("--mips must be a number of million instructions per second (1 to 1000), got {s}")
+    })?;
+    EmulatedSpeed::nearest(value).map_err(|e| e.to_string())
 }
 
 /// `--time-limit-s`: whole seconds, at least 1.
@@ -49,6 +63,7 @@ impl EmulatorArgs {
             log_file: self.log.clone(),
             time_limit: self.time_limit_s.map(std::time::Duration::from_secs),
             flash_file: self.flash_file.clone(),
+            speed: self.mips,
         };
         let (stop_tx, stop_rx) = mpsc::channel();
         ctrlc::set_handler(move || {
@@ -59,10 +74,22 @@ impl EmulatorArgs {
             e => e.into(),
         })?;
         if self.json {
-            let ready = serde_json::json!({ "port": emulator.address(), "pid": emulator.pid() });
+            let mut ready =
+                serde_json::json!({ "port": emulator.address(), "pid": emulator.pid() });
+            if let Some(speed) = self.mips {
+                ready["mips"] = speed.mips().into();
+                ready["icount_shift"] = speed.shift.into();
+            }
             println!("{ready}");
         } else {
             println!("controller ready on {}", emulator.address());
+            if let Some(speed) = self.mips {
+                println!(
+                    "emulated core: {} MIPS (QEMU -icount shift={})",
+                    speed.mips(),
+                    speed.shift
+                );
+            }
             println!("try: chladni device info --port {}", emulator.address());
         }
         // A script reads the address from the first line while the emulator keeps running.

@@ -41,6 +41,46 @@ pub struct EmulatorConfig {
     /// Host file holding the controller's flash bank 2 across restarts; created erased
     /// (512 KiB of 0xFF) if missing. `None`: the bank does not persist.
     pub flash_file: Option<PathBuf>,
+    /// Run the core at a fixed emulated speed ([`EmulatedSpeed`], QEMU's `-icount`) instead of
+    /// as fast as the host goes; `None`: as fast as the host goes.
+    pub speed: Option<EmulatedSpeed>,
+}
+
+/// A fixed emulated core speed: QEMU's `-icount shift=N` runs exactly 10⁹ / 2ᴺ instructions
+/// per second of the guest's clock (shift 4: 62.5 MIPS, 5: 31.25 MIPS), so the firmware's
+/// timing is what a core of that speed would see, whatever the host does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct EmulatedSpeed {
+    /// QEMU's icount shift.
+    pub shift: u8,
+}
+
+/// Largest icount shift offered (≈ 0.98 MIPS).
+pub const MAX_ICOUNT_SHIFT: u8 = 10;
+
+/// A `--mips` value that no icount shift gives.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error(
+    "--mips {0}: give a speed from 1 to 1000 million instructions per second (QEMU runs \
+     10^9/2^N of them: 1000, 500, 250, 125, 62.5, 31.25, ... down to 0.98)"
+)]
+pub struct BadMips(pub String);
+
+impl EmulatedSpeed {
+    /// The icount shift whose speed is nearest to `mips` (on a log scale): 62 → shift 4
+    /// (62.5 MIPS), 31 → shift 5 (31.25 MIPS).
+    pub fn nearest(mips: f64) -> Result<Self, BadMips> {
+        if !mips.is_finite() || !(1.0..=1000.0).contains(&mips) {
+            return Err(BadMips(mips.to_string()));
+        }
+        let shift = (1000.0 / mips).log2().round().clamp(0.0, f64::from(MAX_ICOUNT_SHIFT));
+        Ok(Self { shift: shift as u8 })
+    }
+
+    /// Million instructions per second at this shift.
+    pub fn mips(self) -> f64 {
+        1000.0 / f64::from(1u32 << self.shift)
+    }
 }
 
 impl EmulatorConfig {
@@ -293,7 +333,10 @@ fn spawn(
     config: &EmulatorConfig,
     append: bool,
 ) -> Result<(Child, Option<Child>), EmulatorError> {
-    let qemu_args = qemu_command_line(elf, port, flash);
+    let mut qemu_args = qemu_command_line(elf, port, flash);
+    if let Some(speed) = config.speed {
+        qemu_args.extend(icount_args(speed));
+    }
     let mut command = match config.time_limit {
         Some(limit) => {
             let mut c = Command::new("timeout");
@@ -374,6 +417,13 @@ pub fn qemu_command_line(elf: &Path, port: u16, flash: Option<&Path>) -> Vec<Str
     ]
 }
 
+/// QEMU's arguments for a fixed emulated speed. `sleep=on` (QEMU's default, written out):
+/// while the core sleeps in WFI the guest clock follows the host's, so timers still fire in
+/// real time; while it runs, each instruction takes exactly 2^shift ns of guest time.
+pub fn icount_args(speed: EmulatedSpeed) -> Vec<String> {
+    vec!["-icount".into(), format!("shift={},sleep=on", speed.shift)]
+}
+
 /// Checks the flash file (creating it erased if missing) and returns its absolute path.
 pub fn prepare_flash_file(path: &Path) -> Result<PathBuf, EmulatorError> {
     let fail = |reason: String| EmulatorError::FlashFile { path: path.to_path_buf(), reason };
@@ -446,6 +496,22 @@ mod tests {
         assert!(Emulator::ended_by_time_limit(&limited, &expired));
         assert!(!Emulator::ended_by_time_limit(&limited, &failed));
         assert!(!Emulator::ended_by_time_limit(&EmulatorConfig::default(), &expired));
+    }
+
+    #[test]
+    fn mips_map_to_the_nearest_icount_shift() {
+        let shift = |m: f64| EmulatedSpeed::nearest(m).map(|s| s.shift);
+        assert_eq!(shift(62.0), Ok(4));
+        assert_eq!(shift(31.0), Ok(5));
+        assert_eq!(shift(1000.0), Ok(0));
+        assert_eq!(shift(80.0), Ok(4), "80 is nearer 62.5 than 125 on a log scale");
+        assert_eq!(shift(1.0), Ok(10));
+        assert_eq!(EmulatedSpeed { shift: 5 }.mips(), 31.25);
+        for bad in [0.0, 0.5, 1001.0, f64::NAN, -3.0] {
+            let err = EmulatedSpeed::nearest(bad).unwrap_err().to_string();
+            assert!(err.contains("--mips") && err.contains("1 to 1000"), "{err}");
+        }
+        assert_eq!(icount_args(EmulatedSpeed { shift: 5 }), ["-icount", "shift=5,sleep=on"]);
     }
 
     #[test]

@@ -22,12 +22,16 @@ pub struct StatusJson {
     pub elapsed_ms: f64,
     pub fault: Option<FaultJson>,
     pub freq_hz: f64,
+    /// The least refill slack since the controller started, µs (null before the first block).
+    pub least_slack_us: Option<u32>,
     /// Measured phase against the drive, degrees (null without a measurement).
     pub phase_deg: Option<f64>,
     pub plan: Option<String>,
     pub remaining_ms: f64,
     pub reset_cause: &'static str,
     pub run: u32,
+    /// The most stack the controller has used, bytes (0: not measured).
+    pub stack_high_water: u32,
     pub state: &'static str,
     pub step: Option<u16>,
     /// The closed-loop target as ramped so far, m/s² (null in open loop or idle).
@@ -78,11 +82,13 @@ impl From<&StatusReport> for StatusJson {
             elapsed_ms: s.elapsed_ms(),
             fault: s.fault.map(|f| FaultJson::of(&f, s.sample_rate)),
             freq_hz: MilliHz(s.freq_mhz).to_hz(),
+            least_slack_us: s.least_slack_us,
             phase_deg: s.measured.map(|m| MilliDeg(m.phase_mdeg).to_deg()),
             plan: s.plan.as_ref().map(|p| p.to_string()),
             remaining_ms: s.remaining_ms(),
             reset_cause: s.reset_cause.name(),
             run: s.run.0,
+            stack_high_water: s.stack_high_water,
             state: s.state.name(),
             step: s.step,
             target_accel_mps2: s.level.and_then(Level::accel_mmps2).map(|a| MmPerS2(a).to_mps2()),

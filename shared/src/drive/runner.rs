@@ -14,9 +14,16 @@
 //! change leaves a [`PhaseMark`]: the DDS phase at a sample of the runner's sample clock, the
 //! reference the lock-in needs.
 //!
+//! The plan is held by whatever `P` the caller picks ([`Runner<P>`]): the plan itself on the
+//! host, a lock guard on one of two plan buffers in the firmware, so a new plan starts by
+//! handing over which buffer to read, never by copying a plan. The run's totals are cached when
+//! it starts, so [`Runner::status`] is O(1) whatever the plan's length.
+//!
 //! A block is split into segments in which nothing changes but the phase (and, in a ramp, the
 //! gain); each segment is one call of the DDS's tight loop ([`Dds::fill_steady`] /
 //! [`Dds::fill_ramp`]), so the per-sample cost carries no state-machine branches.
+
+use core::ops::Deref;
 
 use crate::drive::dds::{self, DAC_MID, Dds, SAMPLE_RATE, SAMPLES_PER_MS};
 use crate::drive::timeline::PhaseMark;
@@ -52,11 +59,35 @@ enum Mode {
     Faulted,
 }
 
-/// The plan runner. See the module docs.
+/// What holds the plan a [`Runner`] reads: the plan itself, or anything that dereferences to
+/// one (a lock guard).
+pub trait PlanHolder {
+    /// The plan held.
+    fn plan(&self) -> &Plan;
+}
+
+impl PlanHolder for Plan {
+    fn plan(&self) -> &Plan {
+        self
+    }
+}
+
+impl<T: Deref<Target = Plan>> PlanHolder for T {
+    fn plan(&self) -> &Plan {
+        self
+    }
+}
+
+/// The plan runner, reading its plan through `P` (see the module docs).
 #[derive(Debug, Clone)]
-pub struct Runner {
+pub struct Runner<P = Plan> {
     limits: DeviceLimits,
-    plan: Plan,
+    /// The plan loaded last (kept after it ends, until the next one).
+    plan: Option<P>,
+    /// Samples in one repetition of the plan (cached when it starts).
+    per_run: u64,
+    /// Samples in the steps after the current one, in this repetition.
+    rest_of_run: u64,
     mode: Mode,
     dds: Dds,
     freq_mhz: u32,
@@ -76,12 +107,14 @@ pub struct Runner {
     mark: PhaseMark,
 }
 
-impl Runner {
+impl<P: PlanHolder> Runner<P> {
     /// An idle runner checking commands against `limits`.
     pub const fn new(limits: DeviceLimits) -> Self {
         Self {
             limits,
-            plan: Plan { name: heapless::String::new(), repeat: 0, steps: heapless::Vec::new() },
+            plan: None,
+            per_run: 0,
+            rest_of_run: 0,
             mode: Mode::Idle,
             dds: Dds::new(0),
             freq_mhz: 0,
@@ -158,29 +191,25 @@ impl Runner {
         self.limits = limits;
     }
 
-    /// The plan loaded last.
-    pub fn plan(&self) -> &Plan {
-        &self.plan
+    /// The plan loaded last (`None` before the first).
+    pub fn plan(&self) -> Option<&Plan> {
+        self.plan.as_ref().map(PlanHolder::plan)
     }
 
     /// Starts `plan` at the next sample (replacing whatever runs; the amplitude ramps from its
-    /// current value, the phase carries on).
-    pub fn start_plan(&mut self, mut plan: Plan) -> Result<(), DriveError> {
-        self.start_plan_from(&mut plan)
-    }
-
-    /// [`Runner::start_plan`] taking the plan out of `plan` (which gets the previous plan), so
-    /// a plan of a few KiB changes hands without a copy on a small controller stack.
-    pub fn start_plan_from(&mut self, plan: &mut Plan) -> Result<(), DriveError> {
+    /// current value, the phase carries on). Returns the holder of the previous plan (the
+    /// firmware releases that buffer by dropping it); a refused plan is dropped.
+    pub fn start_plan(&mut self, plan: P) -> Result<Option<P>, DriveError> {
         if self.fault.is_some() {
             return Err(DriveError::Faulted);
         }
-        plan.validate(&self.limits).map_err(DriveError::Plan)?;
-        core::mem::swap(&mut self.plan, plan);
+        plan.plan().validate(&self.limits).map_err(DriveError::Plan)?;
+        self.per_run = plan.plan().steps.iter().map(|s| s.duration_samples() as u64).sum();
+        let previous = self.plan.replace(plan);
         self.elapsed = 0;
         self.commands = self.commands.wrapping_add(1);
         self.begin_step(0, 0);
-        Ok(())
+        Ok(previous)
     }
 
     /// Drives a steady sine (manual mode): the frequency changes at the next sample (phase
@@ -277,7 +306,7 @@ impl Runner {
     pub fn status(&self) -> StatusReport {
         let (step, repetition, remaining_samples) = match self.mode {
             Mode::Plan { step, run, step_left } => {
-                (Some(step), run, self.remaining_samples(step, run, step_left))
+                (Some(step), run, self.remaining_samples(run, step_left))
             }
             _ => (None, 0, 0),
         };
@@ -290,7 +319,7 @@ impl Runner {
             repetition,
             // Commands are numbered by whoever queues them (the firmware's drive task).
             run: crate::icd::link::RunNumber(0),
-            plan: if in_plan { Some(self.plan.name.clone()) } else { None },
+            plan: if in_plan { self.plan().map(|p| p.name.clone()) } else { None },
             remaining_samples,
             fault: self.fault,
             level,
@@ -305,17 +334,28 @@ impl Runner {
             amplitude_q15: dds::q15_of_gain(self.gain),
             underruns: self.underruns,
             commands: self.commands,
+            // The drive task adds what the board measures.
+            least_slack_us: None,
+            stack_high_water: 0,
         }
     }
 
     /// Samples until the plan's last step ends, from `step_left` samples before the end of
-    /// step `step` in repetition `run`.
-    fn remaining_samples(&self, step: u16, run: u16, step_left: u32) -> u64 {
-        let samples = |s: &Step| s.duration_samples() as u64;
-        let rest_of_run: u64 = self.plan.steps[step as usize + 1..].iter().map(samples).sum();
-        let per_run: u64 = self.plan.steps.iter().map(samples).sum();
-        let runs_after = self.plan.repeat.saturating_sub(run + 1) as u64;
-        step_left as u64 + rest_of_run + runs_after * per_run
+    /// the current step in repetition `run`: O(1), from the totals cached at the step's start.
+    fn remaining_samples(&self, run: u16, step_left: u32) -> u64 {
+        let repeat = self.plan().map_or(0, |p| p.repeat);
+        let runs_after = repeat.saturating_sub(run + 1) as u64;
+        step_left as u64 + self.rest_of_run + runs_after * self.per_run
+    }
+
+    /// Step `step` of the plan loaded (only called in plan mode, whose steps exist).
+    fn step_of(&self, step: u16) -> Step {
+        self.plan().and_then(|p| p.steps.get(step as usize)).copied().unwrap_or(Step {
+            freq_mhz: 0,
+            level: Level::Drive(0),
+            duration_ms: 0,
+            ramp_ms: 0,
+        })
     }
 
     fn set_freq(&mut self, freq_mhz: u32) {
@@ -358,19 +398,22 @@ impl Runner {
     }
 
     fn begin_step(&mut self, step: u16, run: u16) {
-        let s = self.plan.steps[step as usize];
+        let s = self.step_of(step);
+        let before = if step == 0 { self.per_run } else { self.rest_of_run };
+        self.rest_of_run = before.saturating_sub(s.duration_samples() as u64);
         self.mode = Mode::Plan { step, run, step_left: s.duration_samples() };
         self.set_freq(s.freq_mhz);
         self.set_level(s.level, s.ramp_ms);
     }
 
     fn end_of_step(&mut self, step: u16, run: u16) {
-        if (step as usize + 1) < self.plan.steps.len() {
+        let (steps, repeat) = self.plan().map_or((0, 0), |p| (p.steps.len(), p.repeat));
+        if (step as usize + 1) < steps {
             self.begin_step(step + 1, run);
-        } else if run + 1 < self.plan.repeat {
+        } else if run + 1 < repeat {
             self.begin_step(0, run + 1);
         } else {
-            let ramp = self.plan.steps[step as usize].ramp_ms.max(STOP_RAMP_MS);
+            let ramp = self.step_of(step).ramp_ms.max(STOP_RAMP_MS);
             self.mode = Mode::Stopping { fault: false };
             self.accel = None;
             self.ramp_to(0, ramp * SAMPLES_PER_MS);
@@ -487,7 +530,7 @@ mod tests {
 
     #[test]
     fn steps_switch_at_exact_sample_indices() {
-        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        let mut r = Runner::<Plan>::new(DeviceLimits::DEFAULT);
         r.start_plan(plan(&STEPS, 2)).unwrap();
         let t = trace(&mut r, 97);
         let per_run: u32 = STEPS.iter().map(|s| s.duration_samples()).sum();
@@ -513,9 +556,27 @@ mod tests {
         assert_eq!(r.state(), DriveState::Idle);
     }
 
+    /// The cached totals give the same remaining time as summing the plan's steps: at every
+    /// block of two repetitions, `remaining_samples` is exactly the samples left in the plan.
+    #[test]
+    fn remaining_samples_counts_down_to_the_plans_end() {
+        let mut r = Runner::<Plan>::new(DeviceLimits::DEFAULT);
+        r.start_plan(plan(&STEPS, 2)).unwrap();
+        let total: u64 = 2 * STEPS.iter().map(|s| s.duration_samples() as u64).sum::<u64>();
+        let mut buf = [0u16; 97];
+        let mut filled = 0u64;
+        while r.status().step.is_some() {
+            assert_eq!(r.status().remaining_samples, total - filled, "after {filled} samples");
+            r.fill(&mut buf);
+            filled += buf.len() as u64;
+        }
+        assert!(filled >= total && filled < total + buf.len() as u64);
+        assert_eq!(r.status().remaining_samples, 0);
+    }
+
     #[test]
     fn phase_is_continuous_across_steps() {
-        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        let mut r = Runner::<Plan>::new(DeviceLimits::DEFAULT);
         r.start_plan(plan(&STEPS, 1)).unwrap();
         let t = trace(&mut r, 250);
         // The phase advances by exactly the current step's tuning word: never reset or jumped.
@@ -539,7 +600,7 @@ mod tests {
 
     #[test]
     fn ramps_are_monotonic_and_reach_their_targets() {
-        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        let mut r = Runner::<Plan>::new(DeviceLimits::DEFAULT);
         r.start_plan(plan(&STEPS, 1)).unwrap();
         let t = trace(&mut r, 64);
         let mut idx = 0usize;
@@ -570,7 +631,7 @@ mod tests {
 
     #[test]
     fn stop_ramps_to_zero_then_idles() {
-        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        let mut r = Runner::<Plan>::new(DeviceLimits::DEFAULT);
         r.drive(440_000, Level::Drive(30000)).unwrap();
         let mut buf = [0u16; 5000];
         r.fill(&mut buf);
@@ -598,7 +659,7 @@ mod tests {
 
     #[test]
     fn fault_latches_until_cleared() {
-        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        let mut r = Runner::<Plan>::new(DeviceLimits::DEFAULT);
         r.drive(100_000, Level::Drive(10000)).unwrap();
         let mut buf = [0u16; 2000];
         r.fill(&mut buf);
@@ -624,7 +685,7 @@ mod tests {
 
     #[test]
     fn closed_loop_takes_its_amplitude_from_the_controller() {
-        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        let mut r = Runner::<Plan>::new(DeviceLimits::DEFAULT);
         r.drive(180_000, Level::Accel(20_000)).unwrap();
         let mut buf = [0u16; BLOCK_LEN];
         // No effort yet: silent; the closed loop gets the target and its ramp.
@@ -656,7 +717,7 @@ mod tests {
 
     #[test]
     fn phase_marks_follow_frequency_changes() {
-        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        let mut r = Runner::<Plan>::new(DeviceLimits::DEFAULT);
         let mut buf = [0u16; 333];
         r.fill(&mut buf);
         r.start_plan(plan(&STEPS, 1)).unwrap();
@@ -679,7 +740,7 @@ mod tests {
 
     #[test]
     fn invalid_commands_are_refused() {
-        let mut r = Runner::new(DeviceLimits::DEFAULT);
+        let mut r = Runner::<Plan>::new(DeviceLimits::DEFAULT);
         assert!(matches!(r.drive(5_000_000, Level::Drive(1)), Err(DriveError::Setpoint(_))));
         assert!(matches!(r.start_plan(plan(&[], 1)), Err(DriveError::Plan(PlanError::Empty))));
         assert_eq!(r.state(), DriveState::Idle);

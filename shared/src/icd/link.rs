@@ -605,6 +605,11 @@ pub struct StatusReport {
     pub underruns: u32,
     /// Commands applied so far (start, drive, stop, fault).
     pub commands: u32,
+    /// The least refill slack since the controller started, µs: how long before the output
+    /// would have run dry a block was handed over (`None` before the first block).
+    pub least_slack_us: Option<u32>,
+    /// The stack's high water since the controller started, bytes (0: not measured).
+    pub stack_high_water: u32,
 }
 
 impl StatusReport {
@@ -628,6 +633,8 @@ impl StatusReport {
         amplitude_q15: 0,
         underruns: 0,
         commands: 0,
+        least_slack_us: None,
+        stack_high_water: 0,
     };
 
     /// `elapsed_samples` in milliseconds.
@@ -743,8 +750,8 @@ mod tests {
         assert_eq!(
             wire,
             [
-                0x00, 0x11, 0x04, 0xf8, 0xac, 0xd1, 0x91, 0x01, 0x01, 0x01, 0x84, 0x86, 0x88, 0x08,
-                0xfd, 0x5d, 0xa8, 0x32, 0x00
+                0x00, 0x11, 0x05, 0xf8, 0xac, 0xd1, 0x91, 0x01, 0x01, 0x01, 0x84, 0x86, 0x88, 0x08,
+                0x92, 0x11, 0x0d, 0xa9, 0x00
             ]
         );
         // Variant numbers are the table's order: a client in another language relies on them.

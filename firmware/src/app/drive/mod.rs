@@ -6,6 +6,14 @@
 //! the run number of the command in effect, so a host can tell "its" run from an older one. The
 //! runner itself is owned by the drive task alone.
 //!
+//! Priorities: the drive task runs on an interrupt executor above the link, store, USB and sense
+//! tasks (which share the thread-mode executor), so everything in [`DriveShared`] is reached
+//! from two priority levels. Every piece is either a critical-section mutex held for O(1) work
+//! (a command, a status of ~150 bytes, a sensor batch, a page of sweep points) or one of two
+//! plan buffers behind async mutexes: the link copies a new plan into the buffer the drive is
+//! not reading, outside any critical section, and the drive starts it by taking that buffer's
+//! lock and dropping the other's. Nothing O(plan), and no log, runs with interrupts off.
+//!
 //! The output is anything that takes blocks of 12-bit DAC codes at the sample rate
 //! ([`SampleOutput`]): on the board, the DAC's circular DMA buffer; in QEMU,
 //! [`SimulatedDac`] ([`simulated`]), which paces blocks with embassy-time and feeds the
@@ -19,6 +27,7 @@
 
 use core::cell::{Cell, RefCell};
 use core::future::Future;
+use core::sync::atomic::{AtomicU32, Ordering};
 
 use chladni_shared::drive::closed_loop::{BlockInput, ClosedLoop};
 use chladni_shared::drive::dds::q15_of_gain;
@@ -29,6 +38,7 @@ use chladni_shared::icd::sense::{ControlConfig, Measurement, ResetCause, SensorF
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
+use embassy_sync::mutex::{Mutex as AsyncMutex, MutexGuard};
 use embassy_time::Duration;
 
 use crate::app::watchdog::{Supervisor, Task};
@@ -87,23 +97,36 @@ pub enum Command {
 /// What the command queue carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Queued {
-    /// Run the plan staged by [`DriveShared::run_plan`].
-    RunPlan,
+    /// Run the plan [`DriveShared::run_plan`] staged in this plan buffer.
+    RunPlan(usize),
     /// A manual drive or a stop.
     Command(Command),
 }
 
-/// The plan waiting for the drive task: plans (up to ~4 KiB) are handed over here, one at a
-/// time, rather than through the command queue, so no plan is ever copied on the stack.
-struct Staged {
-    plan: Plan,
-    waiting: bool,
-}
+/// One of the two plan buffers (a plan is up to ~5 KiB).
+type PlanBuffer = AsyncMutex<CriticalSectionRawMutex, Plan>;
+/// The drive's hold on the plan buffer it runs from.
+pub type PlanGuard<'a> = MutexGuard<'a, CriticalSectionRawMutex, Plan>;
+/// The runner as the drive task has it: reading its plan through a buffer's lock.
+pub type DriveRunner<'a> = Runner<PlanGuard<'a>>;
+
+const EMPTY_PLAN: Plan =
+    Plan { name: heapless::String::new(), repeat: 0, steps: heapless::Vec::new() };
+
+/// Least refill slack not yet measured.
+const NO_SLACK: u32 = u32::MAX;
 
 /// What the link task and the drive task share.
 pub struct DriveShared {
     commands: Channel<CriticalSectionRawMutex, (RunNumber, Queued), 2>,
-    staged: Mutex<CriticalSectionRawMutex, RefCell<Staged>>,
+    /// Plans change hands here, never through the command queue or the stack.
+    plans: [PlanBuffer; 2],
+    /// A plan is being staged or waits for the drive: only one at a time.
+    staging: Mutex<CriticalSectionRawMutex, Cell<bool>>,
+    /// Least refill slack seen since boot, µs ([`NO_SLACK`] before the first).
+    least_slack_us: AtomicU32,
+    /// Stack high water, bytes (0: not measured on this board).
+    stack_high_water: AtomicU32,
     status: Mutex<CriticalSectionRawMutex, RefCell<StatusReport>>,
     limits: Mutex<CriticalSectionRawMutex, Cell<DeviceLimits>>,
     control: Mutex<CriticalSectionRawMutex, Cell<ControlConfig>>,
@@ -125,14 +148,10 @@ impl DriveShared {
     pub const fn new() -> Self {
         Self {
             commands: Channel::new(),
-            staged: Mutex::new(RefCell::new(Staged {
-                plan: Plan {
-                    name: heapless::String::new(),
-                    repeat: 0,
-                    steps: heapless::Vec::new(),
-                },
-                waiting: false,
-            })),
+            plans: [AsyncMutex::new(EMPTY_PLAN), AsyncMutex::new(EMPTY_PLAN)],
+            staging: Mutex::new(Cell::new(false)),
+            least_slack_us: AtomicU32::new(NO_SLACK),
+            stack_high_water: AtomicU32::new(0),
             status: Mutex::new(RefCell::new(StatusReport::IDLE)),
             limits: Mutex::new(Cell::new(DeviceLimits::DEFAULT)),
             control: Mutex::new(Cell::new(ControlConfig::DEFAULT)),
@@ -199,22 +218,46 @@ impl DriveShared {
         self.limits.lock(|l| l.set(limits));
     }
 
-    /// Checks `plan`, stages a copy of it and queues it to run; returns its run number.
-    /// Only one plan waits at a time: a second one before the drive took the first is
-    /// [`DriveError::QueueFull`].
+    /// Checks `plan`, copies it into the plan buffer the drive is not running from and queues
+    /// it to run; returns its run number. Only one plan waits at a time: a second one before
+    /// the drive took the first is [`DriveError::QueueFull`]. The copy runs with interrupts on
+    /// (the drive may preempt it); only the flag and the queueing are critical sections.
     pub fn run_plan(&self, plan: &Plan) -> Result<RunNumber, DriveError> {
         plan.validate(&self.limits()).map_err(DriveError::Plan)?;
         self.check_not_faulted()?;
-        critical_section::with(|cs| {
-            let mut staged = self.staged.borrow(cs).borrow_mut();
-            if staged.waiting {
-                return Err(DriveError::QueueFull);
-            }
-            let run = self.queue(cs, Queued::RunPlan)?;
-            staged.plan.clone_from(plan);
-            staged.waiting = true;
-            Ok(run)
-        })
+        if self.staging.lock(|s| s.replace(true)) {
+            return Err(DriveError::QueueFull);
+        }
+        // The drive holds at most one buffer, and only this call stages: one is free.
+        let free =
+            self.plans.iter().enumerate().find_map(|(i, b)| b.try_lock().ok().map(|g| (i, g)));
+        let Some((slot, mut buffer)) = free else {
+            self.staging.lock(|s| s.set(false));
+            return Err(DriveError::QueueFull);
+        };
+        buffer.clone_from(plan);
+        drop(buffer);
+        let queued = critical_section::with(|cs| self.queue(cs, Queued::RunPlan(slot)));
+        if queued.is_err() {
+            self.staging.lock(|s| s.set(false));
+        }
+        queued
+    }
+
+    /// Records a refill's slack (µs between the block being handed over and the output
+    /// running dry); the status reports the least since boot.
+    pub fn note_slack_us(&self, slack_us: u32) {
+        self.least_slack_us.fetch_min(slack_us, Ordering::Relaxed);
+    }
+
+    /// The least refill slack since boot, µs (`None` before the first block).
+    pub fn least_slack_us(&self) -> Option<u32> {
+        Some(self.least_slack_us.load(Ordering::Relaxed)).filter(|&s| s != NO_SLACK)
+    }
+
+    /// Records the stack's high water (bytes), measured by the board.
+    pub fn set_stack_high_water(&self, bytes: u32) {
+        self.stack_high_water.store(bytes, Ordering::Relaxed);
     }
 
     /// Queues a manual drive or a stop for the drive task and returns the run number it will
@@ -262,9 +305,13 @@ impl DriveShared {
         Ok(run)
     }
 
-    /// The status published after the last block.
+    /// The status published after the last block, with the least slack and the stack's high
+    /// water as of now.
     pub fn status(&self) -> StatusReport {
-        self.status.lock(|s| s.borrow().clone())
+        let mut status = self.status.lock(|s| s.borrow().clone());
+        status.least_slack_us = self.least_slack_us();
+        status.stack_high_water = self.stack_high_water.load(Ordering::Relaxed);
+        status
     }
 }
 
@@ -273,7 +320,7 @@ impl DriveShared {
 pub struct DriveCore<'a> {
     shared: &'a DriveShared,
     supervisor: Option<&'a Supervisor>,
-    runner: Runner,
+    runner: DriveRunner<'a>,
     run: RunNumber,
     closed: Option<ClosedLoop>,
     measured: Option<Measurement>,
@@ -330,20 +377,27 @@ impl<'a> DriveCore<'a> {
         self.publish();
     }
 
+    // Never inlined, nor is the closed loop's construction: both run rarely, and inlined they
+    // would add their locals to the drive's frame at every block, on top of whatever the
+    // thread-mode tasks it preempts have on the stack.
+    #[inline(never)]
     fn apply(&mut self, run: RunNumber, command: Queued) -> Result<(), DriveError> {
         // Any command ends a sweep in progress (its points so far stay readable).
         self.sweep = None;
         match command {
-            Queued::RunPlan => self.shared.staged.lock(|staged| {
-                let mut staged = staged.borrow_mut();
-                staged.waiting = false;
-                defmt::info!(
-                    "drive: plan '{}', {} steps",
-                    staged.plan.name.as_str(),
-                    staged.plan.steps.len()
-                );
-                self.runner.start_plan_from(&mut staged.plan)
-            }),
+            Queued::RunPlan(slot) => {
+                // The link dropped its hold before queueing: the lock is free. Taking it and
+                // dropping the previous plan's is the whole hand-over.
+                let buffer = self.shared.plans[slot].try_lock();
+                self.shared.staging.lock(|s| s.set(false));
+                let buffer = buffer.map_err(|_| DriveError::QueueFull)?;
+                let steps = buffer.steps.len();
+                drop(self.runner.start_plan(buffer)?);
+                if let Some(plan) = self.runner.plan() {
+                    defmt::info!("drive: plan '{}', {} steps", plan.name.as_str(), steps);
+                }
+                Ok(())
+            }
             Queued::Command(Command::Drive { freq_mhz, level }) => {
                 self.runner.drive(freq_mhz, level)
             }
@@ -373,13 +427,20 @@ impl<'a> DriveCore<'a> {
         }
     }
 
+    /// Builds the closed loop once the sense task has given the sensor's scale.
+    #[inline(never)]
+    fn start_closed_loop(&mut self) -> Option<()> {
+        let scale = self.shared.scale.lock(|s| s.get())?;
+        let control = self.shared.control.lock(|c| c.get());
+        self.closed = Some(ClosedLoop::new(control, scale.odr_mhz, scale.lsb_mps2));
+        Some(())
+    }
+
     /// Feeds the sensor's batches to the closed loop and applies what it says: the effort in
     /// closed loop, a fault at any time. Returns the measurement completed in this block.
     fn sense_and_control(&mut self) -> Option<Measurement> {
         if self.closed.is_none() {
-            let scale = self.shared.scale.lock(|s| s.get())?;
-            let control = self.shared.control.lock(|c| c.get());
-            self.closed = Some(ClosedLoop::new(control, scale.odr_mhz, scale.lsb_mps2));
+            self.start_closed_loop()?;
         }
         let closed = self.closed.as_mut()?;
         closed.set_config(self.shared.control.lock(|c| c.get()));
@@ -423,11 +484,16 @@ impl<'a> DriveCore<'a> {
     }
 
     /// One turn of the drive: refill `block`, hand it to `output`, count an underrun if the
-    /// output had run dry.
+    /// output had run dry, and keep the least slack the output reports.
     pub async fn play_block<O: SampleOutput>(&mut self, block: &mut [u16], output: &mut O) {
         self.refill(block);
-        if output.write_block(block).await.is_err() {
-            self.note_underrun();
+        match output.write_block(block).await {
+            Ok(Some(slack_us)) => self.shared.note_slack_us(slack_us),
+            Ok(None) => {}
+            Err(Underrun) => {
+                self.shared.note_slack_us(0);
+                self.note_underrun();
+            }
         }
     }
 
@@ -456,9 +522,12 @@ pub struct Underrun;
 
 /// Where sample blocks go, one [`BLOCK_LEN`] block at a time, at the sample rate.
 pub trait SampleOutput {
-    /// Waits until the output has room for `block`, then takes it. `Err(Underrun)` when the
-    /// output had run dry before (the block is still taken).
-    fn write_block(&mut self, block: &[u16]) -> impl Future<Output = Result<(), Underrun>>;
+    /// Waits until the output has room for `block`, then takes it. `Ok(slack)`: the block came
+    /// in time, `slack` µs before the output would have run dry without it (`None` if the
+    /// output cannot tell). `Err(Underrun)` when the output had run dry before (the block is
+    /// still taken).
+    fn write_block(&mut self, block: &[u16])
+    -> impl Future<Output = Result<Option<u32>, Underrun>>;
 }
 
 /// Runs the drive forever: refill a block, hand it to `output`, repeat; checks in with

@@ -6,13 +6,15 @@
 //! point ends with the usual ramp to zero. The points stay in [`SweepRecord`] for `GetSweep`
 //! until the next sweep starts. The first point's dwell includes the ramp up from rest.
 
+use core::ops::Deref;
+
 use chladni_shared::drive::dds::SAMPLES_PER_MS;
 use chladni_shared::drive::runner::Runner;
 use chladni_shared::icd::link::{
     DriveError, MAX_SWEEP_POINTS, RunNumber, SWEEP_PAGE, StatusReport, Sweep, SweepError,
     SweepPage, SweepPoint,
 };
-use chladni_shared::icd::plan::Level;
+use chladni_shared::icd::plan::{Level, Plan};
 use chladni_shared::icd::sense::Measurement;
 
 /// A sweep whose shape was checked ([`Sweep::check`]): the only kind the drive accepts.
@@ -77,12 +79,16 @@ impl SweepRun {
     pub fn start(
         sweep: CheckedSweep,
         run: RunNumber,
-        runner: &mut Runner,
+        runner: &mut Runner<impl Deref<Target = Plan>>,
         record: &mut SweepRecord,
     ) -> Result<SweepRun, DriveError> {
         let spec = *sweep.spec();
         runner.drive(spec.from_mhz, Level::Drive(spec.amplitude_q15))?;
-        *record = SweepRecord { run, total: spec.points, points: heapless::Vec::new() };
+        // Field by field: the record is locked (interrupts off), and a whole new one would be
+        // a 3 KiB copy.
+        record.run = run;
+        record.total = spec.points;
+        record.points.clear();
         Ok(SweepRun { spec, index: 0, left: dwell_samples(&spec), last: None })
     }
 
@@ -91,7 +97,7 @@ impl SweepRun {
     /// over (the runner then ramps to zero).
     pub fn advance(
         &mut self,
-        runner: &mut Runner,
+        runner: &mut Runner<impl Deref<Target = Plan>>,
         record: &mut SweepRecord,
         n: u32,
         fresh: Option<Measurement>,

@@ -40,8 +40,9 @@ impl Default for ParkableDac {
 impl ParkableDac {
     /// A plant at rest, output at mid-scale, feeding the simulated accelerometer.
     pub fn new() -> Self {
-        let dac =
-            SimulatedDac::new().with_sensor(super::sensor::sim(), &super::sensor::PLANT_FAULTS);
+        let dac = SimulatedDac::new()
+            .with_sensor(super::sensor::sim(), &super::sensor::PLANT_FAULTS)
+            .with_clock(super::time_driver::now_us);
         Self { dac }
     }
 
@@ -52,7 +53,7 @@ impl ParkableDac {
 }
 
 impl SampleOutput for ParkableDac {
-    async fn write_block(&mut self, block: &[u16]) -> Result<(), Underrun> {
+    async fn write_block(&mut self, block: &[u16]) -> Result<Option<u32>, Underrun> {
         if PARKED.load(Ordering::Acquire) {
             // Frozen: whatever the drive computes, the "pin" stays at mid-scale.
             return self.dac.write_block(&[DAC_MID; BLOCK_LEN][..block.len()]).await;

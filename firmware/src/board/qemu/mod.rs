@@ -74,6 +74,7 @@ pub fn spawn_tasks(_spawner: embassy_executor::Spawner, _tasks: BoardTasks) {}
 
 /// Brings the board up: time driver first (everything else may wait on time), then the link.
 pub fn init() -> Board {
+    super::stack::paint();
     let core = cortex_m::Peripherals::take().expect("board::init called twice");
     time_driver::start(core.SYST);
     let mut arg = [0u8; 256];
@@ -95,7 +96,7 @@ pub fn init() -> Board {
     }
 }
 
-pub use executor::run;
+pub use executor::{run, start_drive_executor};
 
 /// Host wall-clock time in seconds since the epoch (semihosting `SYS_TIME`), so tests can
 /// compare the firmware's sense of time with the host's. (`SYS_CLOCK` would be QEMU's CPU time,

@@ -118,6 +118,33 @@ pub fn wake_host_loop() {
     }
 }
 
+/// Time since boot in ns, to a SysTick count (250 ns at 4 MHz): the ticks plus SysTick's
+/// current count. Under QEMU's `-icount shift=0` (1 ns per instruction) it counts
+/// instructions, which is what the drive's benchmark measures with.
+pub fn now_ns() -> u64 {
+    const NS_PER_CYCLE: u64 = 1_000_000_000 / CORE_CLOCK_HZ as u64;
+    const RELOAD: u32 = CORE_CLOCK_HZ / TICK_HZ - 1;
+    critical_section::with(|cs| {
+        // SAFETY: reads of SysTick's current value and of SCB's ICSR only.
+        let (syst, scb) = unsafe { (&*SYST::PTR, &*cortex_m::peripheral::SCB::PTR) };
+        let mut ticks = DRIVER.ticks.borrow(cs).get();
+        let mut cvr = syst.cvr.read() & 0x00ff_ffff;
+        // The counter wrapped but the handler has not run (interrupts are off): one more tick,
+        // and the count read again (it may have been read just before the wrap).
+        if scb.icsr.read() & (1 << 26) != 0 {
+            ticks += 1;
+            cvr = syst.cvr.read() & 0x00ff_ffff;
+        }
+        let in_tick = u64::from(RELOAD.saturating_sub(cvr));
+        ticks * (1_000_000_000 / TICK_HZ as u64) + in_tick * NS_PER_CYCLE
+    })
+}
+
+/// [`now_ns`] in µs.
+pub fn now_us() -> u64 {
+    now_ns() / 1_000
+}
+
 /// Starts SysTick; call once, before anything waits on time.
 pub fn start(mut syst: SYST) {
     syst.set_clock_source(SystClkSource::Core);

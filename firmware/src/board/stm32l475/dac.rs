@@ -88,8 +88,8 @@ fn update_rate(timer: &Timer<'static, peripherals::TIM6>) -> u32 {
 const WORDS_PER_WRITE: usize = 50;
 
 impl SampleOutput for DacOutput {
-    async fn write_block(&mut self, block: &[u16]) -> Result<(), Underrun> {
-        let mut result = Ok(());
+    async fn write_block(&mut self, block: &[u16]) -> Result<Option<u32>, Underrun> {
+        let mut result = Ok(super::slack_us(self.ring.capacity(), self.ring.len()));
         let mut words = [0u32; WORDS_PER_WRITE];
         for codes in block.chunks(WORDS_PER_WRITE) {
             let words = &mut words[..codes.len()];

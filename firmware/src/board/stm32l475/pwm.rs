@@ -109,8 +109,8 @@ impl PwmOutput {
 const DUTIES_PER_WRITE: usize = 50;
 
 impl SampleOutput for PwmOutput {
-    async fn write_block(&mut self, block: &[u16]) -> Result<(), Underrun> {
-        let mut result = Ok(());
+    async fn write_block(&mut self, block: &[u16]) -> Result<Option<u32>, Underrun> {
+        let mut result = Ok(super::slack_us(self.ring.capacity(), self.ring.len()));
         let mut duties = [0u16; DUTIES_PER_WRITE];
         for codes in block.chunks(DUTIES_PER_WRITE) {
             let duties = &mut duties[..codes.len()];

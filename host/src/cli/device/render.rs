@@ -245,23 +245,27 @@ mod tests {
             amplitude_q15: 32767,
             underruns: 3,
             commands: 9,
+            least_slack_us: Some(4_321),
+            stack_high_water: 10_240,
             ..StatusReport::IDLE
         }
     }
 
     /// The documented keys of `status --json` (docs/device.md).
-    const STATUS_KEYS: [&str; 16] = [
+    const STATUS_KEYS: [&str; 18] = [
         "accel_mps2",
         "amplitude",
         "effort",
         "elapsed_ms",
         "fault",
         "freq_hz",
+        "least_slack_us",
         "phase_deg",
         "plan",
         "remaining_ms",
         "reset_cause",
         "run",
+        "stack_high_water",
         "state",
         "step",
         "target_accel_mps2",

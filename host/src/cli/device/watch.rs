@@ -324,6 +324,8 @@ mod tests {
             elapsed_samples: 50_000,
             underruns: 2,
             commands: 4,
+            least_slack_us: None,
+            stack_high_water: 0,
             ..StatusReport::IDLE
         }
     }
