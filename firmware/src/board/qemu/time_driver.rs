@@ -135,7 +135,10 @@ pub fn now_ns() -> u64 {
             ticks += 1;
             cvr = syst.cvr.read() & 0x00ff_ffff;
         }
-        let in_tick = u64::from(RELOAD.saturating_sub(cvr));
+        // Cycles of a period that `wake_host_loop` cut short count too, or the clock would
+        // step back by them at every wake.
+        let carry = DRIVER.carry.borrow(cs).get();
+        let in_tick = u64::from(carry) + u64::from(RELOAD.saturating_sub(cvr));
         ticks * (1_000_000_000 / TICK_HZ as u64) + in_tick * NS_PER_CYCLE
     })
 }
