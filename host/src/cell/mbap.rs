@@ -7,7 +7,7 @@
 //! protocol answers an exception, and it has no timeouts. Here every well-framed request gets
 //! an answer: 0x01 for a function or MEI type the map does not have, 0x03 for a bad quantity,
 //! byte count or value, then the register map's own answers ([`Registers::handle`]). Only a
-//! broken frame (protocol id not 0, a length outside 2..=254) or a timeout closes the
+//! broken frame (protocol id not 0, a length outside 2..=260) or a timeout closes the
 //! connection. The request and answer types stay tokio-modbus's.
 
 use std::borrow::Cow;
@@ -21,8 +21,10 @@ use tokio_modbus::{ExceptionCode, Request, Response};
 use super::modbus::{MAX_WRITE, Registers};
 use super::ratelog;
 
-/// The MBAP length field's largest value: the unit id and a PDU of 253 bytes.
-pub const MAX_LENGTH: u16 = 254;
+/// The MBAP length field's largest value taken: the spec's is 254 (the unit id and a PDU of 253
+/// bytes), but a client that sends an FC16 of 124 registers (255) gets the spec's exception for
+/// the quantity, not a closed connection; beyond this the frame is broken.
+pub const MAX_LENGTH: u16 = 260;
 /// How long the rest of a frame may take once its first byte arrived.
 pub const FRAME_TIMEOUT: Duration = Duration::from_secs(2);
 /// Function code 0x2B, MEI type 0x0E: read device identification (basic objects).
@@ -41,6 +43,9 @@ pub enum Pdu {
 /// Decodes a request PDU (function code first); the exception to answer when it is not one.
 pub fn decode(pdu: &[u8]) -> Result<Pdu, ExceptionCode> {
     let (&function, data) = pdu.split_first().ok_or(ExceptionCode::IllegalFunction)?;
+    if pdu.len() > 253 && function != 0x10 {
+        return Err(ExceptionCode::IllegalDataValue);
+    }
     let word = |i: usize| data.get(i..i + 2).map(|w| u16::from_be_bytes([w[0], w[1]]));
     let pair = || match (data.len(), word(0), word(2)) {
         (4, Some(a), Some(b)) => Ok((a, b)),
