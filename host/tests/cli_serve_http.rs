@@ -200,9 +200,17 @@ fn browser_run(url: &str, stop: bool) -> Value {
     serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("{e}: {stdout}"))
 }
 
+fn seen_beat(addr: SocketAddr) -> u64 {
+    http(addr, "GET /api/status", "").1["heartbeat"].as_u64().unwrap()
+}
+
 /// Pages from elsewhere in the operator's browser: they ran, and nothing ran on the controller.
 fn cross_origin_attacks_run_nothing(addr: SocketAddr) {
-    let (_, before) = http(addr, "GET /api/status", "");
+    // A status read after every earlier command (two polls later).
+    let (_, now) = http(addr, "GET /api/status", "");
+    let beat = now["heartbeat"].as_u64().unwrap();
+    let before =
+        status_until(addr, Duration::from_secs(3), |s| s["heartbeat"].as_u64() > Some(beat + 1));
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/cell/cross_origin.py");
     let out = Command::new("/usr/bin/python3")
         .arg(&script)
@@ -232,7 +240,9 @@ fn cross_origin_attacks_run_nothing(addr: SocketAddr) {
         "{seen}"
     );
     assert!(seen["rebinding_run"].as_str().unwrap().starts_with("421"), "{seen}");
-    let (_, after) = http(addr, "GET /api/status", "");
+    let beat = seen_beat(addr);
+    let after =
+        status_until(addr, Duration::from_secs(3), |s| s["heartbeat"].as_u64() > Some(beat + 1));
     assert_eq!(after["device"]["run"], before["device"]["run"], "something ran: {after}");
     assert_eq!(after["state"], "idle", "{after}");
 }
