@@ -396,8 +396,10 @@ impl Owner {
             let job = match Self::next(shared, next_poll) {
                 Next::End => return,
                 Next::Poll => {
+                    // Timed from the poll's start: the link's round trip does not slow the rate.
+                    let began = Instant::now();
                     self.poll();
-                    next_poll = Instant::now() + POLL_PERIOD;
+                    next_poll = began + POLL_PERIOD;
                     continue;
                 }
                 Next::Job(job) => job,
@@ -558,7 +560,7 @@ impl Owner {
         if report.clock >= previous.clock && report.run >= previous.run {
             return;
         }
-        let cause = format!("{:?}", report.reset_cause).to_lowercase();
+        let cause = report.reset_cause.name();
         if let Some(run) = self.last_run.take() {
             let was_done = previous.run == run && matches!(previous.state, DriveState::Idle);
             if !was_done {
