@@ -545,12 +545,13 @@ impl Owner {
             self.forget_a_run_the_device_never_reported(&report);
             self.last_report = Some(report);
         }
-        self.publish.send_replace(self.snapshot());
+        // Before the status is published: a front end that sees the link up finds the list.
         if self.client.is_some() && Instant::now() >= self.next_plan_read {
             // A failed read shows in the link state; the cache keeps its last list.
             let _ = self.read_plans();
             self.next_plan_read = self.next_plan_read.max(Instant::now() + RECONNECT_PERIOD);
         }
+        self.publish.send_replace(self.snapshot());
     }
 
     /// A controller whose clock or run number went back has restarted and forgotten every
