@@ -1,6 +1,9 @@
 //! The cell's link owner against the controller in QEMU: a run goes busy then done (never the
 //! last run's done first), bad slots and empty slots are named, a stopped run reads idle, a
-//! killed controller reads error within seconds, and a restarted one is picked up again.
+//! killed controller reads error within seconds, and a restarted one is picked up again. The
+//! stale-busy case: the controller is killed mid-run and started again on the same flash (its
+//! run numbers start over): the cell follows it (error naming the lost run, never busy), and a
+//! stop resolves it to idle.
 
 use std::time::{Duration, Instant};
 
@@ -70,7 +73,7 @@ async fn the_owner_runs_stops_and_reports_a_lost_and_found_link() {
         Err(CellError::NoPlan { slot: 9, stored }) => assert_eq!(stored, SLOT.to_string()),
         other => panic!("slot 9 holds no plan, got {other:?}"),
     }
-    let (plans, _) = cell.plans().await.expect("plans");
+    let (plans, _) = cell.plans().expect("plans");
     assert_eq!(plans.iter().map(|p| p.slot).collect::<Vec<_>>(), [SLOT]);
 
     cell.run(u32::from(SLOT), None).await.expect("run again");
@@ -80,6 +83,13 @@ async fn the_owner_runs_stops_and_reports_a_lost_and_found_link() {
     let seen = until(&cell, Duration::from_secs(5), |s| s.state != CellState::Busy).await;
     assert_eq!(seen.last().unwrap().state, CellState::Idle, "a stopped run reads idle");
 
+    // Killed mid-run: the run is lost with the controller.
+    let lost_run = cell.run(u32::from(SLOT), None).await.expect("run before the power cut");
+    until(&cell, Duration::from_secs(5), |s| {
+        s.device.as_ref().is_some_and(|d| d.run == lost_run.run)
+    })
+    .await;
+    assert_eq!(cell.status().state, CellState::Busy);
     emu.kill();
     let killed = Instant::now();
     let seen = until(&cell, Duration::from_secs(8), |s| s.state == CellState::Error).await;
@@ -91,6 +101,31 @@ async fn the_owner_runs_stops_and_reports_a_lost_and_found_link() {
 
     emu.restart().expect("restart the emulator");
     let back = Instant::now();
-    until(&cell, Duration::from_secs(15), |s| s.link_up && s.state != CellState::Error).await;
+    let seen = until(&cell, Duration::from_secs(15), |s| {
+        s.link_up
+            && s.device.is_some()
+            && s.error.as_deref().is_some_and(|e| !e.contains("link down"))
+    })
+    .await;
     eprintln!("link back after {:.1} s", back.elapsed().as_secs_f64());
+    // Never a stale busy once the link is up again: the device restarted at run 0.
+    assert!(seen.iter().all(|s| !(s.link_up && s.state == CellState::Busy)), "stale busy");
+    let after = seen.last().unwrap();
+    assert_eq!(after.state, CellState::Error);
+    let why = after.error.as_deref().unwrap();
+    assert!(why.contains("restarted") && why.contains(&format!("run {}", lost_run.run)), "{why}");
+    // A stop acknowledges it: the cell reads the device's idle.
+    cell.stop().await.expect("stop after the restart");
+    let seen = until(&cell, Duration::from_secs(5), |s| s.state == CellState::Idle).await;
+    assert_eq!(seen.last().unwrap().last_run, None);
+    // And the cell runs again on the restarted controller.
+    let again = cell.run(u32::from(SLOT), None).await.expect("run after the restart");
+    assert!(
+        again.run < lost_run.run,
+        "the run numbers started over: {} {}",
+        again.run,
+        lost_run.run
+    );
+    let seen = until(&cell, Duration::from_secs(10), |s| s.state == CellState::Done).await;
+    assert_eq!(seen.last().unwrap().last_run, Some(again.run));
 }

@@ -1,7 +1,12 @@
 //! `chladni serve --http` against the QEMU controller: an operator's run through the dashboard
 //! in headless Chromium (tests/cell/dashboard.py: the stored plan listed, Run, busy, done, the
 //! acceleration plot drawn, screenshots in target/cell/), and the JSON API by plain HTTP
-//! (shapes, a bad slot named, stop, and the error state once the controller is gone).
+//! (shapes, a bad slot named, stop, and the error state once the controller is gone). Before
+//! the operator's run, pages from elsewhere attack through the same browser
+//! (tests/cell/cross_origin.py: a no-CORS fetch, a text/plain form POST, a JSON fetch, a
+//! DNS-rebinding page): the pages ran and nothing ran on the controller. After it, a second
+//! `serve` with `--token-file` refuses requests without the token, and the dashboard logs in
+//! from the URL it printed, runs the plan and stops it.
 //!
 //! Needs Debian's chromium, chromium-driver and python3-selenium (scripts/install-deps.sh): a
 //! machine without them fails here, naming the script, rather than skipping the test.
@@ -44,17 +49,24 @@ struct Serve {
 
 impl Serve {
     fn start(port: &str) -> Serve {
+        Self::start_with(port, &[]).0
+    }
+
+    /// With more arguments; the URL printed (the login URL with a token).
+    fn start_with(port: &str, args: &[&str]) -> (Serve, String) {
         let mut child = Command::new(env!("CARGO_BIN_EXE_chladni"))
             .args(["serve", "--port", port, "--http", "127.0.0.1:0"])
+            .args(args)
             .stdout(Stdio::piped())
             .spawn()
             .unwrap();
         let mut line = String::new();
         BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
-        let url = line.trim().strip_prefix("http listening on http://").unwrap_or_else(|| {
+        let url = line.trim().strip_prefix("http listening on ").unwrap_or_else(|| {
             panic!("serve printed {line:?}, not `http listening on http://ADDR/`")
         });
-        Serve { addr: url.trim_end_matches('/').parse().unwrap(), child }
+        let addr = url.trim_start_matches("http://").split('/').next().unwrap().parse().unwrap();
+        (Serve { addr, child }, url.to_owned())
     }
 
     fn url(&self) -> String {
@@ -78,11 +90,17 @@ impl Drop for Serve {
 
 /// One HTTP/1.1 request (`Connection: close`): the status and the body as JSON.
 fn http(addr: SocketAddr, head: &str, body: &str) -> (u16, Value) {
+    http_as(addr, None, head, body)
+}
+
+/// The same with a bearer token.
+fn http_as(addr: SocketAddr, token: Option<&str>, head: &str, body: &str) -> (u16, Value) {
     let mut stream = TcpStream::connect(addr).unwrap();
     stream.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    let auth = token.map_or(String::new(), |t| format!("Authorization: Bearer {t}\r\n"));
     let request = format!(
-        "{head} HTTP/1.1\r\nHost: test\r\nConnection: close\r\nContent-Type: application/json\r\n\
-         Content-Length: {}\r\n\r\n{body}",
+        "{head} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\nContent-Type: application/json\r\n\
+         {auth}Content-Length: {}\r\n\r\n{body}",
         body.len()
     );
     stream.write_all(request.as_bytes()).unwrap();
@@ -164,14 +182,15 @@ fn refused_while_another_session_owns(emu: &Emulator, addr: SocketAddr) {
     drop(other);
 }
 
-/// The operator's run in the browser; what the script saw.
-fn browser_run(url: &str) -> Value {
+/// The operator's run in the browser (`stop`: stopped once busy); what the script saw.
+fn browser_run(url: &str, stop: bool) -> Value {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/cell/dashboard.py");
     let shots = screenshot_dir();
     let out = Command::new("/usr/bin/python3")
         .arg(&script)
         .args([url, "cell-http-2step"])
         .arg(&shots)
+        .args(stop.then_some("stop"))
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -179,6 +198,78 @@ fn browser_run(url: &str) -> Value {
     assert!(out.status.success(), "dashboard.py failed: {stdout}\n{stderr}");
     assert!(shots.join("dashboard.png").is_file());
     serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("{e}: {stdout}"))
+}
+
+fn seen_beat(addr: SocketAddr) -> u64 {
+    http(addr, "GET /api/status", "").1["heartbeat"].as_u64().unwrap()
+}
+
+/// Pages from elsewhere in the operator's browser: they ran, and nothing ran on the controller.
+fn cross_origin_attacks_run_nothing(addr: SocketAddr) {
+    // A status read after every earlier command (two polls later).
+    let (_, now) = http(addr, "GET /api/status", "");
+    let beat = now["heartbeat"].as_u64().unwrap();
+    let before =
+        status_until(addr, Duration::from_secs(3), |s| s["heartbeat"].as_u64() > Some(beat + 1));
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/cell/cross_origin.py");
+    let out = Command::new("/usr/bin/python3")
+        .arg(&script)
+        .arg(format!("http://{addr}/"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "cross_origin.py failed: {stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let seen: Value =
+        serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("{e}: {stdout}"));
+    eprintln!("the attacking pages saw {seen}");
+    // The page ran every attempt (an opaque no-CORS answer, the form's frame loaded, the JSON
+    // fetch blocked by the browser for want of a CORS grant).
+    let attempts = &seen["cross_origin"];
+    assert_eq!(
+        (&attempts["nocors"], &attempts["form"]),
+        (&"sent".into(), &"submitted".into()),
+        "{seen}"
+    );
+    assert!(attempts["json"].as_str().unwrap().starts_with("blocked"), "{seen}");
+    assert!(
+        seen["rebinding_page"].as_str().unwrap().contains("does not answer for host"),
+        "{seen}"
+    );
+    assert!(seen["rebinding_run"].as_str().unwrap().starts_with("421"), "{seen}");
+    let beat = seen_beat(addr);
+    let after =
+        status_until(addr, Duration::from_secs(3), |s| s["heartbeat"].as_u64() > Some(beat + 1));
+    assert_eq!(after["device"]["run"], before["device"]["run"], "something ran: {after}");
+    assert_eq!(after["state"], "idle", "{after}");
+}
+
+/// A second server with a token: refused without it; the dashboard logs in from the printed
+/// URL, runs the plan and stops it. The server is handed back for the lost-link checks.
+fn token_login_runs_and_stops(emu: &Emulator) -> (Serve, String) {
+    let file = screenshot_dir().join("serve-token");
+    let _ = std::fs::create_dir_all(screenshot_dir());
+    let _ = std::fs::remove_file(&file);
+    let (serve, login) =
+        Serve::start_with(&emu.address(), &["--token-file", file.to_str().unwrap()]);
+    let token = std::fs::read_to_string(&file).unwrap().trim().to_owned();
+    assert_eq!(login, format!("http://{}/?token={token}", serve.addr));
+    let (code, refused) = http(serve.addr, "GET /api/status", "");
+    assert_eq!(code, 401, "{refused}");
+    let (code, refused) = http(serve.addr, "POST /api/run", r#"{"slot": 0}"#);
+    assert_eq!(code, 401, "{refused}");
+    let up = Instant::now();
+    while http_as(serve.addr, Some(&token), "GET /api/status", "").1["state"] != "idle" {
+        assert!(up.elapsed() < Duration::from_secs(10), "the token server never read idle");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let seen = browser_run(&login, true);
+    eprintln!("the logged-in dashboard saw {seen}");
+    assert!(seen["message"].as_str().unwrap().contains("run"), "{seen}");
+    (serve, token)
 }
 
 #[test]
@@ -193,8 +284,15 @@ fn the_dashboard_runs_a_stored_plan_and_the_api_reports_a_lost_link() {
     assert_eq!(up["device"]["state"], "idle", "{up}");
     check_api_requests(addr);
     refused_while_another_session_owns(&emu, addr);
+    cross_origin_attacks_run_nothing(addr);
+    // One meaning of repeat 0 on both front ends: the plan's own count.
+    let (code, zero) = http(addr, "POST /api/run", r#"{"slot": 0, "repeat": 0}"#);
+    assert_eq!(code, 200, "{zero}");
+    let (code, stopped) = http(addr, "POST /api/stop", "{}");
+    assert_eq!(code, 200, "{stopped}");
+    status_until(addr, Duration::from_secs(5), |s| s["state"] == "idle");
 
-    let seen = browser_run(&serve.url());
+    let seen = browser_run(&serve.url(), false);
     assert!(seen["busy_after_s"].as_f64().unwrap() < 2.0, "{seen}");
     // The plan is 6 s: done when it ended, not before (6.5-7 s measured; slack for a loaded
     // machine, where QEMU's controller runs late).
@@ -211,13 +309,24 @@ fn the_dashboard_runs_a_stored_plan_and_the_api_reports_a_lost_link() {
     assert!(stopped["run"].as_u64().unwrap() > done["last_run"].as_u64().unwrap());
     let idle = status_until(addr, Duration::from_secs(3), |s| s["state"] == "idle");
     assert_eq!(idle["state"], "idle", "{idle}");
+    // This server owns the controller while it serves: the next one starts after it.
+    assert_eq!(serve.terminate(), Some(0));
+    let (mut serve, token) = token_login_runs_and_stops(&emu);
+    let addr = serve.addr;
 
     // A power cut: the proxy stays, nothing answers.
     emu.kill();
-    let lost = status_until(addr, Duration::from_secs(8), |s| s["state"] == "error");
+    let start = Instant::now();
+    let lost = loop {
+        let (_, status) = http_as(addr, Some(&token), "GET /api/status", "");
+        if status["state"] == "error" || start.elapsed() > Duration::from_secs(8) {
+            break status;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
     assert_eq!((&lost["state"], &lost["link_up"]), (&"error".into(), &false.into()), "{lost}");
     assert!(lost["error"].as_str().unwrap().contains("controller link down"), "{lost}");
-    let (code, refused) = http(addr, "POST /api/run", r#"{"slot": 0}"#);
+    let (code, refused) = http_as(addr, Some(&token), "POST /api/run", r#"{"slot": 0}"#);
     assert_eq!(code, 503, "{refused}");
     assert!(refused["error"].as_str().unwrap().contains("link is down"), "{refused}");
     assert_eq!(serve.terminate(), Some(0));

@@ -100,7 +100,8 @@ fn serve(emu: &Emulator) -> (Served, SocketAddr, SocketAddr) {
 fn http_status(address: SocketAddr) -> (u16, Value) {
     let mut stream = TcpStream::connect(address).expect("connect to the HTTP front end");
     stream.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
-    write!(stream, "GET /api/status HTTP/1.1\r\nHost: cell\r\nConnection: close\r\n\r\n").unwrap();
+    write!(stream, "GET /api/status HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")
+        .unwrap();
     let mut response = String::new();
     stream.read_to_string(&mut response).expect("read the HTTP response");
     let (head, body) = response.split_once("\r\n\r\n").unwrap_or_else(|| panic!("{response}"));

@@ -3,7 +3,9 @@
 uses it: the stored plan is listed, its Run button starts it, the state goes busy then done,
 the acceleration plot gets points; screenshots on the way.
 
-Usage: dashboard.py URL PLAN_NAME SCREENSHOT_DIR
+Usage: dashboard.py URL PLAN_NAME SCREENSHOT_DIR [stop]
+With `stop`, the run is stopped with the Stop button once busy, and the state must read idle
+(the login case: URL is then the `/?token=...` URL serve printed).
 Run by host/tests/cli_serve_http.rs against `chladni serve --http` on the QEMU controller.
 Prints one JSON line of what it saw; exits 1 naming the first thing that did not happen.
 Needs Debian's chromium, chromium-driver and python3-selenium (scripts/install-deps.sh).
@@ -26,13 +28,13 @@ except ImportError as e:
 DRIVER = "/usr/bin/chromedriver"
 
 
-def browser():
+def browser(extra=()):
     """Headless Chromium at a desktop size; root in a container needs --no-sandbox."""
     if not os.path.exists(DRIVER):
         sys.exit(f"dashboard.py: {DRIVER} missing: install chromium-driver with scripts/install-deps.sh")
     options = webdriver.ChromeOptions()
     for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
-                "--window-size=1280,920", "--hide-scrollbars"):
+                "--window-size=1280,920", "--hide-scrollbars", *extra):
         options.add_argument(arg)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     return webdriver.Chrome(service=Service(DRIVER), options=options)
@@ -61,7 +63,18 @@ def points(driver):
     return int(driver.find_element(By.ID, "plot").get_attribute("data-points"))
 
 
-def main(url, plan, shots):
+def run_and_stop(driver, seen):
+    """Stop once busy: the state must read idle, and the message name the stop's run."""
+    driver.find_element(By.ID, "stop").click()
+    stopped = time.monotonic()
+    wait_for(driver, "the state idle after Stop", state_is("idle"), 10)
+    seen["idle_after_stop_s"] = round(time.monotonic() - stopped, 2)
+    seen["message"] = driver.find_element(By.ID, "message").text
+    seen["errors"] = [e["message"] for e in driver.get_log("browser") if e["level"] == "SEVERE"]
+    seen["points_busy"] = points(driver)
+
+
+def main(url, plan, shots, stop=False):
     driver = browser()
     seen = {}
     try:
@@ -77,6 +90,9 @@ def main(url, plan, shots):
         wait_for(driver, "the state busy after Run", state_is("busy"), 5)
         seen["busy_after_s"] = round(time.monotonic() - started, 2)
         seen["message"] = driver.find_element(By.ID, "message").text
+        if stop:
+            run_and_stop(driver, seen)
+            return
         # Well into the run: the figure for the docs, with the plot drawn and the bar moving.
         wait_for(driver, "the second step", lambda d: d.find_element(By.ID, "step").text == "2 of 2", 15)
         time.sleep(1.5)
@@ -90,7 +106,11 @@ def main(url, plan, shots):
         seen["errors"] = [e["message"] for e in driver.get_log("browser") if e["level"] == "SEVERE"]
     finally:
         driver.quit()
-    print(json.dumps(seen), flush=True)
+        print(json.dumps(seen), flush=True)
+    if stop:
+        if seen["errors"]:
+            sys.exit(f"dashboard.py: the page logged errors: {seen['errors']}")
+        return
     if seen["points_busy"] < 10:
         sys.exit(f"dashboard.py: the plot has {seen['points_busy']} points during the run, expected ≥ 10")
     if seen["errors"]:
@@ -98,8 +118,8 @@ def main(url, plan, shots):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) != 4:
+    if len(sys.argv) not in (4, 5) or sys.argv[4:] not in ([], ["stop"]):
         sys.exit(__doc__)
     SHOTS = sys.argv[3]
     os.makedirs(SHOTS, exist_ok=True)
-    main(sys.argv[1], sys.argv[2], SHOTS)
+    main(sys.argv[1], sys.argv[2], SHOTS, stop=sys.argv[4:] == ["stop"])

@@ -17,8 +17,16 @@
 //! `Json` extractor) so that these messages are ours and not a framework's.
 //!
 //! Like every front end, this one never talks to the link: it only calls [`Cell`].
+//!
+//! In front of the routes: [`guard`](super::guard) (Host, Origin, JSON bodies, the token),
+//! `tower-http`'s body limit ([`MAX_BODY`]), body-read timeout and request timeout
+//! ([`REQUEST_TIMEOUT`], 504), and [`json_errors`], which turns any answer of the stack that
+//! is not JSON (413, 408) into `{"error": ...}`. Connections ([`serve`]) are hyper's HTTP/1 with
+//! its header-read timeout, which also closes idle keep-alive connections, and a cap per
+//! [`net::Caps`](super::net::Caps).
 
 use std::convert::Infallible;
+use std::sync::Arc;
 use std::time::Duration;
 
 use axum::Router;
@@ -32,8 +40,14 @@ use chladni_shared::icd::store::PLAN_SLOTS;
 use futures_util::stream::{self, Stream};
 use serde::Serialize;
 use serde_json::Value;
-use tokio::sync::watch;
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::{Semaphore, watch};
+use tower_http::limit::RequestBodyLimitLayer;
+use tower_http::timeout::{RequestBodyTimeoutLayer, TimeoutLayer};
 
+use super::guard::{self, Access};
+use super::net::{self, Caps};
+use super::ratelog;
 use super::{Cell, CellError, CellStatus};
 use crate::controller::client::DeviceError;
 use crate::controller::json::{PlanJson, PlansJson};
@@ -49,13 +63,129 @@ const DASHBOARD: &str = include_str!("dashboard.html");
 const ROUTES: &str = "GET /, GET /api/status, GET /api/events, GET /api/plans, \
                       POST /api/run, POST /api/stop, POST /api/clear-fault";
 
-/// Serves the dashboard and the API on `listener` until the listener fails.
-pub async fn serve(cell: Cell, listener: tokio::net::TcpListener) -> std::io::Result<()> {
-    axum::serve(listener, router(cell)).await
+/// The largest request body taken (a run request is a few dozen bytes).
+pub const MAX_BODY: usize = 4 * 1024;
+/// How long a request may take from its head to its answer (a run waits for the link).
+pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(15);
+/// How long a body may take to arrive.
+pub const BODY_TIMEOUT: Duration = Duration::from_secs(5);
+/// How long a connection may take to send a request's head, and stay idle between requests.
+pub const HEADER_TIMEOUT: Duration = Duration::from_secs(10);
+/// The same for connections beyond the cap (served one request, no keep-alive).
+pub const OVERFLOW_HEADER_TIMEOUT: Duration = Duration::from_secs(2);
+/// hyper's read buffer: headers beyond it get hyper's own bare 431 (the guard answers JSON
+/// for anything above [`guard::MAX_HEADER_BYTES`] and below this).
+const READ_BUFFER: usize = 64 * 1024;
+
+/// How the HTTP front end is served.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Who may use it.
+    pub access: Access,
+    /// Connections served normally, and beyond that with a short header timeout.
+    pub connections: usize,
+    /// See [`Caps::http_overflow`].
+    pub overflow: usize,
 }
 
-/// The routes, on `cell`; public so that tests and other servers can mount them.
-pub fn router(cell: Cell) -> Router {
+impl Options {
+    /// Loopback use without a token, with the caps of this process's open-file limit.
+    pub fn local() -> Self {
+        let caps = Caps::from_limit(net::open_file_limit(), 1);
+        Options { access: Access::default(), connections: caps.http, overflow: caps.http_overflow }
+    }
+}
+
+/// Serves the dashboard and the API on `listener`; it never returns on its own (accept errors
+/// are logged and retried).
+pub async fn serve(cell: Cell, listener: TcpListener, options: Options) -> std::io::Result<()> {
+    let app = router(cell, options.access);
+    let normal = Arc::new(Semaphore::new(options.connections));
+    let overflow = Arc::new(Semaphore::new(options.overflow));
+    loop {
+        let (stream, peer) = net::accept(&listener, "http").await;
+        let (permit, timeout, keep_alive) = match Arc::clone(&normal).try_acquire_owned() {
+            Ok(permit) => (permit, HEADER_TIMEOUT, true),
+            Err(_) => match Arc::clone(&overflow).try_acquire_owned() {
+                Ok(permit) => (permit, OVERFLOW_HEADER_TIMEOUT, false),
+                Err(_) => {
+                    refuse_connection(&stream, peer);
+                    continue;
+                }
+            },
+        };
+        let service = hyper_util::service::TowerToHyperService::new(app.clone());
+        tokio::spawn(async move {
+            let mut http1 = hyper::server::conn::http1::Builder::new();
+            http1
+                .timer(hyper_util::rt::TokioTimer::new())
+                .header_read_timeout(timeout)
+                .keep_alive(keep_alive)
+                .max_buf_size(READ_BUFFER);
+            let io = hyper_util::rt::TokioIo::new(stream);
+            // A connection that fails or times out is the client's affair: it is closed.
+            let _ = http1.serve_connection(io, service).with_upgrades().await;
+            drop(permit);
+        });
+    }
+}
+
+/// A connection beyond every cap: a JSON 503 if the socket takes it at once, then closed.
+fn refuse_connection(stream: &TcpStream, peer: std::net::SocketAddr) {
+    let body = r#"{"error":"the server holds as many connections as it takes: try again in a few seconds"}"#;
+    let answer = format!(
+        "HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\n\
+         Content-Length: {}\r\nConnection: close\r\nRetry-After: 2\r\n\r\n{body}",
+        body.len()
+    );
+    let _ = stream.try_write(answer.as_bytes());
+    ratelog::global().log(
+        &peer.ip().to_string(),
+        "http-cap",
+        &format!("http {peer}: refused, the connection cap is reached"),
+    );
+}
+
+/// The routes, on `cell`, behind the guard and the limits; public so that tests and other
+/// servers can mount them.
+pub fn router(cell: Cell, access: Access) -> Router {
+    routes(cell)
+        .layer(axum::middleware::from_fn_with_state(Arc::new(access), guard::check))
+        .layer(RequestBodyLimitLayer::new(MAX_BODY))
+        .layer(RequestBodyTimeoutLayer::new(BODY_TIMEOUT))
+        .layer(TimeoutLayer::with_status_code(StatusCode::GATEWAY_TIMEOUT, REQUEST_TIMEOUT))
+        .layer(axum::middleware::map_response(json_errors))
+}
+
+/// Any error answer that is not JSON yet (the stack's own: 413, 504, a body that timed out)
+/// becomes `{"error": ...}` with a message naming the limit.
+pub async fn json_errors(response: Response) -> Response {
+    let status = response.status();
+    let is_json = response
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .is_some_and(|t| t.as_bytes().starts_with(b"application/json"));
+    if !(status.is_client_error() || status.is_server_error()) || is_json {
+        return response;
+    }
+    let text = axum::body::to_bytes(response.into_body(), MAX_BODY).await.unwrap_or_default();
+    let text = String::from_utf8_lossy(&text);
+    let message = match status {
+        StatusCode::PAYLOAD_TOO_LARGE => {
+            format!("the body is larger than {MAX_BODY} bytes: the API takes small JSON objects")
+        }
+        StatusCode::GATEWAY_TIMEOUT => format!(
+            "no answer within {REQUEST_TIMEOUT:?} (the controller is slow or many requests \
+             wait): try again"
+        ),
+        _ if text.trim().is_empty() => status.canonical_reason().unwrap_or("error").to_owned(),
+        _ => format!("{}: {}", status.canonical_reason().unwrap_or("error"), text.trim()),
+    };
+    ApiError { status, message }.into_response()
+}
+
+/// The routes themselves.
+fn routes(cell: Cell) -> Router {
     Router::new()
         .route("/", get(dashboard))
         .route("/api/status", get(status))
@@ -90,7 +220,9 @@ impl From<CellError> for ApiError {
             CellError::BadSlot { .. } | CellError::NoPlan { .. } => {
                 StatusCode::UNPROCESSABLE_ENTITY
             }
-            CellError::LinkDown { .. } | CellError::Stopped => StatusCode::SERVICE_UNAVAILABLE,
+            CellError::LinkDown { .. } | CellError::Stopped | CellError::QueueFull => {
+                StatusCode::SERVICE_UNAVAILABLE
+            }
             CellError::Device(d) => device_status(d),
         };
         ApiError { status, message: e.to_string() }
@@ -152,7 +284,7 @@ async fn status(State(cell): State<Cell>) -> Response {
 }
 
 async fn plans(State(cell): State<Cell>) -> Result<Response, ApiError> {
-    let (plans, free_bytes) = cell.plans().await?;
+    let (plans, free_bytes) = cell.plans()?;
     let plans = PlansJson { free_bytes, plans: plans.iter().map(PlanJson::from).collect() };
     Ok(json(StatusCode::OK, &plans))
 }
@@ -169,12 +301,25 @@ async fn run(State(cell): State<Cell>, body: Bytes) -> Result<Response, ApiError
     Ok(json(StatusCode::OK, &started))
 }
 
-async fn stop(State(cell): State<Cell>) -> Result<Response, ApiError> {
+async fn stop(State(cell): State<Cell>, body: Bytes) -> Result<Response, ApiError> {
+    empty_object(&body)?;
     Ok(json(StatusCode::OK, &Accepted { run: cell.stop().await? }))
 }
 
-async fn clear_fault(State(cell): State<Cell>) -> Result<Response, ApiError> {
+async fn clear_fault(State(cell): State<Cell>, body: Bytes) -> Result<Response, ApiError> {
+    empty_object(&body)?;
     Ok(json(StatusCode::OK, &Accepted { run: cell.clear_fault().await? }))
+}
+
+/// Stop and clear-fault take no arguments: an empty body or `{}`.
+fn empty_object(body: &[u8]) -> Result<(), ApiError> {
+    let text = String::from_utf8_lossy(body);
+    if text.trim().is_empty()
+        || serde_json::from_slice::<Value>(body).is_ok_and(|v| v == serde_json::json!({}))
+    {
+        return Ok(());
+    }
+    Err(ApiError::bad_request(format!("the body is {text}: this command takes {{}} or nothing")))
 }
 
 async fn not_found(method: Method, uri: Uri) -> ApiError {

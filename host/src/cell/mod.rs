@@ -3,15 +3,22 @@
 //!
 //! - [`Cell`] (in [`owner`]) is the link's one owner: a thread that holds the
 //!   [`DeviceClient`](crate::controller::client::DeviceClient) session, runs the commands sent to
-//!   it one at a time, and polls the controller's status for everyone else. Front ends never
-//!   talk to the link themselves, so a PLC and a browser at once never interleave frames, and a
-//!   lost link shows as an error state, never as a stale "busy".
+//!   it (stop and clear-fault first), and polls the controller's status for everyone else.
+//!   Front ends never talk to the link themselves, so a PLC and a browser at once never
+//!   interleave frames, and a lost link shows as an error state, never as a stale "busy".
 //! - The front ends (`chladni serve`) turn their protocol into [`Cell`] calls and its
-//!   [`CellStatus`] into their registers or pages: [`modbus`] (Modbus TCP for a PLC; the
-//!   register map is in docs/cell.md) and [`http`] (the dashboard and JSON API for people).
+//!   [`CellStatus`] into their registers or pages: [`modbus`] (Modbus TCP for a PLC, framed by
+//!   [`mbap`]; the register map is in docs/cell.md) and [`http`] (the dashboard and JSON API
+//!   for people, behind [`guard`]).
+//! - [`net`] (accepting, connection caps, allow-lists) and [`ratelog`] (bounded logging) keep
+//!   both front ends up under floods of connections and bad requests.
 
+pub mod guard;
 pub mod http;
+pub mod mbap;
 pub mod modbus;
+pub mod net;
 pub mod owner;
+pub mod ratelog;
 
 pub use owner::{Cell, CellError, CellState, CellStatus, POLL_PERIOD, RunStarted};

@@ -7,7 +7,7 @@
 //! registers for the state, a result register that says why a command was refused.
 //!
 //! The map is pure data here ([`input_registers`], [`parse_write`], [`CommandResult::of`]),
-//! tested without a network; [`serve`] puts it behind `tokio-modbus`'s TCP server. Every
+//! tested without a network; [`serve`] puts it behind the framing of [`super::mbap`]. Every
 //! connection shares one [`Registers`]: the holding registers (slot, repeat, last command) and
 //! the last command's result are the cell's, not a connection's. Commands go through the link
 //! owner ([`Cell`]), so a PLC and the dashboard never interleave frames on the link.
@@ -17,20 +17,20 @@
 //! (the result register says which refusal). Reads never fail for a lost link: the state reads
 //! `error` (3) and the fault register reads [`FAULT_LINK_DOWN`], never a stale `busy`.
 
-use std::future::Future;
-use std::net::SocketAddr;
-use std::pin::Pin;
 use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
 
 use chladni_shared::icd::link::{DriveError, Refusal, StatusReport};
 use chladni_shared::icd::sense::{FaultCause, SensorFault};
 use chladni_shared::icd::store::PLAN_SLOTS;
 use tokio::net::TcpListener;
-use tokio_modbus::server::Service;
-use tokio_modbus::server::tcp::Server;
+use tokio::sync::Semaphore;
 use tokio_modbus::{ExceptionCode, Request, Response};
 
+use super::mbap;
+use super::net::{self, Cidr};
 use super::owner::{Cell, CellError, CellStatus};
+use super::ratelog;
 use crate::controller::client::DeviceError;
 
 /// Holding register: the plan slot a run command runs (0..[`PLAN_SLOTS`]).
@@ -84,7 +84,7 @@ pub const FAULT_LINK_DOWN: u16 = 100;
 /// Most registers one read may ask for (Modbus application protocol, FC03/FC04).
 const MAX_READ: u16 = 125;
 /// Most registers one FC16 write may carry.
-const MAX_WRITE: u16 = 123;
+pub const MAX_WRITE: u16 = 123;
 
 /// The commands of the command register.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -131,6 +131,8 @@ pub enum CommandResult {
     Refused = 7,
     /// 8: the cell is shutting down.
     Stopped = 8,
+    /// 9: run: too many commands wait for the controller already; try again.
+    QueueFull = 9,
 }
 
 impl CommandResult {
@@ -151,6 +153,7 @@ impl CommandResult {
             | CommandResult::Faulted
             | CommandResult::Refused
             | CommandResult::Stopped => Some(ExceptionCode::ServerDeviceFailure),
+            CommandResult::QueueFull => Some(ExceptionCode::ServerDeviceBusy),
         }
     }
 
@@ -161,6 +164,7 @@ impl CommandResult {
             CellError::BadSlot { .. } => CommandResult::BadSlot,
             CellError::NoPlan { .. } => CommandResult::NoPlan,
             CellError::Stopped => CommandResult::Stopped,
+            CellError::QueueFull => CommandResult::QueueFull,
             CellError::Device(e) => match e {
                 // The owner drops the session on these: the link is what failed.
                 DeviceError::Closed
@@ -419,51 +423,63 @@ impl Registers {
     }
 }
 
-/// One connection's service: the shared registers behind `tokio-modbus`'s trait.
-struct Connection {
-    registers: Registers,
-    peer: SocketAddr,
+/// How the Modbus front end is served.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// The clients allowed to connect (by address).
+    pub allow: Vec<Cidr>,
+    /// How many clients may be connected at once (a PLC is one).
+    pub clients: usize,
+    /// A connection silent this long is closed.
+    pub idle: Duration,
 }
 
-impl Service for Connection {
-    type Request = Request<'static>;
-    type Response = Response;
-    type Exception = ExceptionCode;
-    type Future = Pin<Box<dyn Future<Output = Result<Response, ExceptionCode>> + Send>>;
-
-    fn call(&self, request: Request<'static>) -> Self::Future {
-        let registers = self.registers.clone();
-        let peer = self.peer;
-        Box::pin(async move {
-            let write = matches!(
-                request,
-                Request::WriteSingleRegister(..) | Request::WriteMultipleRegisters(..)
-            );
-            let described = if write { Some(format!("{request:?}")) } else { None };
-            let answer = registers.handle(request).await;
-            // Writes change the cell: the operator sees each one on stderr.
-            if let Some(request) = described {
-                let outcome = match &answer {
-                    Ok(_) => "ok".to_owned(),
-                    Err(e) => format!("exception {:#04x} ({e:?})", u8::from(*e)),
-                };
-                let result = registers.holding().result;
-                eprintln!("modbus {peer}: {request} → {outcome}, result {result:?}");
-            }
-            answer
-        })
+impl Options {
+    /// Loopback clients only, one at a time, [`IDLE_TIMEOUT`].
+    pub fn local() -> Self {
+        Options { allow: Cidr::loopback(), clients: 1, idle: IDLE_TIMEOUT }
     }
 }
 
-/// Serves the register map on `listener` until the task is dropped (or accepting fails).
-pub async fn serve(listener: TcpListener, registers: Registers) -> std::io::Result<()> {
-    let server = Server::new(listener);
-    let on_connected = |stream, peer| {
-        let connection = Connection { registers: registers.clone(), peer };
-        async move { Ok(Some((connection, stream))) }
-    };
-    let on_process_error = |e| eprintln!("modbus: a connection failed: {e}");
-    server.serve(&on_connected, on_process_error).await
+/// A connection that sends no request for this long is closed (a PLC polls far more often).
+pub const IDLE_TIMEOUT: Duration = Duration::from_secs(30);
+
+/// Serves the register map on `listener`; it never returns on its own (accept errors are
+/// logged and retried). A client outside the allow-list, or beyond the client limit, is
+/// closed at once.
+pub async fn serve(
+    listener: TcpListener,
+    registers: Registers,
+    options: Options,
+) -> std::io::Result<()> {
+    let clients = Arc::new(Semaphore::new(options.clients.max(1)));
+    loop {
+        let (stream, peer) = net::accept(&listener, "modbus").await;
+        let client = peer.ip().to_string();
+        if !options.allow.iter().any(|net| net.contains(peer.ip())) {
+            let allowed: Vec<String> = options.allow.iter().map(ToString::to_string).collect();
+            let text = format!(
+                "modbus {peer}: refused, not in the allow-list ({}): add it with --modbus-allow",
+                allowed.join(" ")
+            );
+            ratelog::global().log(&client, "modbus-allow", &text);
+            continue;
+        }
+        let Ok(permit) = Arc::clone(&clients).try_acquire_owned() else {
+            let text = format!(
+                "modbus {peer}: refused, {} client(s) connected already (--modbus-clients)",
+                options.clients
+            );
+            ratelog::global().log(&client, "modbus-clients", &text);
+            continue;
+        };
+        let registers = registers.clone();
+        let idle = options.idle;
+        tokio::spawn(async move {
+            mbap::connection(stream, peer, registers, idle).await;
+            drop(permit);
+        });
+    }
 }
 
 #[cfg(test)]

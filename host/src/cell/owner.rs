@@ -3,22 +3,37 @@
 //!
 //! Why a thread and not a lock around the client: a command (run, stop) and the status polls
 //! must be one ordered conversation on one session, or two front ends' frames would interleave
-//! and answers could reach the wrong asker. The thread takes one command at a time from a
-//! queue, answers it on its own reply channel, and between commands reads the status every
-//! [`POLL_PERIOD`]. Front ends are async (tokio) and sync alike: replies come on a
-//! `tokio::sync::oneshot`, the status on a `tokio::sync::watch`, both usable from either.
+//! and answers could reach the wrong asker. The thread takes one command at a time, answers it
+//! on its own reply channel, and reads the status every [`POLL_PERIOD`]. Front ends are async
+//! (tokio) and sync alike: replies come on a `tokio::sync::oneshot`, the status and the plan
+//! list on `tokio::sync::watch`es, both usable from either.
+//!
+//! What keeps the cell responsive under any front-end load:
+//! - stop and clear-fault go into their own lane, taken before anything else: they wait at
+//!   most for the one link request in flight (a few ms), never behind runs;
+//! - a status poll that is due is made before the next run: the heartbeat keeps its rate;
+//! - runs wait in a bounded queue ([`MAX_QUEUED_RUNS`]; beyond it they are refused at once),
+//!   and a run whose asker has gone (an HTTP client that hung up) is dropped, not carried out;
+//! - the plan list is a cache ([`Cell::plans`]) the owner reads from the controller when the
+//!   link comes up, every [`PLAN_REFRESH`], and when a run names a slot it does not list: a
+//!   page that lists plans in a loop costs the link nothing.
 //!
 //! The cell's state follows the Asycube convention a PLC expects:
-//! - `error`: the link is down (the reason is kept), or the controller latched a fault;
+//! - `error`: the link is down (the reason is kept), the controller latched a fault, or the
+//!   controller restarted while a run of this cell's was under way (the run was lost: a stop or
+//!   clear-fault acknowledges it);
 //! - `busy`: a run this cell asked for is accepted but not yet reported, or the drive is on;
 //! - `done`: the controller reported the run this cell started, and then reported it idle
 //!   (ended by itself; a stop is a newer command, so a stopped run reads `idle`);
 //! - `idle`: otherwise (nothing run yet, stopped, or someone else's command since).
 //!
+//! The device's word wins: a controller that restarted (its sample clock or run number went
+//! back) has forgotten every run, so the cell forgets them too and never reads a stale `busy`.
 //! A link that fails (closed, I/O error, no answer) is dropped and reopened every
 //! [`RECONNECT_PERIOD`]; until then the state is `error`, whatever the controller did last.
 
-use std::sync::mpsc::{self, RecvTimeoutError};
+use std::collections::VecDeque;
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
 use chladni_shared::icd::link::{DriveState, RunNumber, StatusReport};
@@ -33,6 +48,13 @@ use crate::controller::json::StatusJson;
 pub const POLL_PERIOD: Duration = Duration::from_millis(100);
 /// How often a lost link is tried again.
 pub const RECONNECT_PERIOD: Duration = Duration::from_secs(1);
+/// How often the plan list is read again while the link is up (another program may upload).
+pub const PLAN_REFRESH: Duration = Duration::from_secs(10);
+/// Runs that may wait for the owner at once; one more is refused ([`CellError::QueueFull`]).
+pub const MAX_QUEUED_RUNS: usize = 8;
+/// How long an accepted run may stay missing from the controller's report before the cell
+/// takes it as lost (it shows within one control block, a few ms).
+pub const RUN_REPORT_LIMIT: Duration = Duration::from_secs(2);
 
 /// Why a cell command was not carried out.
 #[derive(Debug, thiserror::Error)]
@@ -65,6 +87,12 @@ pub enum CellError {
     /// The controller refused or could not take the command.
     #[error(transparent)]
     Device(#[from] DeviceError),
+    /// Too many runs wait for the controller already.
+    #[error(
+        "{MAX_QUEUED_RUNS} run requests are waiting for the controller already: try again \
+         when one is answered"
+    )]
+    QueueFull,
     /// The owner thread has ended (the process is shutting down).
     #[error("the cell's link owner has stopped")]
     Stopped,
@@ -150,14 +178,12 @@ enum Command {
     Run { slot: u8, repeat: Option<u16> },
     Stop,
     ClearFault,
-    Plans,
 }
 
 /// The owner's answer to a [`Command`].
 enum Answer {
     Run(RunStarted),
     Accepted(RunNumber),
-    Plans(Vec<PlanSummary>, u32),
 }
 
 struct Job {
@@ -165,12 +191,57 @@ struct Job {
     reply: oneshot::Sender<Result<Answer, CellError>>,
 }
 
+/// The commands waiting for the owner: stop and clear-fault in their own lane, taken first.
+#[derive(Default)]
+struct Queue {
+    urgent: VecDeque<Job>,
+    runs: VecDeque<Job>,
+    /// Every [`Cell`] handle is gone: the owner ends.
+    closed: bool,
+}
+
+/// The queue and the owner's wake-up, shared by the handles and the owner thread.
+#[derive(Default)]
+struct Shared {
+    queue: Mutex<Queue>,
+    ready: Condvar,
+}
+
+impl Shared {
+    fn lock(&self) -> MutexGuard<'_, Queue> {
+        self.queue.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+/// Held by every handle; the last one dropped tells the owner to end.
+struct Alive(Arc<Shared>);
+
+impl Drop for Alive {
+    fn drop(&mut self) {
+        self.0.lock().closed = true;
+        self.0.ready.notify_all();
+    }
+}
+
+/// The stored plans as the owner last read them from the controller.
+#[derive(Debug, Clone, Default)]
+pub struct PlanCache {
+    /// The plans, by slot.
+    pub plans: Vec<PlanSummary>,
+    /// The controller's free plan flash, bytes.
+    pub free_bytes: u32,
+    /// Whether the list was ever read (false: not since the cell started).
+    pub read: bool,
+}
+
 /// A handle on the link owner; clones share it. The owner thread ends when the last handle is
 /// dropped.
 #[derive(Clone)]
 pub struct Cell {
-    jobs: mpsc::Sender<Job>,
+    shared: Arc<Shared>,
+    _alive: Arc<Alive>,
     status: watch::Receiver<CellStatus>,
+    plans: watch::Receiver<PlanCache>,
 }
 
 impl Cell {
@@ -178,14 +249,17 @@ impl Cell {
     /// naming its session `client_name`. It never fails: a link that does not open shows as
     /// the `error` state and is tried again every [`RECONNECT_PERIOD`].
     pub fn start(port: &str, client_name: &str) -> Cell {
-        let (jobs, queue) = mpsc::channel();
+        let shared = Arc::new(Shared::default());
         let (publish, status) = watch::channel(CellStatus::starting());
+        let (publish_plans, plans) = watch::channel(PlanCache::default());
         let mut owner = Owner::new(port.to_owned(), client_name.to_owned(), publish);
+        owner.publish_plans = Some(publish_plans);
+        let queue = Arc::clone(&shared);
         std::thread::Builder::new()
             .name("cell-link-owner".into())
             .spawn(move || owner.serve(&queue))
             .expect("spawning a thread only fails when the OS is out of resources");
-        Cell { jobs, status }
+        Cell { _alive: Arc::new(Alive(Arc::clone(&shared))), shared, status, plans }
     }
 
     /// The latest status.
@@ -198,49 +272,75 @@ impl Cell {
         self.status.clone()
     }
 
-    /// Runs the plan stored in `slot`, `repeat` times (`None`: as stored). `slot` is a `u32`
-    /// so that front ends pass what they received and get [`CellError::BadSlot`] naming it.
+    /// Runs the plan stored in `slot`, `repeat` times (`None` or 0: as stored, the one meaning
+    /// of 0 for every front end). `slot` is a `u32` so that front ends pass what they received
+    /// and get [`CellError::BadSlot`] naming it.
     pub async fn run(&self, slot: u32, repeat: Option<u16>) -> Result<RunStarted, CellError> {
         let slot = u8::try_from(slot)
             .ok()
             .filter(|s| *s < PLAN_SLOTS)
             .ok_or(CellError::BadSlot { slot })?;
-        match self.ask(Command::Run { slot, repeat }).await? {
+        let repeat = repeat.filter(|n| *n != 0);
+        match self.ask(Command::Run { slot, repeat }, false).await? {
             Answer::Run(started) => Ok(started),
-            _ => unreachable!("the owner answers Run with Run"),
+            Answer::Accepted(_) => unreachable!("the owner answers Run with Run"),
         }
     }
 
-    /// Stops the drive (ramped); the controller's run number of the stop.
+    /// Stops the drive (ramped); the controller's run number of the stop. Never waits behind
+    /// runs.
     pub async fn stop(&self) -> Result<u32, CellError> {
-        self.ask_run(Command::Stop).await
+        self.ask_urgent(Command::Stop).await
     }
 
-    /// Clears a latched fault; the controller's run number of the clear.
+    /// Clears a latched fault; the controller's run number of the clear. Never waits behind
+    /// runs.
     pub async fn clear_fault(&self) -> Result<u32, CellError> {
-        self.ask_run(Command::ClearFault).await
+        self.ask_urgent(Command::ClearFault).await
     }
 
-    /// The stored plans, read from the controller now, and its free flash, bytes.
-    pub async fn plans(&self) -> Result<(Vec<PlanSummary>, u32), CellError> {
-        match self.ask(Command::Plans).await? {
-            Answer::Plans(plans, free) => Ok((plans, free)),
-            _ => unreachable!("the owner answers Plans with Plans"),
+    /// The stored plans and the free flash, bytes, from the owner's cache (no link request).
+    /// Before the list was ever read it is the link's error.
+    pub fn plans(&self) -> Result<(Vec<PlanSummary>, u32), CellError> {
+        let cache = self.plans.borrow();
+        if !cache.read {
+            let status = self.status.borrow();
+            let reason = status.error.clone().unwrap_or_else(|| "not read yet".into());
+            return Err(CellError::LinkDown { reason });
         }
+        Ok((cache.plans.clone(), cache.free_bytes))
     }
 
-    async fn ask_run(&self, command: Command) -> Result<u32, CellError> {
-        match self.ask(command).await? {
+    async fn ask_urgent(&self, command: Command) -> Result<u32, CellError> {
+        match self.ask(command, true).await? {
             Answer::Accepted(run) => Ok(run.0),
-            _ => unreachable!("the owner answers Stop and ClearFault with a run number"),
+            Answer::Run(_) => unreachable!("the owner answers Stop and ClearFault with a run"),
         }
     }
 
-    async fn ask(&self, command: Command) -> Result<Answer, CellError> {
+    async fn ask(&self, command: Command, urgent: bool) -> Result<Answer, CellError> {
         let (reply, answer) = oneshot::channel();
-        self.jobs.send(Job { command, reply }).map_err(|_| CellError::Stopped)?;
+        {
+            let mut queue = self.shared.lock();
+            let job = Job { command, reply };
+            if urgent {
+                queue.urgent.push_back(job);
+            } else if queue.runs.len() >= MAX_QUEUED_RUNS {
+                return Err(CellError::QueueFull);
+            } else {
+                queue.runs.push_back(job);
+            }
+        }
+        self.shared.ready.notify_one();
         answer.await.map_err(|_| CellError::Stopped)?
     }
+}
+
+/// What the owner does next.
+enum Next {
+    Job(Job),
+    Poll,
+    End,
 }
 
 /// The owner thread's state.
@@ -252,11 +352,19 @@ struct Owner {
     down_reason: String,
     next_connect: Instant,
     publish: watch::Sender<CellStatus>,
+    publish_plans: Option<watch::Sender<PlanCache>>,
     heartbeat: u32,
     last_run: Option<RunNumber>,
+    /// When the last run was accepted (a report may lag it by one control block).
+    run_accepted: Option<Instant>,
+    /// A run of this cell's lost by a controller restart, until a stop or clear-fault.
+    lost_run: Option<String>,
     slot: Option<u8>,
     plans: Vec<PlanSummary>,
+    next_plan_read: Instant,
     last_report: Option<StatusReport>,
+    /// Runs dropped because their asker had gone, since the last log line about them.
+    dropped: u32,
 }
 
 impl Owner {
@@ -268,36 +376,74 @@ impl Owner {
             down_reason: "not connected yet".into(),
             next_connect: Instant::now(),
             publish,
+            publish_plans: None,
             heartbeat: 0,
             last_run: None,
+            run_accepted: None,
+            lost_run: None,
             slot: None,
             plans: Vec::new(),
+            next_plan_read: Instant::now(),
             last_report: None,
+            dropped: 0,
         }
     }
 
     /// Takes commands and polls the status until every [`Cell`] handle is gone.
-    fn serve(&mut self, queue: &mpsc::Receiver<Job>) {
+    fn serve(&mut self, shared: &Shared) {
         let mut next_poll = Instant::now();
         loop {
-            let wait = next_poll.saturating_duration_since(Instant::now());
-            match queue.recv_timeout(wait) {
-                Ok(job) => {
-                    let answer = self.execute(job.command);
-                    // Published before the answer: a front end that reads the state right
-                    // after its run was accepted sees `busy`, never the last run's `done`.
-                    self.publish.send_replace(self.snapshot());
-                    // The asker may have given up (a closed HTTP request): nothing to do.
-                    let _ = job.reply.send(answer);
-                    // A command changes the state: read it without waiting for the next poll.
-                    next_poll = Instant::now();
-                }
-                Err(RecvTimeoutError::Timeout) => {
+            let job = match Self::next(shared, next_poll) {
+                Next::End => return,
+                Next::Poll => {
+                    // Timed from the poll's start: the link's round trip does not slow the rate.
+                    let began = Instant::now();
                     self.poll();
-                    next_poll = Instant::now() + POLL_PERIOD;
+                    next_poll = began + POLL_PERIOD;
+                    continue;
                 }
-                Err(RecvTimeoutError::Disconnected) => return,
+                Next::Job(job) => job,
+            };
+            if job.reply.is_closed() {
+                // The asker hung up: nobody would learn the run started.
+                self.dropped += 1;
+                crate::cell::ratelog::global().log(
+                    "owner",
+                    "dropped",
+                    &format!("cell: {} run request(s) dropped: their asker had gone", self.dropped),
+                );
+                continue;
             }
+            let answer = self.execute(job.command);
+            // Published before the answer: a front end that reads the state right after its
+            // run was accepted sees `busy`, never the last run's `done`.
+            self.publish.send_replace(self.snapshot());
+            let _ = job.reply.send(answer);
+            // A command changes the state: read it soon (the next poll is not delayed).
+            next_poll = next_poll.min(Instant::now() + POLL_PERIOD / 4);
+        }
+    }
+
+    /// The next thing to do: an urgent command, else a due poll, else a run, else wait.
+    fn next(shared: &Shared, next_poll: Instant) -> Next {
+        let mut queue = shared.lock();
+        loop {
+            if let Some(job) = queue.urgent.pop_front() {
+                return Next::Job(job);
+            }
+            let now = Instant::now();
+            if now >= next_poll {
+                return Next::Poll;
+            }
+            if let Some(job) = queue.runs.pop_front() {
+                return Next::Job(job);
+            }
+            if queue.closed {
+                return Next::End;
+            }
+            let wait = next_poll - now;
+            queue =
+                shared.ready.wait_timeout(queue, wait).unwrap_or_else(PoisonError::into_inner).0;
         }
     }
 
@@ -305,7 +451,11 @@ impl Owner {
     fn client(&mut self) -> Result<&mut DeviceClient, CellError> {
         if self.client.is_none() && Instant::now() >= self.next_connect {
             match DeviceClient::open(&self.port, &self.name) {
-                Ok(client) => self.client = Some(client),
+                Ok(client) => {
+                    self.client = Some(client);
+                    // Another program may have changed the store while the link was down.
+                    self.next_plan_read = Instant::now();
+                }
                 Err(e) => {
                     self.down_reason = e.to_string();
                     self.next_connect = Instant::now() + RECONNECT_PERIOD;
@@ -330,35 +480,53 @@ impl Owner {
     fn execute(&mut self, command: Command) -> Result<Answer, CellError> {
         match command {
             Command::Run { slot, repeat } => self.run(slot, repeat).map(Answer::Run),
-            Command::Stop => {
-                let result = self.client()?.stop();
-                self.check(result).map(Answer::Accepted)
-            }
-            Command::ClearFault => {
-                let result = self.client()?.clear_fault();
-                self.check(result).map(Answer::Accepted)
-            }
-            Command::Plans => {
-                let result = self.client()?.list_plans();
-                let (plans, free) = self.check(result)?;
-                self.plans.clone_from(&plans);
-                Ok(Answer::Plans(plans, free))
+            Command::Stop | Command::ClearFault => {
+                let client = self.client()?;
+                let result = match command {
+                    Command::Stop => client.stop(),
+                    _ => client.clear_fault(),
+                };
+                let run = self.check(result)?;
+                // A newer command than any run of ours: whatever was lost is acknowledged.
+                self.last_run = None;
+                self.run_accepted = None;
+                self.lost_run = None;
+                Ok(Answer::Accepted(run))
             }
         }
     }
 
-    fn run(&mut self, slot: u8, repeat: Option<u16>) -> Result<RunStarted, CellError> {
-        // The list is read anew: another program may have uploaded or deleted since.
+    /// Reads the plan list into the cache.
+    fn read_plans(&mut self) -> Result<(), CellError> {
         let listed = self.client()?.list_plans();
-        self.plans = self.check(listed)?.0;
+        let (plans, free_bytes) = self.check(listed)?;
+        self.plans.clone_from(&plans);
+        self.next_plan_read = Instant::now() + PLAN_REFRESH;
+        if let Some(publish) = &self.publish_plans {
+            publish.send_replace(PlanCache { plans, free_bytes, read: true });
+        }
+        Ok(())
+    }
+
+    fn run(&mut self, slot: u8, repeat: Option<u16>) -> Result<RunStarted, CellError> {
+        if !self.plans.iter().any(|p| p.slot == slot) {
+            // Maybe uploaded since the cache was read: one list read before refusing.
+            self.read_plans()?;
+        }
         let Some(plan) = self.plans.iter().find(|p| p.slot == slot).cloned() else {
             let stored: Vec<String> = self.plans.iter().map(|p| p.slot.to_string()).collect();
             let stored = if stored.is_empty() { "none".into() } else { stored.join(", ") };
             return Err(CellError::NoPlan { slot, stored });
         };
         let result = self.client()?.run(PlanRef::Slot(slot), repeat);
+        if matches!(result, Err(DeviceError::Refused(_))) {
+            // The store may have changed under the cache (deleted, replaced).
+            self.next_plan_read = Instant::now();
+        }
         let run = self.check(result)?;
         self.last_run = Some(run);
+        self.run_accepted = Some(Instant::now());
+        self.lost_run = None;
         self.slot = Some(slot);
         Ok(RunStarted { run: run.0, slot, plan: plan.name.to_string() })
     }
@@ -373,16 +541,71 @@ impl Owner {
         };
         if let Some(report) = report {
             self.heartbeat = self.heartbeat.wrapping_add(1);
+            self.follow_restart(&report);
+            self.forget_a_run_the_device_never_reported(&report);
             self.last_report = Some(report);
         }
+        // Before the status is published: a front end that sees the link up finds the list.
+        if self.client.is_some() && Instant::now() >= self.next_plan_read {
+            // A failed read shows in the link state; the cache keeps its last list.
+            let _ = self.read_plans();
+            self.next_plan_read = self.next_plan_read.max(Instant::now() + RECONNECT_PERIOD);
+        }
         self.publish.send_replace(self.snapshot());
+    }
+
+    /// A controller whose clock or run number went back has restarted and forgotten every
+    /// run: the cell forgets them too (a run of ours that was under way is reported lost).
+    fn follow_restart(&mut self, report: &StatusReport) {
+        let Some(previous) = &self.last_report else { return };
+        if report.clock >= previous.clock && report.run >= previous.run {
+            return;
+        }
+        let cause = report.reset_cause.name();
+        if let Some(run) = self.last_run.take() {
+            let was_done = previous.run == run && matches!(previous.state, DriveState::Idle);
+            if !was_done {
+                self.lost_run = Some(format!(
+                    "the controller restarted (reset cause {cause}) during run {}: the run did \
+                     not finish; stop or clear fault to acknowledge",
+                    run.0
+                ));
+            }
+        }
+        self.run_accepted = None;
+        self.next_plan_read = Instant::now();
+        crate::cell::ratelog::global().log(
+            "owner",
+            "restart",
+            &format!("cell: the controller restarted (reset cause {cause}); the cell follows it"),
+        );
+    }
+
+    /// An accepted run shows in the controller's report within a control block; one still
+    /// missing long after was never started there (a lost session, a reset): not busy for good.
+    fn forget_a_run_the_device_never_reported(&mut self, report: &StatusReport) {
+        let (Some(run), Some(accepted)) = (self.last_run, self.run_accepted) else { return };
+        if report.run >= run {
+            self.run_accepted = None;
+        } else if accepted.elapsed() > RUN_REPORT_LIMIT {
+            self.last_run = None;
+            self.run_accepted = None;
+            self.lost_run = Some(format!(
+                "the controller never reported run {} (it reports run {}): it was lost; stop or \
+                 clear fault to acknowledge",
+                run.0, report.run.0
+            ));
+        }
     }
 
     /// The status front ends see, from the last report and what this cell asked for.
     fn snapshot(&self) -> CellStatus {
         let report = self.last_report.as_ref();
         let link_up = self.client.is_some();
-        let (state, error) = cell_state(link_up, &self.down_reason, report, self.last_run);
+        let (mut state, mut error) = cell_state(link_up, &self.down_reason, report, self.last_run);
+        if let (Some(lost), CellState::Idle | CellState::Done) = (&self.lost_run, state) {
+            (state, error) = (CellState::Error, Some(lost.clone()));
+        }
         // The slot of the plan running now if it is stored, else the one this cell ran last.
         let running = report
             .and_then(|r| r.plan.as_ref())

@@ -7,17 +7,25 @@
 //! Each listener is bound before anything is printed; port 0 picks a free port, and the line
 //! printed per front end (`modbus listening on ADDR`, `http listening on http://ADDR/`, or
 //! `{"modbus": "ADDR"}`, `{"http": "http://ADDR/"}` with `--json`) names the address actually
-//! bound, so scripts and tests read it from the first lines.
+//! bound, so scripts and tests read it from the first lines. With a token (`--token-file`) the
+//! HTTP line is the dashboard's login URL, `http://ADDR/?token=TOKEN` (`--json`: `{"http":
+//! "http://ADDR/", "login": "http://ADDR/?token=TOKEN"}`).
+//!
+//! What is refused at start, naming the fix: HTTP beyond loopback without `--token-file` or
+//! `--no-auth`; Modbus beyond loopback without `--modbus-allow` (Modbus has no
+//! authentication); an allow-host or allow-origin that is not a bare name or origin.
 
 use std::io::Write as _;
 use std::net::SocketAddr;
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::Context as _;
-use chladni::cell::Cell;
-use chladni::cell::http;
+use chladni::cell::guard::{self, Access};
 use chladni::cell::modbus::{self, Registers};
+use chladni::cell::net::{self, Caps, Cidr};
+use chladni::cell::{Cell, http};
 use clap::Args;
 use tokio::net::TcpListener;
 use tokio::task::JoinSet;
@@ -37,6 +45,29 @@ pub struct ServeArgs {
     /// port, printed).
     #[arg(long, value_name = "ADDR:PORT")]
     http: Option<SocketAddr>,
+    /// A host name (besides IP addresses and localhost) under which browsers may reach the
+    /// HTTP front end, e.g. cell-7.plant.example; repeat for more.
+    #[arg(long, value_name = "NAME")]
+    http_allow_host: Vec<String>,
+    /// An origin (besides the server's own) whose pages may send commands, e.g.
+    /// https://hmi.plant.example; repeat for more.
+    #[arg(long, value_name = "ORIGIN")]
+    http_allow_origin: Vec<String>,
+    /// Require the token in FILE for HTTP (created with a random token, mode 0600, when
+    /// missing); needed when --http is not on loopback.
+    #[arg(long, value_name = "FILE", conflicts_with = "no_auth")]
+    token_file: Option<PathBuf>,
+    /// Serve HTTP beyond loopback without a token (only on a network you trust).
+    #[arg(long)]
+    no_auth: bool,
+    /// A client network allowed to use Modbus, e.g. 192.168.10.0/24 or 192.168.10.7; repeat
+    /// for more (default: loopback only).
+    #[arg(long, value_name = "CIDR")]
+    modbus_allow: Vec<Cidr>,
+    /// How many Modbus clients may be connected at once; one more is refused.
+    #[arg(long, value_name = "N", default_value_t = 1,
+          value_parser = clap::value_parser!(u16).range(1..))]
+    modbus_clients: u16,
     /// Print the listening addresses as JSON objects, one a line.
     #[arg(long)]
     json: bool,
@@ -67,6 +98,9 @@ impl ServeArgs {
     }
 
     async fn serve(&self) -> anyhow::Result<ExitCode> {
+        let access = self.access()?;
+        let modbus_options = self.modbus_options()?;
+        let caps = Caps::from_limit(net::open_file_limit(), usize::from(self.modbus_clients));
         let cell = Cell::start(&self.port, &format!("chladni serve (pid {})", std::process::id()));
         // Before any address is printed: whoever reads it may signal at once (and `ctrlc`
         // takes one handler per process, for every front end).
@@ -77,15 +111,22 @@ impl ServeArgs {
         let mut front_ends = FrontEnds::new();
         if let Some(address) = self.modbus {
             let listener = bind(address, "--modbus").await?;
-            self.announce("modbus", listener.local_addr()?.to_string())?;
+            self.announce("modbus", listener.local_addr()?.to_string(), None)?;
             let registers = Registers::new(cell.clone());
-            front_ends.spawn(async move { ("modbus", modbus::serve(listener, registers).await) });
+            let options = modbus::Options { clients: caps.modbus, ..modbus_options };
+            front_ends.spawn(async move {
+                ("modbus", modbus::serve(listener, registers, options).await)
+            });
         }
         if let Some(address) = self.http {
             let listener = bind(address, "--http").await?;
-            self.announce("http", url_of(listener.local_addr()?))?;
+            let url = url_of(listener.local_addr()?);
+            let login = access.token.as_ref().map(|t| format!("{url}?token={t}"));
+            self.announce("http", url, login)?;
             let cell = cell.clone();
-            front_ends.spawn(async move { ("http", http::serve(cell, listener).await) });
+            let options =
+                http::Options { access, connections: caps.http, overflow: caps.http_overflow };
+            front_ends.spawn(async move { ("http", http::serve(cell, listener, options).await) });
         }
         tokio::select! {
             _ = stop_rx.recv() => {
@@ -104,15 +145,92 @@ impl ServeArgs {
     }
 
     /// Prints where a front end listens, and flushes: a script waits for this line.
-    fn announce(&self, name: &str, address: String) -> anyhow::Result<()> {
+    fn announce(&self, name: &str, address: String, login: Option<String>) -> anyhow::Result<()> {
         let mut out = std::io::stdout().lock();
-        if self.json {
-            writeln!(out, "{}", serde_json::json!({ name: address }))?;
-        } else {
-            writeln!(out, "{name} listening on {address}")?;
+        match (self.json, login) {
+            (true, None) => writeln!(out, "{}", serde_json::json!({ name: address }))?,
+            (true, Some(login)) => {
+                writeln!(out, "{}", serde_json::json!({ name: address, "login": login }))?;
+            }
+            (false, login) => {
+                writeln!(out, "{name} listening on {}", login.unwrap_or(address))?;
+            }
         }
         out.flush()?;
         Ok(())
+    }
+
+    /// Who may use HTTP: the token (required beyond loopback unless --no-auth), the hosts and
+    /// origins allowed.
+    fn access(&self) -> anyhow::Result<Access> {
+        let beyond_loopback = self.http.is_some_and(|a| !a.ip().is_loopback());
+        if beyond_loopback && self.token_file.is_none() && !self.no_auth {
+            let address = self.http.map(|a| a.to_string()).unwrap_or_default();
+            return Err(InputError(format!(
+                "--http {address} is reachable from other machines, and whoever reaches it can \
+                 run the shaker: give --token-file FILE (a random token is written there when it \
+                 is missing; the login URL is printed), or --no-auth on a network you trust, or \
+                 bind 127.0.0.1"
+            ))
+            .into());
+        }
+        let token = match &self.token_file {
+            Some(path) => Some(guard::load_or_create_token(path)?),
+            None => None,
+        };
+        let hosts =
+            self.http_allow_host.iter().map(|h| allowed_host(h)).collect::<Result<_, _>>()?;
+        let origins =
+            self.http_allow_origin.iter().map(|o| allowed_origin(o)).collect::<Result<_, _>>()?;
+        Ok(Access { hosts, origins, token })
+    }
+
+    /// The Modbus allow-list (default loopback), refused when it cannot match the bind.
+    fn modbus_options(&self) -> anyhow::Result<modbus::Options> {
+        if let Some(address) = self.modbus
+            && !address.ip().is_loopback()
+            && self.modbus_allow.is_empty()
+        {
+            return Err(InputError(format!(
+                "--modbus {address} listens beyond loopback, but Modbus has no authentication \
+                 and only loopback clients are allowed by default: give the PLC's address or \
+                 network with --modbus-allow (e.g. --modbus-allow 192.168.10.0/24), or bind \
+                 127.0.0.1"
+            ))
+            .into());
+        }
+        let allow =
+            if self.modbus_allow.is_empty() { Cidr::loopback() } else { self.modbus_allow.clone() };
+        let clients = usize::from(self.modbus_clients);
+        Ok(modbus::Options { allow, clients, idle: modbus::IDLE_TIMEOUT })
+    }
+}
+
+/// A `--http-allow-host` value: a bare host name, lowercase.
+fn allowed_host(given: &str) -> Result<String, InputError> {
+    let name = given.trim().to_ascii_lowercase();
+    let bare =
+        !name.is_empty() && name.bytes().all(|b| b.is_ascii_alphanumeric() || b"-.".contains(&b));
+    if bare {
+        Ok(name)
+    } else {
+        Err(InputError(format!(
+            "--http-allow-host '{given}' is not a host name: give the name alone, without scheme \
+             or port, e.g. --http-allow-host cell-7.plant.example"
+        )))
+    }
+}
+
+/// A `--http-allow-origin` value: `http(s)://host[:port]`, lowercase, no path.
+fn allowed_origin(given: &str) -> Result<String, InputError> {
+    let origin = given.trim().trim_end_matches('/').to_ascii_lowercase();
+    let rest = origin.strip_prefix("http://").or_else(|| origin.strip_prefix("https://"));
+    match rest {
+        Some(host) if !host.is_empty() && !host.contains('/') => Ok(origin),
+        _ => Err(InputError(format!(
+            "--http-allow-origin '{given}' is not an origin: give scheme and host (and port), \
+             e.g. --http-allow-origin https://hmi.plant.example"
+        ))),
     }
 }
 
@@ -155,6 +273,16 @@ fn url_of(addr: SocketAddr) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn allowed_hosts_and_origins_are_checked_and_lowercased() {
+        assert_eq!(allowed_host("Cell-7.Plant").unwrap(), "cell-7.plant");
+        assert!(allowed_host("http://cell").unwrap_err().0.contains("without scheme"));
+        assert!(allowed_host("cell:80").is_err());
+        assert_eq!(allowed_origin("HTTPS://hmi.plant:8443/").unwrap(), "https://hmi.plant:8443");
+        assert!(allowed_origin("hmi.plant").unwrap_err().0.contains("https://hmi"));
+        assert!(allowed_origin("https://hmi.plant/page").is_err());
+    }
 
     #[test]
     fn the_url_of_a_server_on_every_interface_is_on_loopback() {

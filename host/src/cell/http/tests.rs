@@ -77,7 +77,7 @@ fn server_without_controller() -> (Runtime, SocketAddr) {
     let runtime = Runtime::new().unwrap();
     let listener = runtime.block_on(tokio::net::TcpListener::bind("127.0.0.1:0")).unwrap();
     let addr = listener.local_addr().unwrap();
-    runtime.spawn(serve(cell, listener));
+    runtime.spawn(serve(cell, listener, Options::local()));
     (runtime, addr)
 }
 
@@ -86,7 +86,8 @@ fn server_without_controller() -> (Runtime, SocketAddr) {
 fn request(addr: SocketAddr, head: &str, body: &str, stop_at: Option<&str>) -> (u16, String) {
     let mut stream = TcpStream::connect(addr).unwrap();
     let text = format!(
-        "{head} HTTP/1.1\r\nHost: test\r\nConnection: close\r\nContent-Length: {}\r\n\r\n{body}",
+        "{head} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\
+         Content-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
         body.len()
     );
     stream.write_all(text.as_bytes()).unwrap();
@@ -160,4 +161,117 @@ fn the_page_is_self_contained_and_the_events_stream_statuses() {
     let status: Value = serde_json::from_str(data).unwrap();
     assert_eq!(status["state"], "error");
     assert!(stream.contains("event: status"));
+}
+
+/// A request with the given header lines (no defaults but `Connection: close` and the body's
+/// length): the status, the head and the body.
+fn raw(addr: SocketAddr, head: &str, headers: &[&str], body: &str) -> (u16, String, String) {
+    let mut stream = TcpStream::connect(addr).unwrap();
+    let mut text = format!("{head} HTTP/1.1\r\nConnection: close\r\n");
+    for line in headers {
+        text.push_str(line);
+        text.push_str("\r\n");
+    }
+    text.push_str(&format!("Content-Length: {}\r\n\r\n{body}", body.len()));
+    stream.write_all(text.as_bytes()).unwrap();
+    // A refused body may end in a reset after the answer: keep what was read.
+    let mut bytes = Vec::new();
+    let _ = stream.read_to_end(&mut bytes);
+    let answer = String::from_utf8_lossy(&bytes);
+    let (head, body) = answer.split_once("\r\n\r\n").unwrap_or_else(|| panic!("{answer}"));
+    (head[9..12].parse().unwrap(), head.to_owned(), body.to_owned())
+}
+
+/// The error message of a JSON error answer.
+fn error_of(body: &str) -> String {
+    let value: Value =
+        serde_json::from_str(body).unwrap_or_else(|e| panic!("not JSON ({e}): {body}"));
+    value["error"].as_str().unwrap_or_else(|| panic!("no error: {body}")).to_owned()
+}
+
+#[test]
+fn commands_from_other_sites_and_foreign_hosts_are_refused_before_any_route() {
+    let (_runtime, addr) = server_without_controller();
+    let own = format!("Host: {addr}");
+    // A form or a no-CORS fetch can only send these types: refused, whatever the body.
+    for kind in
+        ["text/plain", "application/x-www-form-urlencoded", "multipart/form-data; boundary=x"]
+    {
+        let content = format!("Content-Type: {kind}");
+        let (code, _, body) = raw(addr, "POST /api/run", &[&own, &content], r#"{"slot":0}"#);
+        assert_eq!(code, 415, "{kind}: {body}");
+        assert!(error_of(&body).contains("application/json"), "{body}");
+    }
+    let (code, _, body) = raw(addr, "POST /api/stop", &[&own], "");
+    assert_eq!(code, 415, "{body}");
+    // JSON from a page of another origin.
+    let json = "Content-Type: application/json";
+    let evil = "Origin: http://evil.example";
+    let (code, _, body) = raw(addr, "POST /api/run", &[&own, json, evil], r#"{"slot":0}"#);
+    assert_eq!(code, 403, "{body}");
+    let e = error_of(&body);
+    assert!(e.contains("http://evil.example") && e.contains("--http-allow-origin"), "{e}");
+    // The page's own origin passes (and meets the link that is down).
+    let origin = format!("Origin: http://{addr}");
+    let (code, _, body) = raw(addr, "POST /api/stop", &[&own, json, &origin], "{}");
+    assert_eq!(code, 503, "{body}");
+    // DNS rebinding: the attacker's name in Host, on reads and commands alike.
+    for route in ["GET /api/status", "GET /", "GET /api/plans", "POST /api/stop"] {
+        let rebound = format!("Host: evil.example:{}", addr.port());
+        let (code, _, body) = raw(addr, route, &[&rebound, json], "{}");
+        assert_eq!(code, 421, "{route}: {body}");
+        assert!(error_of(&body).contains("--http-allow-host evil.example"), "{body}");
+    }
+    let (code, _, _) = raw(addr, "GET /api/status", &["Host: localhost"], "");
+    assert_eq!(code, 200);
+}
+
+#[test]
+fn limits_answer_json_too() {
+    let (_runtime, addr) = server_without_controller();
+    let own = format!("Host: {addr}");
+    let json = "Content-Type: application/json";
+    let big = format!(r#"{{"slot": 0, "pad": "{}"}}"#, "x".repeat(MAX_BODY));
+    let (code, _, body) = raw(addr, "POST /api/run", &[&own, json], &big);
+    assert_eq!(code, 413, "{body}");
+    assert!(error_of(&body).contains(&format!("larger than {MAX_BODY} bytes")), "{body}");
+    let long = format!("X-Filler: {}", "y".repeat(guard::MAX_HEADER_BYTES));
+    let (code, _, body) = raw(addr, "GET /api/status", &[&own, &long], "");
+    assert_eq!(code, 431, "{body}");
+    assert!(error_of(&body).contains("headers"), "{body}");
+    // Repeat 0 means "as stored" here too, as on Modbus: the request parses, the link is down.
+    let (code, _, body) = raw(addr, "POST /api/run", &[&own, json], r#"{"slot":0,"repeat":0}"#);
+    assert_eq!(code, 503, "{body}");
+}
+
+#[test]
+fn with_a_token_requests_need_it_and_the_login_url_sets_a_strict_cookie() {
+    let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = format!("tcp://{}", closed.local_addr().unwrap());
+    drop(closed);
+    let cell = Cell::start(&port, "http token test");
+    let runtime = Runtime::new().unwrap();
+    let listener = runtime.block_on(tokio::net::TcpListener::bind("127.0.0.1:0")).unwrap();
+    let addr = listener.local_addr().unwrap();
+    let token = "0123456789abcdef0123456789abcdef";
+    let access = Access { token: Some(token.into()), ..Access::default() };
+    runtime.spawn(serve(cell, listener, Options { access, ..Options::local() }));
+    let own = format!("Host: {addr}");
+    let (code, head, body) = raw(addr, "GET /api/status", &[&own], "");
+    assert_eq!(code, 401, "{body}");
+    assert!(head.contains("www-authenticate: Bearer"), "{head}");
+    assert!(error_of(&body).contains("Authorization: Bearer"), "{body}");
+    let bearer = format!("Authorization: Bearer {token}");
+    let (code, _, _) = raw(addr, "GET /api/status", &[&own, &bearer], "");
+    assert_eq!(code, 200);
+    let (code, _, _) = raw(addr, "GET /?token=wrong", &[&own], "");
+    assert_eq!(code, 401);
+    let (code, head, _) = raw(addr, &format!("GET /?token={token}"), &[&own], "");
+    assert_eq!(code, 303, "{head}");
+    let cookie = head.lines().find_map(|l| l.strip_prefix("set-cookie: ")).unwrap();
+    assert!(cookie.contains("HttpOnly") && cookie.contains("SameSite=Strict"), "{cookie}");
+    let sent = format!("Cookie: {}", cookie.split(';').next().unwrap());
+    let (code, _, page) = raw(addr, "GET /", &[&own, &sent], "");
+    assert_eq!(code, 200);
+    assert!(page.contains("<canvas"));
 }
