@@ -16,7 +16,7 @@
 //!   old or the new one the same way;
 //! - a clean reboot changes nothing.
 //!
-//! The input is a program of operations, each chosen by one byte `op`: `op % 6` picks upload,
+//! The input is a program of at most [`MAX_OPS`] operations, each chosen by one byte `op`: `op % 6` picks upload,
 //! delete, list, load, configuration or reboot; bit 7 plans a power cut inside it (two bytes:
 //! after how many flash operations; one byte of noise for the torn word or page).
 #![no_main]
@@ -37,6 +37,13 @@ use libfuzzer_sys::fuzz_target;
 
 /// Flash pages the store gets: room for a few plans, so "full" happens too.
 const PAGES: usize = 8;
+
+/// Operations read from one input, at most (bytes past them are ignored): an execution's cost
+/// grows with its program (every reboot reads the map back and checks every slot), and
+/// libFuzzer grows inputs to 4 KB, hundreds of operations that mostly repeat what short
+/// programs do. Each execution starts from erased flash; 24 operations still fill the 8 pages
+/// (a few uploads of up to 256 steps) and drive garbage collection and "full".
+const MAX_OPS: usize = 24;
 
 /// Plan names, few so that they collide.
 const NAMES: [&str; 4] = ["a", "b", "square-45", ""];
@@ -73,7 +80,10 @@ async fn run(data: &[u8]) {
     let store = open(&flash);
     let mut h = Harness { flash, store, model: Model::default() };
     let mut c = Choices::new(data);
-    while !c.is_empty() {
+    for _ in 0..MAX_OPS {
+        if c.is_empty() {
+            break;
+        }
         let op = c.u8();
         let cut = op & 0x80 != 0;
         if cut {
