@@ -12,6 +12,7 @@
 #   scripts/firmware.sh run    stm32l475        -> flash the board with probe-rs, then its defmt
 #                                                  log over RTT (installs probe-rs-tools if missing)
 #   scripts/firmware.sh bench  qemu             -> per-sample cost of the drive (QEMU -icount)
+#   scripts/firmware.sh bench-link qemu         -> instructions of UploadChunk and RunPlan (-icount)
 #   scripts/firmware.sh build-bin qemu NAME     -> builds firmware/src/bin/NAME, prints its ELF path
 # BOARD stm32l475-pwm is the B-L475E-IOT01A with the PWM drive (features board-stm32l475 +
 # drive-pwm: TIM3 ch3 on PB0 instead of the DAC; docs/pwm.md); build, clippy, size and run
@@ -74,6 +75,9 @@ case "$cmd" in
     exec probe-rs run --chip "${CHLADNI_CHIP:-STM32L475VGTx}" ${CHLADNI_PROBE:+--probe "$CHLADNI_PROBE"} "$elf" ;;
   bench) [ "$board" = qemu ] || { echo "bench runs on the qemu board only" >&2; exit 2; }
          elf=$("$0" build-bin qemu bench_drive) &&
+         QEMU_EXTRA="-icount shift=0" scripts/qemu-run.sh "$elf" ;;
+  bench-link) [ "$board" = qemu ] || { echo "bench-link runs on the qemu board only" >&2; exit 2; }
+         elf=$("$0" build-bin qemu bench_link) &&
          QEMU_EXTRA="-icount shift=0" scripts/qemu-run.sh "$elf" ;;
   build-bin) name=${3:?usage: firmware.sh build-bin BOARD NAME}
     cargo build "${args[@]}" --bin "$name" >&2

@@ -35,6 +35,9 @@ cargo test
 # so that the Cortex-M builds never try a std test harness; asked for by name here.
 step "firmware app on the host"
 cargo test -p chladni-firmware --lib
+# Its host-side code (unit tests, the mock flash) is linted here too: the board builds above
+# never compile it.
+cargo clippy -p chladni-firmware --lib --tests --features mock-flash -- -D warnings
 
 # Each fuzz target for a short time on the pinned nightly (the long runs are by hand:
 # docs/fuzzing.md). Fails on any crash.

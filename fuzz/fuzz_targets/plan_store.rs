@@ -1,10 +1,11 @@
 //! The plan store with power cuts: arbitrary sequences of uploads (begin, chunks, commit),
 //! deletes, lists, loads and configuration changes on the firmware's `app::store::PlanStore`
-//! over a RAM NOR flash (`chladni_fuzz::flash`), with the power cut at an arbitrary word write
-//! or page erase, then a reboot (a new store over the same bytes).
+//! over the store's NOR flash model (`app::store::mock_flash`, the L4's programming rule, cuts
+//! per word), with the power cut at an arbitrary word write or page erase, then a reboot (a
+//! new store over the same bytes).
 //!
 //! A model holds what the store acknowledged. Asserts, for every input:
-//! - nothing panics, and the store never writes a word twice (the flash's NOR rule);
+//! - nothing panics, and the store never makes a program the L4 refuses (PROGERR);
 //! - an acknowledged commit stores exactly the plan sent (load gives it back, its summary has
 //!   its name, step count, repeat and CRC), a commit with a wrong CRC is refused;
 //! - list, load (by slot and by name) and delete agree with the model while the power is on;
@@ -15,7 +16,7 @@
 //!   old or the new one the same way;
 //! - a clean reboot changes nothing.
 //!
-//! The input is a program of operations, each chosen by one byte `op`: `op % 6` picks upload,
+//! The input is a program of at most [`MAX_OPS`] operations, each chosen by one byte `op`: `op % 6` picks upload,
 //! delete, list, load, configuration or reboot; bit 7 plans a power cut inside it (two bytes:
 //! after how many flash operations; one byte of noise for the torn word or page).
 #![no_main]
@@ -24,7 +25,7 @@ use std::collections::BTreeMap;
 
 use chladni_firmware::app::store::PlanStore;
 use chladni_fuzz::Choices;
-use chladni_fuzz::flash::{Cut, PAGE, SharedFlash};
+use chladni_fuzz::flash::{PAGE_SIZE, SharedFlash, fuzz_flash};
 use chladni_shared::icd::link::Refusal;
 use chladni_shared::icd::plan::{DeviceLimits, MAX_STEPS, Plan, Step};
 use chladni_shared::icd::sense::ControlConfig;
@@ -36,6 +37,13 @@ use libfuzzer_sys::fuzz_target;
 
 /// Flash pages the store gets: room for a few plans, so "full" happens too.
 const PAGES: usize = 8;
+
+/// Operations read from one input, at most (bytes past them are ignored): an execution's cost
+/// grows with its program (every reboot reads the map back and checks every slot), and
+/// libFuzzer grows inputs to 4 KB, hundreds of operations that mostly repeat what short
+/// programs do. Each execution starts from erased flash; 24 operations still fill the 8 pages
+/// (a few uploads of up to 256 steps) and drive garbage collection and "full".
+const MAX_OPS: usize = 24;
 
 /// Plan names, few so that they collide.
 const NAMES: [&str; 4] = ["a", "b", "square-45", ""];
@@ -68,16 +76,19 @@ struct Harness {
 }
 
 async fn run(data: &[u8]) {
-    let flash = SharedFlash::new(PAGES);
+    let flash = SharedFlash::new(fuzz_flash(PAGES));
     let store = open(&flash);
     let mut h = Harness { flash, store, model: Model::default() };
     let mut c = Choices::new(data);
-    while !c.is_empty() {
+    for _ in 0..MAX_OPS {
+        if c.is_empty() {
+            break;
+        }
         let op = c.u8();
         let cut = op & 0x80 != 0;
         if cut {
-            let cut = Cut { after: c.u16() as u32 % 2048, noise: c.u8() };
-            h.flash.with(|f| f.cut_at(cut));
+            let (after, noise) = (c.u16() as u64 % 2048, c.u8() as u32);
+            h.flash.with(|f| f.cut_after(after, noise));
         }
         let in_flight = match op % 6 {
             0 => h.upload(&mut c).await,
@@ -93,6 +104,8 @@ async fn run(data: &[u8]) {
             4 => h.configure(&mut c).await,
             _ => InFlight::Nothing,
         };
+        let violation = h.flash.with(|f| f.violation());
+        assert_eq!(violation, None, "a program the L4 refuses (PROGERR) at this address");
         if cut || op % 6 == 5 {
             // What the store acknowledged is in the model; what failed with the power is in
             // flight.
@@ -106,7 +119,7 @@ async fn run(data: &[u8]) {
 
 /// A store over the whole RAM flash, as the firmware opens it at boot.
 fn open(flash: &SharedFlash) -> PlanStore<SharedFlash> {
-    PlanStore::new(flash.clone(), 0..(PAGES * PAGE) as u32)
+    PlanStore::new(flash.clone(), 0..(PAGES * PAGE_SIZE) as u32)
 }
 
 /// A plan from the input: name, repeat, steps from a seed (valid unless asked otherwise).

@@ -26,7 +26,7 @@
 use chladni_firmware::app::drive::{DriveCore, DriveShared};
 use chladni_firmware::app::link::{Identity, Link};
 use chladni_firmware::app::store::PlanStore;
-use chladni_fuzz::flash::RamFlash;
+use chladni_fuzz::flash::{PAGE_SIZE, fuzz_flash};
 use chladni_fuzz::{Choices, envelope, frame_around, message, mutate, sample_requests};
 use chladni_shared::drive::runner::BLOCK_LEN;
 use chladni_shared::icd::frame::{
@@ -53,8 +53,8 @@ type Stream = Option<(u32, u32)>;
 
 async fn run(data: &[u8]) {
     let drive = DriveShared::new();
-    let mut flash = RamFlash::new(STORE_PAGES);
-    let store = PlanStore::new(&mut flash, 0..(STORE_PAGES * chladni_fuzz::flash::PAGE) as u32);
+    let mut flash = fuzz_flash(STORE_PAGES);
+    let store = PlanStore::new(&mut flash, 0..(STORE_PAGES * PAGE_SIZE) as u32);
     let mut link = Link::new(Identity { board: Board::Qemu, inject: None }, &drive, Some(store));
     link.load_config().await;
     let mut core = DriveCore::new(&drive);
@@ -105,6 +105,8 @@ async fn run(data: &[u8]) {
             check_answer(copy, &answer, &mut stream);
         }
     }
+    drop(link);
+    assert_eq!(flash.violation(), None, "a program the L4 refuses (PROGERR) at this address");
 }
 
 /// The answer to one frame (`frame`: its bytes, or the reader's error).

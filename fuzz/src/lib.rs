@@ -6,7 +6,19 @@
 //! dependencies): structured inputs are valid messages encoded here, then mutated.
 #![forbid(unsafe_code)]
 
-pub mod flash;
+/// The NOR flash model the store's own tests use (`chladni-firmware`'s `mock-flash` feature):
+/// the L4's programming rule, power cuts per word for the fuzzer.
+pub mod flash {
+    pub use chladni_firmware::app::store::mock_flash::{
+        Cuts, MockFlash, MockFlashError, PAGE_SIZE, Rule, SharedFlash, WORD_SIZE,
+    };
+
+    /// A flash of `pages` erased pages with the L4's rule, cut per word programmed or page
+    /// erased.
+    pub fn fuzz_flash(pages: usize) -> MockFlash {
+        MockFlash::with(pages, Rule::Stm32l4, Cuts::PerWord)
+    }
+}
 
 use chladni_shared::icd::frame::{CRC32, ENCODE_BUF, Envelope, PROTOCOL_VERSION, encode};
 use chladni_shared::icd::link::{

@@ -1,6 +1,10 @@
 //! Serves the host link: reads frames, answers every request exactly once (or names what was
 //! wrong), keeps one owner at a time, and streams telemetry.
 //!
+//! Each request is carried out by the [`Handler`] method its line of the endpoint table names
+//! (the impl on [`Link`]); the method returns that request's reply type, and the shared crate
+//! turns it into the response, so an answer of the wrong kind does not compile.
+//!
 //! Garbage never stops the loop: a bad frame costs one error response, and the reader
 //! resynchronises at the next delimiter. Nothing in a frame is acted on unless its CRC matches
 //! and it decodes whole.
@@ -12,12 +16,12 @@
 //! client cannot hold it for ever). `Stop` is taken from anyone.
 
 use chladni_shared::icd::link::{
-    self, Board, DeviceInfo, Endpoint, Envelope, FrameReader, InjectFault, LinkError,
+    self, Board, DeviceInfo, Envelope, FrameReader, Handler, InjectFault, LinkError,
     MAX_CLIENT_NAME, MAX_FRAME, MAX_TELEMETRY_HZ, OWNER_LEASE_MS, PROTOCOL_VERSION, Refusal,
-    Request, Response, Telemetry, TestFault,
+    Request, Response, RunNumber, StatusReport, SweepPage, Telemetry, TestFault,
 };
 use chladni_shared::icd::plan::Plan;
-use chladni_shared::icd::store::{self, DeviceConfig, StoreError};
+use chladni_shared::icd::store::{self, DeviceConfig, PlanPage, PlanSummary, StoreError};
 use embassy_futures::select::{Either, select};
 use embassy_time::{Duration, Instant, Timer};
 use embedded_io_async::{Read, Write};
@@ -228,101 +232,21 @@ impl<'a, F: NorFlash> Link<'a, F> {
         if let Err(refusal) = self.sessions.admit(session, &request, now) {
             return Response::Refused(refusal);
         }
-        match self.dispatch(session, id, request, now).await {
-            Ok(response) => response,
-            Err(refusal) => Response::Refused(refusal),
-        }
-    }
-
-    async fn dispatch(
-        &mut self,
-        session: u32,
-        id: u32,
-        request: Request,
-        now: Instant,
-    ) -> Result<Response, Refusal> {
-        let limits = self.config.limits;
-        let shared = self.drive;
-        let drive = |command| shared.submit(command).map_err(Refusal::Drive);
-        Ok(match request {
-            Request::Hello(hello) => {
-                self.sessions.hello(session, hello.client);
-                link::Hello::respond(self.identity.info())
-            }
-            Request::Ping(ping) => link::Ping::respond(ping.nonce),
-            Request::GetInfo(_) => link::GetInfo::respond(self.identity.info()),
-            Request::Release(_) => {
-                self.sessions.release(session);
-                link::Release::respond(())
-            }
-            Request::Drive(d) => link::Drive::respond(drive(Command::Drive {
-                freq_mhz: d.freq_mhz,
-                level: d.level,
-            })?),
-            Request::ClearFault(_) => link::ClearFault::respond(drive(Command::ClearFault)?),
-            Request::Sweep(sweep) => {
-                let sweep = CheckedSweep::new(sweep).map_err(Refusal::Sweep)?;
-                link::Sweep::respond(drive(Command::Sweep(sweep))?)
-            }
-            Request::GetSweep(get) => link::GetSweep::respond(self.drive.sweep_page(get.from)),
-            Request::InjectFault(InjectFault(fault)) => {
-                let inject = self.identity.inject.ok_or(Refusal::Unsupported)?;
-                defmt::warn!("link: simulating {}", fault);
-                inject(fault);
-                link::InjectFault::respond(())
-            }
-            Request::Stop(_) => link::Stop::respond(drive(Command::Stop)?),
-            Request::Status(_) => link::GetStatus::respond(self.drive.status()),
-            Request::RunPlan(run) => {
-                let store = self.store.as_mut().ok_or(Refusal::Store(StoreError::Flash))?;
-                store.load(&run.plan, &mut self.plan).await?;
-                if let Some(repeat) = run.repeat {
-                    self.plan.repeat = repeat;
-                }
-                let run = self.drive.run_plan(&self.plan);
-                link::RunPlan::respond(run.map_err(Refusal::Drive)?)
-            }
-            Request::UploadBegin(begin) => {
-                store::UploadBegin::respond(self.store()?.begin(begin, &limits).await?)
-            }
-            Request::UploadChunk(chunk) => {
-                store::UploadChunk::respond(self.store()?.chunk(chunk, &limits).await?)
-            }
-            Request::UploadCommit(_) => {
-                link::UploadCommit::respond(self.store()?.commit(&limits).await?)
-            }
-            Request::ListPlans(list) => {
-                link::ListPlans::respond(self.store()?.list(list.from_slot).await?)
-            }
-            Request::DeletePlan(delete) => {
-                link::DeletePlan::respond(self.store()?.delete(&delete.plan).await?)
-            }
-            Request::Subscribe(sub) => {
-                self.subscribe(session, id, sub, now)?;
-                link::Subscribe::respond(())
-            }
-            Request::GetConfig(_) => link::GetConfig::respond(self.config),
-            Request::SetConfig(set) => {
-                set.0.validate().map_err(Refusal::Config)?;
-                self.config = self.store()?.set_config(set.0).await?;
-                self.drive.set_limits(self.config.limits);
-                self.drive.set_control(self.config.control);
-                link::SetConfig::respond(self.config)
-            }
-        })
+        request.answer(self, Call { session, id, now }).await
     }
 
     fn store(&mut self) -> Result<&mut PlanStore<F>, Refusal> {
         self.store.as_mut().ok_or(Refusal::Store(StoreError::Flash))
     }
 
-    fn subscribe(
-        &mut self,
-        session: u32,
-        id: u32,
-        sub: link::Subscribe,
-        now: Instant,
-    ) -> Result<(), Refusal> {
+    /// Hands a command to the drive; its run number.
+    fn submit(&self, command: Command) -> Result<RunNumber, Refusal> {
+        self.drive.submit(command).map_err(Refusal::Drive)
+    }
+
+    /// Starts (replaces, or with a count of 0 ends) the telemetry stream.
+    fn start_stream(&mut self, call: Call, sub: link::Subscribe) -> Result<(), Refusal> {
+        let Call { session, id, now } = call;
         if sub.count == 0 {
             self.stream = None;
             return Ok(());
@@ -359,6 +283,126 @@ impl<'a, F: NorFlash> Link<'a, F> {
             self.stream = None;
         }
         Some(envelope)
+    }
+}
+
+/// Who sent the request being answered, and when.
+#[derive(Debug, Clone, Copy)]
+pub struct Call {
+    session: u32,
+    id: u32,
+    now: Instant,
+}
+
+/// The link's answer to each request of the table (`chladni_shared::icd::link::endpoints!`):
+/// each method returns its own request's reply, so no request gets another one's answer.
+impl<F: NorFlash> Handler for Link<'_, F> {
+    type Context = Call;
+
+    async fn hello(&mut self, call: Call, hello: link::Hello) -> Result<DeviceInfo, Refusal> {
+        self.sessions.hello(call.session, hello.client);
+        Ok(self.identity.info())
+    }
+
+    async fn ping(&mut self, _: Call, ping: link::Ping) -> Result<u32, Refusal> {
+        Ok(ping.nonce)
+    }
+
+    async fn get_info(&mut self, _: Call, _: link::GetInfo) -> Result<DeviceInfo, Refusal> {
+        Ok(self.identity.info())
+    }
+
+    async fn release(&mut self, call: Call, _: link::Release) -> Result<(), Refusal> {
+        self.sessions.release(call.session);
+        Ok(())
+    }
+
+    async fn drive(&mut self, _: Call, d: link::Drive) -> Result<RunNumber, Refusal> {
+        self.submit(Command::Drive { freq_mhz: d.freq_mhz, level: d.level })
+    }
+
+    async fn run_plan(&mut self, _: Call, run: link::RunPlan) -> Result<RunNumber, Refusal> {
+        let store = self.store.as_mut().ok_or(Refusal::Store(StoreError::Flash))?;
+        store.load(&run.plan, &mut self.plan).await?;
+        if let Some(repeat) = run.repeat {
+            self.plan.repeat = repeat;
+        }
+        self.drive.run_plan(&self.plan).map_err(Refusal::Drive)
+    }
+
+    async fn stop(&mut self, _: Call, _: link::Stop) -> Result<RunNumber, Refusal> {
+        self.submit(Command::Stop)
+    }
+
+    async fn status(&mut self, _: Call, _: link::GetStatus) -> Result<StatusReport, Refusal> {
+        Ok(self.drive.status())
+    }
+
+    async fn upload_begin(&mut self, _: Call, begin: store::UploadBegin) -> Result<u8, Refusal> {
+        let limits = self.config.limits;
+        self.store()?.begin(begin, &limits).await
+    }
+
+    async fn upload_chunk(&mut self, _: Call, chunk: store::UploadChunk) -> Result<u16, Refusal> {
+        let limits = self.config.limits;
+        self.store()?.chunk(chunk, &limits).await
+    }
+
+    async fn upload_commit(
+        &mut self,
+        _: Call,
+        _: link::UploadCommit,
+    ) -> Result<PlanSummary, Refusal> {
+        let limits = self.config.limits;
+        self.store()?.commit(&limits).await
+    }
+
+    async fn list_plans(&mut self, _: Call, list: link::ListPlans) -> Result<PlanPage, Refusal> {
+        self.store()?.list(list.from_slot).await
+    }
+
+    async fn delete_plan(
+        &mut self,
+        _: Call,
+        delete: link::DeletePlan,
+    ) -> Result<PlanSummary, Refusal> {
+        self.store()?.delete(&delete.plan).await
+    }
+
+    async fn subscribe(&mut self, call: Call, sub: link::Subscribe) -> Result<(), Refusal> {
+        self.start_stream(call, sub)
+    }
+
+    async fn get_config(&mut self, _: Call, _: link::GetConfig) -> Result<DeviceConfig, Refusal> {
+        Ok(self.config)
+    }
+
+    async fn set_config(&mut self, _: Call, set: link::SetConfig) -> Result<DeviceConfig, Refusal> {
+        set.0.validate().map_err(Refusal::Config)?;
+        self.config = self.store()?.set_config(set.0).await?;
+        self.drive.set_limits(self.config.limits);
+        self.drive.set_control(self.config.control);
+        Ok(self.config)
+    }
+
+    async fn clear_fault(&mut self, _: Call, _: link::ClearFault) -> Result<RunNumber, Refusal> {
+        self.submit(Command::ClearFault)
+    }
+
+    async fn sweep(&mut self, _: Call, sweep: link::Sweep) -> Result<RunNumber, Refusal> {
+        let sweep = CheckedSweep::new(sweep).map_err(Refusal::Sweep)?;
+        self.submit(Command::Sweep(sweep))
+    }
+
+    async fn get_sweep(&mut self, _: Call, get: link::GetSweep) -> Result<SweepPage, Refusal> {
+        Ok(self.drive.sweep_page(get.from))
+    }
+
+    async fn inject_fault(&mut self, _: Call, inject: InjectFault) -> Result<(), Refusal> {
+        let simulate = self.identity.inject.ok_or(Refusal::Unsupported)?;
+        defmt::warn!("link: simulating {}", inject.0);
+        simulate(inject.0);
+        Ok(())
     }
 }
 

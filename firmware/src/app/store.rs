@@ -34,10 +34,10 @@ mod tests;
 use core::ops::Range;
 
 use chladni_shared::icd::link::Refusal;
-use chladni_shared::icd::plan::{DeviceLimits, Plan};
+use chladni_shared::icd::plan::{DeviceLimits, Plan, Step};
 use chladni_shared::icd::store::{
-    CHUNK_STEPS, DeviceConfig, MAX_CHUNKS, PLAN_SLOTS, PlanPage, PlanRef, PlanSummary,
-    SCRATCH_SLOT, StoreError, UploadBegin, UploadChunk, UploadError, plan_crc,
+    CHUNK_STEPS, DeviceConfig, MAX_CHUNKS, PLAN_SLOTS, PlanDigest, PlanPage, PlanRef, PlanSummary,
+    SCRATCH_SLOT, StoreError, UploadBegin, UploadChunk, UploadError,
 };
 use embedded_storage_async::nor_flash::NorFlash;
 use sequential_storage::cache::key_pointers::ArrayKeyPointers;
@@ -46,7 +46,7 @@ use sequential_storage::cache::{Cache, CacheImpl, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage, Value};
 
 use index::{Index, StoredConfig};
-use layout::{BANKS, ChunkItem, Encoded, Geometry, ItemKey, PlanItem, decode};
+use layout::{BANKS, ChunkItem, Encoded, Geometry, ItemKey, PlanItem};
 use upload::Upload;
 
 /// Most pages the store uses (the caches are sized for them): 512 KiB of 2 KiB pages. A larger
@@ -78,10 +78,14 @@ enum Backend<F: NorFlash, C: CacheImpl<u16>> {
 #[repr(align(8))]
 struct ItemBuffer([u8; ITEM_BUFFER]);
 
+/// A chunk's value as encoded once for storing, sizing and the plan CRC.
+struct ChunkBuffer([u8; layout::MAX_VALUE]);
+
 /// The plan store. See the module documentation.
 pub struct PlanStore<F: NorFlash, C: CacheImpl<u16> = StoreCache> {
     backend: Backend<F, C>,
     buf: ItemBuffer,
+    chunk: ChunkBuffer,
     index: Index,
     upload: Option<Upload>,
     /// The index does not describe the flash (not read yet, or a write failed).
@@ -117,6 +121,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         Self {
             backend,
             buf: ItemBuffer([0; ITEM_BUFFER]),
+            chunk: ChunkBuffer([0; layout::MAX_VALUE]),
             index: Index::new(),
             upload: None,
             stale: true,
@@ -223,9 +228,15 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         let upload = self.upload.as_ref().ok_or(Refusal::Upload(UploadError::NotStarted))?;
         let index = upload.check(&chunk, limits).map_err(Refusal::Upload)?;
         let bank = upload.bank;
+        // Encoded once: the same bytes are stored, sized and added to the plan's CRC.
         let item: ChunkItem = Some(chunk.steps);
-        let size = self.geometry.size_of(&item);
-        let stored = self.put(ItemKey::Chunk { bank, index }, &Encoded(&item)).await;
+        // (The buffer holds the longest chunk: `layout::MAX_VALUE`.)
+        let encoded = postcard::to_slice(&item, &mut self.chunk.0);
+        let len = encoded.map_err(|_| Refusal::Store(StoreError::Flash))?.len();
+        let encoded = &self.chunk.0[..len];
+        let size = self.geometry.item_size(len);
+        let key = ItemKey::Chunk { bank, index };
+        let stored = put(&mut self.backend, &mut self.buf.0, key, &encoded).await;
         if stored != Err(StoreError::Full) {
             // Written, or maybe written: counted, and cleared by a sweep if the upload is
             // abandoned. On an error the upload stays where it was; the chunk may be sent again.
@@ -233,8 +244,10 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         }
         stored.map_err(Refusal::Store)?;
         let steps = item.as_deref().unwrap_or_default();
+        // The step bytes follow the option tag and the one-byte length (as `append_chunk`).
+        let step_bytes = encoded.get(2..).unwrap_or_default();
         // The upload is still there: only `ensure_open` and `commit` drop it.
-        Ok(self.upload.as_mut().map_or(0, |u| u.accept(steps)))
+        Ok(self.upload.as_mut().map_or(0, |u| u.accept(steps, step_bytes)))
     }
 
     /// Checks the upload whole and stores it: the plan stored.
@@ -306,31 +319,27 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         self.index.summary(slot).ok_or(not_found(plan))
     }
 
-    /// Reads the chunks of the plan in `slot` into `out`.
+    /// Reads the chunks of the plan in `slot` into `out`, checking the plan's CRC on the
+    /// stored bytes as they are read (no step is encoded again for it).
     async fn read_plan(&mut self, slot: u8, out: &mut Plan) -> Result<(), StoreError> {
         let Some(record) = self.index.plan(slot).cloned() else {
             return Err(StoreError::NotFound(PlanRef::Slot(slot)));
         };
-        let corrupt = StoreError::Corrupt { slot };
         out.name = record.name.clone();
         out.repeat = record.repeat;
+        let mut digest = PlanDigest::new(&record.name, record.repeat, record.steps);
         for index in 0..record.chunks() {
             let key = ItemKey::Chunk { bank: record.bank, index };
-            let steps = self.get(key).await?.and_then(decode::<ChunkItem>).flatten();
             let expected = (record.steps as usize - index as usize * CHUNK_STEPS).min(CHUNK_STEPS);
-            match steps {
-                Some(steps) if steps.len() == expected => {
-                    out.steps.extend_from_slice(&steps).map_err(|_| corrupt.clone())?;
-                }
-                _ => {
-                    defmt::warn!("plan store: slot {} chunk {} missing or short", slot, index);
-                    return Err(corrupt);
-                }
+            let raw = self.get(key).await?;
+            if !raw.is_some_and(|raw| append_chunk(raw, expected, out, &mut digest)) {
+                defmt::warn!("plan store: slot {} chunk {} missing or short", slot, index);
+                return Err(StoreError::Corrupt { slot });
             }
         }
-        if plan_crc(out) != record.crc {
+        if digest.finish() != record.crc {
             defmt::warn!("plan store: slot {} fails its CRC", slot);
-            return Err(corrupt);
+            return Err(StoreError::Corrupt { slot });
         }
         Ok(())
     }
@@ -398,18 +407,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
 
     /// Stores one item.
     async fn put<'v, V: Value<'v>>(&mut self, key: ItemKey, value: &V) -> Result<(), StoreError> {
-        let Backend::Map(map) = &mut self.backend else {
-            return Err(StoreError::Flash);
-        };
-        match map.store_item(&mut self.buf.0, &key.raw(), value).await {
-            Ok(()) => Ok(()),
-            // Nothing was written: the map had no room.
-            Err(sequential_storage::Error::FullStorage) => Err(StoreError::Full),
-            Err(e) => {
-                defmt::warn!("plan store: writing failed: {}", describe(&e));
-                Err(StoreError::Flash)
-            }
-        }
+        put(&mut self.backend, &mut self.buf.0, key, value).await
     }
 
     /// Stores an item that changes what the store holds (a plan header, the configuration).
@@ -450,6 +448,28 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
     }
 }
 
+/// Stores one item through `buf` (a function of the fields it needs, so that a value may be
+/// borrowed from another field of the store).
+async fn put<'v, F: NorFlash, C: CacheImpl<u16>, V: Value<'v>>(
+    backend: &mut Backend<F, C>,
+    buf: &mut [u8],
+    key: ItemKey,
+    value: &V,
+) -> Result<(), StoreError> {
+    let Backend::Map(map) = backend else {
+        return Err(StoreError::Flash);
+    };
+    match map.store_item(buf, &key.raw(), value).await {
+        Ok(()) => Ok(()),
+        // Nothing was written: the map had no room.
+        Err(sequential_storage::Error::FullStorage) => Err(StoreError::Full),
+        Err(e) => {
+            defmt::warn!("plan store: writing failed: {}", describe(&e));
+            Err(StoreError::Flash)
+        }
+    }
+}
+
 /// Reads every item of the map into `index`, oldest first.
 async fn scan<F: NorFlash, C: CacheImpl<u16>>(
     map: &mut MapStorage<u16, F, C>,
@@ -464,6 +484,29 @@ async fn scan<F: NorFlash, C: CacheImpl<u16>>(
         }
     }
     Ok(())
+}
+
+/// Appends the steps of one stored chunk (the item's raw value) to `out`, decoding them in
+/// place, and adds their bytes to the plan's `digest`; false unless the value is a chunk of
+/// exactly `expected` steps with nothing after them.
+fn append_chunk(raw: &[u8], expected: usize, out: &mut Plan, digest: &mut PlanDigest) -> bool {
+    // postcard's `Some(steps)`: the tag 1, the length as a varint (one byte: at most
+    // CHUNK_STEPS), then the steps, whose bytes are what the plan CRC covers.
+    const _: () = assert!(CHUNK_STEPS < 128);
+    let [1, len, steps @ ..] = raw else { return false };
+    if *len as usize != expected {
+        return false;
+    }
+    let mut rest = steps;
+    for _ in 0..expected {
+        let Ok((step, tail)) = postcard::take_from_bytes::<Step>(rest) else { return false };
+        if out.steps.push(step).is_err() {
+            return false;
+        }
+        rest = tail;
+    }
+    digest.step_bytes(steps);
+    rest.is_empty()
 }
 
 fn not_found(plan: &PlanRef) -> Refusal {

@@ -3,14 +3,18 @@
 //!
 //! One table ([`endpoints!`](crate::endpoints)) pairs every request with the response it gets:
 //! the answer to `Request::X` is `Response::X`, or `Response::Error` (the frame could not be
-//! read) or `Response::Refused` (the request was read and refused, with the reason). Both sides
-//! build from the same table: the controller answers a request through its [`Endpoint`] type,
-//! and a client asks through it, so a client never meets a response of another kind.
+//! read) or `Response::Refused` (the request was read and refused, with the reason). The table
+//! also says who may send each request (its [`Access`] column). Both sides build from it: the
+//! controller implements the generated [`Handler`] trait (one method per request, returning that
+//! request's reply type; [`Request::answer`] makes the response, so a handler cannot answer with
+//! another request's reply), and a client asks through the [`Endpoint`] types, so it never meets
+//! a response of another kind. The test module `wire_pins` pins a digest of the encoding of every
+//! message to [`PROTOCOL_VERSION`]: a wire change without a version bump fails it.
 //!
 //! Sessions: a client picks a random session number when it connects and sends it in every
 //! envelope; answers carry it back, so clients sharing one byte stream (two programs on one
 //! serial port, a new client reading what an old one left) each take only their own.
-//! Ownership: requests that change the controller ([`Request::needs_owner`]) are taken from one
+//! Ownership: requests whose [`Access`] column says `Owner` are taken from one
 //! session at a time, the owner; another session gets [`Refusal::Busy`] naming the owner, at
 //! once. `Stop` is taken from anyone (the shaker can always be stopped), and reads (`Status`,
 //! `ListPlans`, `GetConfig`, `GetInfo`, `Ping`, and the one telemetry stream, `Subscribe`)
@@ -44,6 +48,16 @@ pub const USB_PRODUCT: &str = "Chladni feeder controller";
 /// Fastest telemetry stream, samples per second.
 pub const MAX_TELEMETRY_HZ: u16 = 100;
 
+/// Who may send a request: the owner column of the [`endpoints!`](crate::endpoints) table.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Access {
+    /// Any session: reads, the telemetry stream, and `Stop` (the shaker can always be stopped).
+    Anyone,
+    /// Only the session that owns the controller (the request changes it); another session is
+    /// refused with [`Refusal::Busy`].
+    Owner,
+}
+
 /// A request type and the type of its answer: one line of the [`endpoints!`](crate::endpoints)
 /// table.
 pub trait Endpoint: Sized {
@@ -51,6 +65,8 @@ pub trait Endpoint: Sized {
     type Reply;
     /// Name of the request, for messages.
     const NAME: &'static str;
+    /// Who may send it.
+    const ACCESS: Access;
     /// The request as sent.
     fn into_request(self) -> Request;
     /// The response carrying `reply`.
@@ -61,12 +77,15 @@ pub trait Endpoint: Sized {
     fn reply(response: Response) -> Result<Self::Reply, Response>;
 }
 
-/// Declares the request and response enums and one [`Endpoint`] per line:
-/// `Variant(RequestType) => ReplyType`.
+/// Declares the request and response enums, one [`Endpoint`] per line, and the [`Handler`]
+/// trait the controller implements: `Variant(RequestType) => ReplyType, Access, fn method;`.
 #[macro_export]
 #[doc(hidden)]
 macro_rules! endpoints {
-    ($( $(#[$doc:meta])* $name:ident ( $req:ty ) => $reply:ty; )*) => {
+    ($(
+        $(#[$doc:meta])*
+        $name:ident ( $req:ty ) => $reply:ty, $access:ident, fn $method:ident;
+    )*) => {
         /// Requests from the host to the controller. Each is answered by the [`Response`]
         /// variant of the same name (see [`Endpoint`]).
         // An upload chunk rides inline (no allocator on the controller to box it).
@@ -97,10 +116,43 @@ macro_rules! endpoints {
             Telemetry(Telemetry),
         }
 
+        /// The controller's side of the table: one method per endpoint, each returning that
+        /// endpoint's own reply or a refusal. [`Request::answer`] turns the result into the
+        /// [`Response`]; it is the only place a reply becomes a response, so an implementation
+        /// cannot answer one request with another's reply (it would not compile).
+        // Called from one task on a single-core executor: no `Send` bound is wanted.
+        #[allow(async_fn_in_trait)]
+        pub trait Handler {
+            /// What every method gets besides its request (the session, the time, ...).
+            type Context;
+            $(
+                #[doc = concat!("Carries out [`Request::", stringify!($name), "`].")]
+                async fn $method(
+                    &mut self,
+                    context: Self::Context,
+                    request: $req,
+                ) -> Result<$reply, Refusal>;
+            )*
+        }
+
         impl Request {
+            /// Every request's name, in the table's order (= variant numbers on the wire).
+            pub const NAMES: &'static [&'static str] = &[$( stringify!($name), )*];
+
             /// The request's name, for logs and messages.
             pub const fn name(&self) -> &'static str {
                 match self { $( Request::$name(_) => stringify!($name), )* }
+            }
+
+            /// Who may send this request (the table's owner column).
+            pub const fn access(&self) -> Access {
+                match self { $( Request::$name(_) => Access::$access, )* }
+            }
+
+            /// Whether only the owning session may send this request (it changes the
+            /// controller). `Stop` is not among them: anyone may stop the shaker.
+            pub const fn needs_owner(&self) -> bool {
+                matches!(self.access(), Access::Owner)
             }
 
             /// Whether `response` is this request's own answer kind (not an error, a refusal
@@ -111,12 +163,26 @@ macro_rules! endpoints {
                     _ => false,
                 }
             }
+
+            /// Carries the request out with `handler`'s method for it: its reply as this
+            /// request's response, or `Refused`.
+            pub async fn answer<H: Handler>(self, handler: &mut H, context: H::Context) -> Response {
+                match self {
+                    $(
+                        Request::$name(request) => match handler.$method(context, request).await {
+                            Ok(reply) => Response::$name(reply),
+                            Err(refusal) => Response::Refused(refusal),
+                        },
+                    )*
+                }
+            }
         }
 
         $(
             impl Endpoint for $req {
                 type Reply = $reply;
                 const NAME: &'static str = stringify!($name);
+                const ACCESS: Access = Access::$access;
                 fn into_request(self) -> Request {
                     Request::$name(self)
                 }
@@ -328,65 +394,45 @@ pub struct RunNumber(pub u32);
 
 endpoints! {
     /// Opens a session → the device's identity.
-    Hello(Hello) => DeviceInfo;
+    Hello(Hello) => DeviceInfo, Anyone, fn hello;
     /// Liveness → the nonce.
-    Ping(Ping) => u32;
+    Ping(Ping) => u32, Anyone, fn ping;
     /// Identity.
-    GetInfo(GetInfo) => DeviceInfo;
+    GetInfo(GetInfo) => DeviceInfo, Anyone, fn get_info;
     /// Ends ownership.
-    Release(Release) => ();
+    Release(Release) => (), Anyone, fn release;
     /// Manual drive → its run number.
-    Drive(Drive) => RunNumber;
+    Drive(Drive) => RunNumber, Owner, fn drive;
     /// Runs a stored plan → its run number.
-    RunPlan(RunPlan) => RunNumber;
-    /// Stop → its run number.
-    Stop(Stop) => RunNumber;
+    RunPlan(RunPlan) => RunNumber, Owner, fn run_plan;
+    /// Stop → its run number (from any session: the shaker can always be stopped).
+    Stop(Stop) => RunNumber, Anyone, fn stop;
     /// The drive's status.
-    Status(GetStatus) => StatusReport;
+    Status(GetStatus) => StatusReport, Anyone, fn status;
     /// Begins an upload → the slot it will go to.
-    UploadBegin(UploadBegin) => u8;
+    UploadBegin(UploadBegin) => u8, Owner, fn upload_begin;
     /// One chunk of steps → how many steps are in so far.
-    UploadChunk(UploadChunk) => u16;
+    UploadChunk(UploadChunk) => u16, Owner, fn upload_chunk;
     /// Commits the upload → the stored plan.
-    UploadCommit(UploadCommit) => PlanSummary;
+    UploadCommit(UploadCommit) => PlanSummary, Owner, fn upload_commit;
     /// One page of the plan list.
-    ListPlans(ListPlans) => PlanPage;
+    ListPlans(ListPlans) => PlanPage, Anyone, fn list_plans;
     /// Deletes a plan → what was deleted.
-    DeletePlan(DeletePlan) => PlanSummary;
+    DeletePlan(DeletePlan) => PlanSummary, Owner, fn delete_plan;
     /// Starts (or ends) the telemetry stream.
-    Subscribe(Subscribe) => ();
+    Subscribe(Subscribe) => (), Anyone, fn subscribe;
     /// The configuration.
-    GetConfig(GetConfig) => DeviceConfig;
+    GetConfig(GetConfig) => DeviceConfig, Anyone, fn get_config;
     /// Sets the configuration → the configuration now in effect.
-    SetConfig(SetConfig) => DeviceConfig;
+    SetConfig(SetConfig) => DeviceConfig, Owner, fn set_config;
     /// Clears a latched fault → its run number.
-    ClearFault(ClearFault) => RunNumber;
+    ClearFault(ClearFault) => RunNumber, Owner, fn clear_fault;
     /// Starts a frequency sweep → its run number.
-    Sweep(Sweep) => RunNumber;
+    Sweep(Sweep) => RunNumber, Owner, fn sweep;
     /// A page of the last sweep's points.
-    GetSweep(GetSweep) => SweepPage;
+    GetSweep(GetSweep) => SweepPage, Anyone, fn get_sweep;
     /// Simulates a fault (QEMU only).
-    InjectFault(InjectFault) => ();
-}
-
-impl Request {
-    /// Whether only the owning session may send this request (it changes the controller).
-    /// `Stop` is not among them: anyone may stop the shaker.
-    pub const fn needs_owner(&self) -> bool {
-        matches!(
-            self,
-            Request::Drive(_)
-                | Request::RunPlan(_)
-                | Request::UploadBegin(_)
-                | Request::UploadChunk(_)
-                | Request::UploadCommit(_)
-                | Request::DeletePlan(_)
-                | Request::SetConfig(_)
-                | Request::ClearFault(_)
-                | Request::Sweep(_)
-                | Request::InjectFault(_)
-        )
-    }
+    InjectFault(InjectFault) => (), Owner, fn inject_fault;
 }
 
 /// Why a request that was read was not carried out.

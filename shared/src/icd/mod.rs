@@ -20,3 +20,5 @@ pub mod plan;
 pub mod sense;
 pub mod store;
 pub mod units;
+#[cfg(test)]
+mod wire_pins;

@@ -493,6 +493,12 @@ impl PlanDigest {
         }
     }
 
+    /// Adds steps given as their postcard bytes (as a store keeps them), without encoding
+    /// them again.
+    pub fn step_bytes(&mut self, bytes: &[u8]) {
+        self.digest.update(bytes);
+    }
+
     /// The CRC.
     pub fn finish(self) -> u32 {
         self.digest.finalize()

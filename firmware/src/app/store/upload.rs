@@ -68,10 +68,11 @@ impl Upload {
         Ok(chunk.index as u8)
     }
 
-    /// Takes in a checked chunk's steps once they are stored; steps received so far.
-    pub fn accept(&mut self, steps: &[Step]) -> u16 {
+    /// Takes in a checked chunk's steps once they are stored, with their postcard bytes (what
+    /// the plan CRC covers, as stored: not encoded again); steps received so far.
+    pub fn accept(&mut self, steps: &[Step], bytes: &[u8]) -> u16 {
+        self.digest.step_bytes(bytes);
         for step in steps {
-            self.digest.step(step);
             self.once_ms += step.duration_ms as u64;
         }
         self.received += steps.len() as u16;
