@@ -73,6 +73,8 @@ fn status() -> StatusReport {
         amplitude_q15: 1_013,
         underruns: 1_014,
         commands: 1_015,
+        least_slack_us: Some(1_016),
+        stack_high_water: 1_017,
     }
 }
 
