@@ -2,6 +2,7 @@
 //! material, size and the menu of modes), plans (JSON, the same plan the controller runs);
 //! the field law of a node ([`field`]) and the polygon helpers every room uses ([`geometry`]).
 
+pub mod feed_region;
 pub mod field;
 pub mod geometry;
 pub mod modes_file;

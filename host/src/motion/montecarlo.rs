@@ -4,10 +4,10 @@
 
 use serde::Serialize;
 
+use crate::model::feed_region::FeedRegion;
 use crate::model::plan_file::PlanFile;
 use crate::model::plate::PlateModel;
 use crate::motion::sim::{Body, FieldModel, Pose, SimStep, simulate_plan};
-use crate::planner::feed::FeedRegion;
 use crate::rng::Rng;
 
 /// Missed trials listed in a [`Report`] (all are counted).
