@@ -272,8 +272,9 @@ impl DistTable {
     }
 
     /// ξ and the normal on a 1 mm grid (finer for small plates) over the plate and a margin
-    /// of half its larger side: parts creeping along a branch can leave the plate (the
-    /// motion model has no edges), and points off the table need a Newton solve each.
+    /// of half its larger side: parts creeping along a branch can leave the plate when its
+    /// edge is open (`[plate] edge = "open"`), and points off the table need a Newton solve
+    /// each.
     fn new(center: [f64; 2], axis: [f64; 2], a: f64, b: f64, [w, h]: [f64; 2]) -> DistTable {
         let step = (w.max(h) / 300.0).min(1.0);
         let margin = (0.5 * w.max(h)).max(20.0);

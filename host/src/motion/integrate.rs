@@ -5,6 +5,7 @@
 //! Units: mm, s, rad.
 
 use crate::motion::body::{Body, Pose};
+use crate::motion::contact::Rim;
 use crate::motion::field::FieldModel;
 
 /// One simulated run.
@@ -22,6 +23,8 @@ pub struct Run {
     pub rested: bool,
     /// Integration steps taken.
     pub steps: usize,
+    /// Fell off an open edge (centroid off the plate); the run stopped there.
+    pub lost: bool,
 }
 
 /// Simulation settings.
@@ -33,6 +36,8 @@ pub struct SimParams {
     pub t_limit: f64,
     /// Keep running to `t_limit` after coming to rest (plans: step durations are fixed).
     pub run_to_limit: bool,
+    /// The plate's rim ([`Rim::of`]); `None`: an unbounded plane (the field alone).
+    pub rim: Option<Rim>,
 }
 
 /// Local error allowed per integration step, as a fraction of the part's radius R (angles
@@ -46,24 +51,37 @@ pub const STEP_TOL: f64 = 1e-3;
 /// Integrates the quasi-static motion from `start`: Heun's method (second order) with the
 /// step chosen from its embedded error estimate (Euler vs Heun position, at most
 /// [`STEP_TOL`]·R per step), halved on overshoot (the velocity reverses across a node).
+/// With a rim, every pose is kept inside a wall and the velocity is the field's with the
+/// wall's contact forces ([`crate::motion::contact`]); a part off an open edge is lost.
 pub fn run(body: &Body, field: &FieldModel, p: SimParams, start: Pose) -> Run {
     let r = body.radius.max(1e-6);
     let vel = |q: Pose| {
         let w = field.wrench(body, q);
-        (p.speed * w.fx / body.area, p.speed * w.fy / body.area, p.speed * w.m / body.polar)
+        let free =
+            (p.speed * w.fx / body.area, p.speed * w.fy / body.area, p.speed * w.m / body.polar);
+        match p.rim {
+            Some(rim) => {
+                let v = rim.constrain(body, p.speed, q, [free.0, free.1, free.2]);
+                (v[0], v[1], v[2])
+            }
+            None => free,
+        }
     };
+    let keep = |q: Pose| p.rim.map_or(q, |rim| rim.project(body, q));
+    let fell = |q: Pose| p.rim.is_some_and(|rim| rim.lost(q));
     let t0 = r / (p.speed * field.max_gain().max(1e-9));
     // Curved nodes let a part creep slowly along them: a creep below 10⁻³ R per T0 counts as rest.
     let (v_tol, w_tol) = (1e-3 * r / t0, 1e-4 / t0);
     let tol = STEP_TOL * r;
     let mut dt_next = 0.05 * t0;
-    let mut pose = start;
+    let mut pose = keep(start);
     let mut t = 0.0;
+    let mut lost = fell(pose);
     let mut trace = vec![(0.0, pose)];
     let mut v0 = vel(pose);
     let mut rested = false;
     let mut steps = 0;
-    while t < p.t_limit && steps < 20_000 {
+    while t < p.t_limit && steps < 20_000 && !lost {
         steps += 1;
         let speed = v0.0.hypot(v0.1);
         if speed < v_tol && v0.2.abs() < w_tol {
@@ -79,11 +97,11 @@ pub fn run(body: &Body, field: &FieldModel, p: SimParams, start: Pose) -> Run {
             .min(p.t_limit - t);
         let mut tries = 0;
         let (next, v1) = loop {
-            let pred = Pose {
+            let pred = keep(Pose {
                 x: pose.x + dt * v0.0,
                 y: pose.y + dt * v0.1,
                 theta: pose.theta + dt * v0.2,
-            };
+            });
             let vp = vel(pred);
             let overshoot = (speed > v_tol && vp.0 * v0.0 + vp.1 * v0.1 < -0.25 * speed * speed)
                 || (v0.2.abs() > w_tol && vp.2 * v0.2 < -0.25 * v0.2 * v0.2);
@@ -101,11 +119,11 @@ pub fn run(body: &Body, field: &FieldModel, p: SimParams, start: Pose) -> Run {
             }
             // Second order: the error scales as dt², so the next step aims at 0.9·tol.
             dt_next = dt * (0.9 * (tol / err.max(1e-300)).sqrt()).min(2.0);
-            let q = Pose {
+            let q = keep(Pose {
                 x: pose.x + 0.5 * dt * (v0.0 + vp.0),
                 y: pose.y + 0.5 * dt * (v0.1 + vp.1),
                 theta: pose.theta + 0.5 * dt * (v0.2 + vp.2),
-            };
+            });
             break (q, vel(q));
         };
         if next == pose {
@@ -116,13 +134,14 @@ pub fn run(body: &Body, field: &FieldModel, p: SimParams, start: Pose) -> Run {
         pose = next;
         v0 = v1;
         trace.push((t, pose));
+        lost = fell(pose);
     }
-    if p.run_to_limit && t < p.t_limit {
+    if p.run_to_limit && t < p.t_limit && !lost {
         t = p.t_limit;
         trace.push((t, pose));
     }
     let settle = settle_time(&trace, pose, 0.02 * r / t0);
-    Run { pose, settle_s: settle, t_end: t, trace, rested, steps }
+    Run { pose, settle_s: settle, t_end: t, trace, rested, steps, lost }
 }
 
 /// Settle time: the last time the part was still moving across its node (speed above
@@ -156,7 +175,7 @@ mod tests {
             "freq_hz = 50.0\nnode = { kind = \"hyperbola\", center_mm = [60.0, 100.0], angle_deg = 0.0, a_mm = 70.0, b_mm = 60.0 }",
         );
         let f = FieldModel::new(&m, &plate(&m));
-        let p = SimParams { speed: 100.0, t_limit: 1e3, run_to_limit: false };
+        let p = SimParams { speed: 100.0, t_limit: 1e3, run_to_limit: false, rim: None };
         for th in [25.3f64, 140.0] {
             let q = |t: f64| Pose { x: 20.6, y: 20.6, theta: t.to_radians() };
             let (r0, r1) = (run(&body, &f, p, q(th)), run(&body, &f, p, q(th + 180.0)));
@@ -174,7 +193,7 @@ mod tests {
             "freq_hz = 50.0\nfield = \"sign\"\nnode = { kind = \"line\", angle_deg = 90.0, offset_mm = 0.0 }",
         );
         let f = FieldModel::new(&m, &plate(&m));
-        let p = SimParams { speed: 10.0, t_limit: 1e4, run_to_limit: false };
+        let p = SimParams { speed: 10.0, t_limit: 1e4, run_to_limit: false, rim: None };
         let r = run(&body, &f, p, Pose { x: 100.0, y: 80.0, theta: 0.3 });
         eprintln!("line: {} steps, t = {}, rested {}", r.steps, r.t_end, r.rested);
         assert!(r.rested);
@@ -191,7 +210,7 @@ mod tests {
             "freq_hz = 50.0\nnode = { kind = \"hyperbola\", center_mm = [100.0, 100.0], angle_deg = 0.0, a_mm = 50.0, b_mm = 50.0 }",
         );
         let f = FieldModel::new(&m, &plate(&m));
-        let p = SimParams { speed: 10.0, t_limit: 1e4, run_to_limit: false };
+        let p = SimParams { speed: 10.0, t_limit: 1e4, run_to_limit: false, rim: None };
         let r = run(&body, &f, p, Pose { x: 200.0, y: 120.0, theta: 0.0 });
         eprintln!("hyperbola: {} steps, t = {}, rested {}", r.steps, r.t_end, r.rested);
         let (u, v) = (r.pose.x - 100.0, r.pose.y - 100.0);

@@ -4,6 +4,7 @@
 use crate::model::plan_file::{PlanFile, PlanFileError, StepLevel};
 use crate::model::plate::PlateModel;
 use crate::motion::body::{Body, Pose};
+use crate::motion::contact::Rim;
 use crate::motion::field::FieldModel;
 use crate::motion::integrate::{SimParams, run};
 
@@ -110,6 +111,7 @@ pub fn simulate_plan(
             speed: mode.speed_mm_s * s.amplitude_ratio * s.amplitude_ratio,
             t_limit: s.duration_s,
             run_to_limit: true,
+            rim: Some(Rim::of(plate)),
         };
         let r = run(body, &fields[s.mode], p, pose);
         trace.extend(r.trace.iter().skip(1).map(|&(t, q)| (t0 + t, q)));

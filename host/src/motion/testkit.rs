@@ -12,7 +12,13 @@ pub fn mode(toml_text: &str) -> Mode {
 
 /// A 300 × 200 mm plate with that one mode.
 pub fn plate(m: &Mode) -> PlateModel {
-    PlateModel { name: "t".into(), size_mm: [300.0, 200.0], modes: vec![m.clone()] }
+    PlateModel {
+        name: "t".into(),
+        size_mm: [300.0, 200.0],
+        modes: vec![m.clone()],
+        edge: crate::model::plate::Edge::Wall,
+        friction: crate::model::plate::DEFAULT_FRICTION,
+    }
 }
 
 /// A 40 × 10 mm rectangle.

@@ -31,7 +31,7 @@ use super::{
 };
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
-use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
+use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
 
 pub use crate::model::feed_region::{FeedError, FeedRegion};
 
@@ -152,7 +152,12 @@ impl Sim<'_> {
     /// Settings of a run under mode `k` stopped at `t_limit` (s): the mode's own speed, as
     /// `simulate_plan` runs a step at the mode's amplitude.
     fn params(&self, k: usize, t_limit: f64) -> SimParams {
-        SimParams { speed: self.plate.modes[k].speed_mm_s, t_limit, run_to_limit: false }
+        SimParams {
+            speed: self.plate.modes[k].speed_mm_s,
+            t_limit,
+            run_to_limit: false,
+            rim: Some(Rim::of(self.plate)),
+        }
     }
 
     /// 5000 T₀ of mode `k`: the limit of a run to rest, as for simulated maps.
