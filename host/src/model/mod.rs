@@ -3,6 +3,7 @@
 //! speed observations (CSV, [`observations`]) and in-place plate edits ([`plate_edit`]);
 //! the field law of a node ([`field`]) and the polygon helpers every room uses ([`geometry`]).
 
+pub mod feed_region;
 pub mod field;
 pub mod geometry;
 pub mod modes_file;

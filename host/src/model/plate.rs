@@ -116,7 +116,23 @@ impl Mode {
     }
 }
 
-/// A plate ready for planning: size and typed modes.
+/// What the plate's edge does to a part (`[plate] edge`, docs/plate.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Edge {
+    /// A rim the part cannot pass; it slides along it with Coulomb friction (feeder
+    /// platforms have one).
+    #[default]
+    Wall,
+    /// No rim: a part whose centroid crosses the edge falls off and is lost.
+    Open,
+}
+
+/// Default wall friction coefficient: mild steel sliding on aluminium, dry, kinetic (0.47 in
+/// the friction tables of Marks' Standard Handbook for Mechanical Engineers). An assumption,
+/// not a measurement of any rig: set `[plate] friction` for yours (docs/plate.md).
+pub const DEFAULT_FRICTION: f64 = 0.47;
+
+/// A plate ready for planning: size, rim and typed modes.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlateModel {
     /// Name.
@@ -125,6 +141,10 @@ pub struct PlateModel {
     pub size_mm: [f64; 2],
     /// Modes, in file order.
     pub modes: Vec<Mode>,
+    /// The rim.
+    pub edge: Edge,
+    /// Coulomb friction coefficient between parts and the wall.
+    pub friction: f64,
 }
 
 /// What is wrong with a `[[mode]]` entry (or the plate as a whole, for planning).
@@ -147,6 +167,16 @@ pub enum ModelError {
     /// The plate has no size.
     #[error("[plate] needs size_mm = [W, H] for planning")]
     NoSize,
+    /// A `[plate]` key of the motion model is wrong.
+    #[error("[plate] {key} = {value}: {fix}")]
+    PlateKey {
+        /// Key.
+        key: &'static str,
+        /// Offending value.
+        value: String,
+        /// How to fix it.
+        fix: &'static str,
+    },
     /// No modes.
     #[error("the plate file has no [[mode]] entries: add at least one (docs/plan.md)")]
     NoModes,
@@ -496,6 +526,30 @@ fn grid_of(
     Ok(Node::Grid(Grid { nx, ny, size_mm, values: values.iter().map(|v| v / max).collect() }))
 }
 
+/// The `[plate]` table's `edge` and `friction`, checked.
+fn rim_of(t: &crate::model::plate_file::PlateTable) -> Result<(Edge, f64), ModelError> {
+    let edge = match t.edge.as_deref() {
+        None | Some("wall") => Edge::Wall,
+        Some("open") => Edge::Open,
+        Some(other) => {
+            return Err(ModelError::PlateKey {
+                key: "edge",
+                value: format!("{other:?}"),
+                fix: "use \"wall\" (a rim parts slide along) or \"open\" (parts fall off)",
+            });
+        }
+    };
+    let friction = t.friction.unwrap_or(DEFAULT_FRICTION);
+    if !(friction.is_finite() && friction >= 0.0) {
+        return Err(ModelError::PlateKey {
+            key: "friction",
+            value: friction.to_string(),
+            fix: "use a Coulomb coefficient ≥ 0 (e.g. 0.47, steel on aluminium; 0 frictionless)",
+        });
+    }
+    Ok((edge, friction))
+}
+
 impl PlateModel {
     /// Types a parsed plate file.
     pub fn from_file(file: &PlateFile) -> Result<PlateModel, ModelError> {
@@ -512,7 +566,8 @@ impl PlateModel {
         let modes = merge_same_frequency(modes)?;
         let name =
             if file.plate.name.is_empty() { "plate".to_string() } else { file.plate.name.clone() };
-        Ok(PlateModel { name, size_mm, modes })
+        let (edge, friction) = rim_of(&file.plate)?;
+        Ok(PlateModel { name, size_mm, modes, edge, friction })
     }
 
     /// Parses and types a plate file's text (`label` names it in messages).
@@ -540,6 +595,23 @@ mod tests {
     fn model(modes: &str) -> Result<PlateModel, ModelError> {
         let text = format!("[plate]\nname = \"t\"\nsize_mm = [300.0, 200.0]\n{modes}");
         PlateModel::parse(&text, "t")
+    }
+
+    #[test]
+    fn the_rim_defaults_to_a_wall_and_bad_rims_are_named() {
+        let line = "[[mode]]\nfreq_hz = 50.0\nnode = { kind = \"line\", angle_deg = 0.0 }\n";
+        let m = model(line).unwrap();
+        assert_eq!((m.edge, m.friction), (Edge::Wall, DEFAULT_FRICTION));
+        let rim = |keys: &str| {
+            let text = format!("[plate]\nsize_mm = [300.0, 200.0]\n{keys}\n{line}");
+            PlateModel::parse(&text, "t")
+        };
+        let m = rim("edge = \"open\"\nfriction = 0.2").unwrap();
+        assert_eq!((m.edge, m.friction), (Edge::Open, 0.2));
+        let e = rim("edge = \"rim\"").unwrap_err().to_string();
+        assert!(e.contains("edge = \"rim\"") && e.contains("\"wall\""), "{e}");
+        let e = rim("friction = -0.1").unwrap_err().to_string();
+        assert!(e.contains("friction = -0.1") && e.contains("≥ 0"), "{e}");
     }
 
     #[test]

@@ -212,6 +212,14 @@ pub struct PlateTable {
     /// Rod attachment point [x, y] (mm), hinged-rod only; default [3W/4, H/2].
     #[serde(skip_serializing_if = "Option::is_none", deserialize_with = "opt_pair")]
     pub rod_mm: Option<[f64; 2]>,
+    /// The rim for the motion model: `"wall"` (default) or `"open"` (checked by
+    /// [`crate::model::plate::PlateModel::from_file`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub edge: Option<String>,
+    /// Coulomb friction coefficient between parts and the wall (default
+    /// [`crate::model::plate::DEFAULT_FRICTION`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub friction: Option<f64>,
 }
 
 /// Boundary conditions of the plate.

@@ -1,7 +1,16 @@
-//! How parts move: the quasi-static motion of a part under a mode's field (field evaluation,
-//! simulation of plans, the Monte Carlo check of a plan), and the paper's particle bouncing on a vibrating string.
+//! How parts move: the quasi-static motion of a part under a mode's field (the part
+//! [`body`], the [`field`] models, the [`integrate`]r, plan [`steps`]; [`sim`] re-exports
+//! them at their old path), the Monte Carlo check of a plan, and the paper's particle
+//! bouncing on a vibrating string.
 
+pub mod body;
+pub mod contact;
+pub mod field;
+pub mod integrate;
 pub mod montecarlo;
 pub mod potential;
 pub mod sim;
+pub mod steps;
 pub mod string;
+#[cfg(test)]
+mod testkit;

@@ -4,10 +4,10 @@
 
 use serde::Serialize;
 
+use crate::model::feed_region::FeedRegion;
 use crate::model::plan_file::PlanFile;
 use crate::model::plate::PlateModel;
-use crate::motion::sim::{Body, FieldModel, Pose, SimStep, simulate_plan};
-use crate::planner::feed::FeedRegion;
+use crate::motion::sim::{Body, FieldModel, Pose, Rim, SimStep, simulate_plan};
 use crate::rng::Rng;
 
 /// Missed trials listed in a [`Report`] (all are counted).
@@ -63,6 +63,8 @@ pub struct Trials {
     pub step_ends: Vec<f64>,
     /// Poses before each step and at the end, of the first [`EXAMPLE_TRIALS`] trials.
     pub examples: Vec<Vec<Pose>>,
+    /// Whether each trial fell off an open edge (`[plate] edge = "open"`).
+    pub lost: Vec<bool>,
 }
 
 /// Runs `trials` random starts drawn from `seed` through the plan; `progress` is called
@@ -79,7 +81,9 @@ pub fn run_trials(setup: &Setup<'_>, trials: u32, seed: u64, mut progress: impl 
         let (poses, trace, ends) =
             simulate_plan(setup.body, setup.plate, setup.fields, setup.steps, start);
         out.starts.push(start);
-        out.finals.push(*poses.last().unwrap_or(&start));
+        let end = *poses.last().unwrap_or(&start);
+        out.lost.push(Rim::of(setup.plate).lost(end));
+        out.finals.push(end);
         if i < TRACED_TRIALS {
             out.traces.push(trace);
             out.step_ends = ends;
@@ -132,6 +136,8 @@ pub struct Stats {
     /// Start poses of the trials that missed the predicted orientation: where a plan's reach
     /// ends (e.g. near a cantilever's clamp) shows in them.
     pub misses: Vec<Pose>,
+    /// Trials that fell off an open edge.
+    pub lost: usize,
 }
 
 /// The statistics of `trials` against `plan`'s predictions; a trial succeeds when its final
@@ -146,6 +152,7 @@ pub fn statistics(trials: &Trials, plan: &PlanFile, tol_deg: f64) -> Stats {
         mean_position_mm: [0.0; 2],
         position_spread_mm: 0.0,
         misses: Vec::new(),
+        lost: trials.lost.iter().filter(|&&l| l).count(),
     };
     if let (Some(t), Some(p)) = (plan.final_orientation_deg, plan.period_deg) {
         let errs: Vec<f64> = finals
@@ -155,9 +162,11 @@ pub fn statistics(trials: &Trials, plan: &PlanFile, tol_deg: f64) -> Stats {
                 if d > p / 2.0 { d - p } else { d }
             })
             .collect();
-        stats.misses = (trials.starts.iter().zip(&errs))
-            .filter(|(_, e)| e.abs() > tol_deg)
-            .map(|(s, _)| *s)
+        // A part lost off an open edge is not oriented, wherever it fell.
+        let lost = |i: usize| trials.lost.get(i).copied().unwrap_or(false);
+        stats.misses = (trials.starts.iter().zip(&errs).enumerate())
+            .filter(|(i, (_, e))| e.abs() > tol_deg || lost(*i))
+            .map(|(_, (s, _))| *s)
             .collect();
         stats.success_rate = Some(1.0 - stats.misses.len() as f64 / n);
         stats.orientation_error_deg = Some(RmsMax::of(&errs));
@@ -184,6 +193,8 @@ fn r6(v: f64) -> f64 {
 pub struct Report {
     /// Final orientation the plan predicts (degrees).
     pub final_orientation_deg: Option<f64>,
+    /// Trials that fell off an open edge (always 0 with a wall; also counted as missed).
+    pub lost: usize,
     /// Number of trials that missed.
     pub missed: usize,
     /// The first [`MAX_LISTED_MISSES`] missed trials' start poses: `[x_mm, y_mm, θ_deg]`.
@@ -212,6 +223,7 @@ impl Report {
         let target = plan.final_orientation_deg.zip(plan.period_deg);
         Report {
             final_orientation_deg: target.map(|t| t.0),
+            lost: stats.lost,
             missed: stats.misses.len(),
             missed_starts: (stats.misses.iter().take(MAX_LISTED_MISSES))
                 .map(|q| [r6(q.x), r6(q.y), r6(q.theta.to_degrees())])
@@ -281,7 +293,8 @@ mod tests {
         let report = Report::new(&stats, &plan, 8, 3, 5.0);
         let v = serde_json::to_value(&report).unwrap();
         let keys: Vec<&str> = v.as_object().unwrap().keys().map(String::as_str).collect();
-        assert_eq!(keys.len(), 11);
+        assert_eq!(keys.len(), 12);
+        assert_eq!(v["lost"], 0);
         assert_eq!(v["missed"], 0);
         assert!(v["position_error_mm"].is_null());
     }

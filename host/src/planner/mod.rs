@@ -46,7 +46,7 @@ use crate::analysis::reference::{RefField, Reference};
 use crate::model::part::Part;
 use crate::model::plan_file::{PartPrediction, PlanFile, StepJson};
 use crate::model::plate::{Mode, Node, PlateModel};
-use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
+use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
 
 pub mod dynamic;
 pub mod feed;
@@ -355,7 +355,12 @@ pub fn map_starts(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]>
 pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, period: f64) -> StepMap {
     let field = FieldModel::new(mode, plate);
     let t0 = body.radius / (mode.speed_mm_s * field.max_gain());
-    let p = SimParams { speed: mode.speed_mm_s, t_limit: 5000.0 * t0, run_to_limit: false };
+    let p = SimParams {
+        speed: mode.speed_mm_s,
+        t_limit: 5000.0 * t0,
+        run_to_limit: false,
+        rim: Some(Rim::of(plate)),
+    };
     // 0.3 of a step off 0° (so also off 45°, 90°, ... for n = 36, 90, 360): a start point on
     // the node (the plate centre often is) would
     // otherwise sample the symmetric unstable rests (0°, 90°, ...) exactly and report them as
@@ -851,7 +856,12 @@ pub struct Settle {
 /// plate edge (see [`Settle`]).
 pub fn settle_time(body: &Body, mode: &Mode, plate: &PlateModel, orientations: &[f64]) -> Settle {
     let field = FieldModel::new(mode, plate);
-    let p = SimParams { speed: mode.speed_mm_s, t_limit: 3600.0, run_to_limit: false };
+    let p = SimParams {
+        speed: mode.speed_mm_s,
+        t_limit: 3600.0,
+        run_to_limit: false,
+        rim: Some(Rim::of(plate)),
+    };
     let mut times = Vec::new();
     let points = start_points(body, mode, plate);
     let mut ends_on_edge = Vec::new();
@@ -923,7 +933,12 @@ pub fn confirm_any(
     let ctr = plate.center();
     let xi0 = xhat[0] * ctr[0] + xhat[1] * ctr[1] - c;
     let base = [ctr[0] - xi0 * xhat[0], ctr[1] - xi0 * xhat[1]];
-    let p = SimParams { speed: mode.speed_mm_s, t_limit: 3600.0, run_to_limit: false };
+    let p = SimParams {
+        speed: mode.speed_mm_s,
+        t_limit: 3600.0,
+        run_to_limit: false,
+        rim: Some(Rim::of(plate)),
+    };
     let r = body.radius;
     [-(r + 5.0), -0.5 * r, 0.5 * r, r + 5.0].iter().all(|&xi| {
         let start =

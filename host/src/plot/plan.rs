@@ -9,12 +9,12 @@ use plotters::prelude::*;
 
 use super::{PlotError, text, write_figure};
 
+use crate::model::feed_region::FeedRegion;
 use crate::model::part::Part;
 use crate::model::plate::{Mode, Node, PlateModel};
 use crate::motion::montecarlo::{self, Setup, Trials};
 use crate::motion::sim::{Body, FieldModel, Pose, SimStep, simulate_plan};
 use crate::planner::Synthesis;
-use crate::planner::feed::FeedRegion;
 use crate::plate::contour;
 use crate::rng::Rng;
 
