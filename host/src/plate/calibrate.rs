@@ -22,6 +22,7 @@ use serde::Serialize;
 
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
+use crate::motion::contact::Rim;
 use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
 
 /// The speeds (mm/s) a fit may return: a value outside says the observations do not fit the
@@ -209,10 +210,13 @@ fn wrap(a: f64, b: f64, p: f64) -> f64 {
 fn models(
     parts: &[CalPart],
     field: &FieldModel,
+    rim: Rim,
     obs: &[Observation],
     within: f64,
 ) -> Result<Vec<Model>, FitError> {
-    let p = SimParams { speed: 1.0, t_limit: 1e12, run_to_limit: false };
+    // The rim's contacts are quasi-static too (constraint forces scale with the field's), so
+    // a run against the wall keeps the same 1/μ time scaling.
+    let p = SimParams { speed: 1.0, t_limit: 1e12, run_to_limit: false, rim: Some(rim) };
     let runs: Vec<sim::Run> = {
         use rayon::prelude::*;
         obs.par_iter().map(|o| sim::run(&parts[o.part].body, field, p, o.start)).collect()
@@ -275,7 +279,7 @@ pub fn fit(
         return Err(FitError::Empty);
     }
     let field = FieldModel::new(&plate.modes[mode], plate);
-    let models = models(parts, &field, obs, within_mm)?;
+    let models = models(parts, &field, Rim::of(plate), obs, within_mm)?;
     if !models.iter().any(Model::moves) {
         return Err(FitError::Undetermined(format!(
             "in the model no observed part moves (every start is already within {within_mm} mm \
