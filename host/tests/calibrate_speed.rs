@@ -44,7 +44,8 @@ fn time_to_node(body: &Body, field: &FieldModel, mu: f64, start: Pose) -> f64 {
 
 /// Pose after `t` seconds at μ.
 fn pose_after(body: &Body, field: &FieldModel, mu: f64, start: Pose, t: f64) -> Pose {
-    sim::run(body, field, SimParams { speed: mu, t_limit: t, run_to_limit: true, rim: None }, start).pose
+    sim::run(body, field, SimParams { speed: mu, t_limit: t, run_to_limit: true, rim: None }, start)
+        .pose
 }
 
 /// Random starts on the four-lines plate's left half, away from the vertical node.
