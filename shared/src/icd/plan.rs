@@ -66,6 +66,18 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// Makes `self` a copy of `other` in place. `clone_from` would build the whole plan
+    /// (5 KiB) as a temporary first, and on the controller that lands on the link's stack.
+    pub fn copy_from(&mut self, other: &Plan) {
+        self.name.clone_from(&other.name);
+        self.repeat = other.repeat;
+        self.steps.clear();
+        for step in &other.steps {
+            // Same capacity on both sides: every step fits.
+            let _ = self.steps.push(*step);
+        }
+    }
+
     /// Total length of all runs, milliseconds (without the final ramp to zero).
     pub fn total_ms(&self) -> u64 {
         self.steps.iter().map(|s| s.duration_ms as u64).sum::<u64>() * self.repeat as u64

@@ -235,7 +235,7 @@ impl DriveShared {
             self.staging.lock(|s| s.set(false));
             return Err(DriveError::QueueFull);
         };
-        buffer.clone_from(plan);
+        buffer.copy_from(plan);
         drop(buffer);
         let queued = critical_section::with(|cs| self.queue(cs, Queued::RunPlan(slot)));
         if queued.is_err() {
