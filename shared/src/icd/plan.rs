@@ -375,6 +375,21 @@ mod tests {
     }
 
     #[test]
+    fn copy_from_makes_an_equal_plan_over_a_longer_one() {
+        let long: heapless::Vec<Step, MAX_STEPS> =
+            (0..MAX_STEPS as u32).map(|i| step(1_000 + i, 100, 10, 0)).collect();
+        let mut dst = plan(&long);
+        dst.repeat = 7;
+        let mut src = plan(&[step(2_000, 200, 20, 5), step(3_000, 300, 30, 5)]);
+        src.name = heapless::String::try_from("second").unwrap();
+        dst.copy_from(&src);
+        assert_eq!(dst, src);
+        let full = plan(&long);
+        dst.copy_from(&full);
+        assert_eq!(dst, full);
+    }
+
+    #[test]
     fn valid_plan_passes() {
         let p = plan(&[step(1_000, 0, 1, 0), step(2_000_000, 32767, 100, 100)]);
         assert_eq!(p.validate(&DeviceLimits::DEFAULT), Ok(()));
