@@ -113,6 +113,7 @@ fn http_reader(addr: SocketAddr, seed: u64, until: Instant, tally: &Tally) {
             _ if route == "GET /" && code == 200 => tally.answer(),
             _ => tally.missing(format!("{route}: {code} {body}")),
         }
+        // Think time of a random client (load pacing, not a wait for an event).
         std::thread::sleep(Duration::from_millis(rng.next_u64() % 50));
     }
 }
@@ -337,7 +338,9 @@ fn serve_survives_a_random_mix_of_clients_and_a_controller_restart() {
         }));
     }
     let monitor = std::thread::spawn(move || monitor(http_addr, pid, until, start));
-    // One controller restart half-way (killed, started again on the same flash).
+    // One controller restart half-way (killed, started again on the same flash). These two
+    // sleeps are the scenario's schedule, not a wait for an event: half the soak before the
+    // crash, then a 2 s outage that every front end must ride through.
     std::thread::sleep(soak / 2);
     emu.kill();
     std::thread::sleep(Duration::from_secs(2));
