@@ -12,6 +12,9 @@
 //! # hinged-rod only (defaults shown): hinge line x = hinge_x_mm, rod clamped at rod_mm
 //! # hinge_x_mm = 150.0       # W/2
 //! # rod_mm = [225.0, 100.0]  # [3W/4, H/2]
+//! # drive_mm = [110.0, 70.0] # where the shaker drives the plate (forced response)
+//! # clamps_mm = [[30.0, 40.0]] # point supports (w = 0 there)
+//! # damping_ratio = 0.01     # modal damping ζ of the forced response (Q = 1/2ζ)
 //! ```
 //! Only `name` and `size_mm` are needed by every user of the file; the material and boundary
 //! keys are needed by the mode solver and checked when it asks for them
@@ -220,6 +223,30 @@ pub struct PlateTable {
     /// [`crate::model::plate::DEFAULT_FRICTION`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub friction: Option<f64>,
+    /// Where the shaker drives the plate [x, y] (mm): the solver then writes the forced
+    /// response at each resonance ([`crate::plate::drive`]).
+    #[serde(skip_serializing_if = "Option::is_none", deserialize_with = "opt_pair")]
+    pub drive_mm: Option<[f64; 2]>,
+    /// Point supports [[x, y], ...] (mm): w = 0 at each, imposed exactly by the solver.
+    #[serde(skip_serializing_if = "Option::is_none", deserialize_with = "opt_pairs")]
+    pub clamps_mm: Option<Vec<[f64; 2]>>,
+    /// Modal damping ratio ζ of the forced response (default [`DEFAULT_DAMPING`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub damping_ratio: Option<f64>,
+}
+
+/// Default modal damping ratio ζ = 0.01 (Q = 50): a bolted aluminium plate is typically
+/// 0.005–0.02. An assumption: a sweep's Q gives yours (ζ = 1/2Q, `chladni device sweep`).
+pub const DEFAULT_DAMPING: f64 = 0.01;
+
+/// Most point supports a plate takes (each is one constraint on the Ritz unknowns).
+pub const MAX_CLAMPS: usize = 16;
+
+/// An optional list of [`pair`]s.
+fn opt_pairs<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<Vec<[f64; 2]>>, D::Error> {
+    #[derive(Deserialize)]
+    struct P(#[serde(deserialize_with = "pair")] [f64; 2]);
+    Ok(Some(Vec::<P>::deserialize(d)?.into_iter().map(|p| p.0).collect()))
 }
 
 /// Boundary conditions of the plate.
@@ -255,6 +282,12 @@ pub struct Plate {
     pub hinge_x_mm: f64,
     /// Rod point (mm) for hinged-rod.
     pub rod_mm: [f64; 2],
+    /// Drive point (mm), if given: modes are written as the forced response there.
+    pub drive_mm: Option<[f64; 2]>,
+    /// Point supports (mm).
+    pub clamps_mm: Vec<[f64; 2]>,
+    /// Modal damping ratio ζ.
+    pub damping_ratio: f64,
 }
 
 /// What is wrong with a plate file; each variant names the key and the offending value.
@@ -300,6 +333,51 @@ pub enum PlateFileError {
         /// Plate size.
         limit: [f64; 2],
     },
+    /// A point support lies outside the plate.
+    #[error(
+        "[plate] clamps_mm[{index}] = {value:?} mm is outside the plate (0..{limit:?} mm): \
+         move it onto the plate"
+    )]
+    ClampOutside {
+        /// 0-based index in `clamps_mm`.
+        index: usize,
+        /// The point.
+        value: [f64; 2],
+        /// Plate size.
+        limit: [f64; 2],
+    },
+    /// Two point supports at one place.
+    #[error(
+        "[plate] clamps_mm[{first}] and clamps_mm[{second}] are both at {value:?} mm: remove one"
+    )]
+    ClampDuplicate {
+        /// First index.
+        first: usize,
+        /// Second index.
+        second: usize,
+        /// The point.
+        value: [f64; 2],
+    },
+    /// More point supports than [`MAX_CLAMPS`].
+    #[error("[plate] clamps_mm has {0} points: at most {MAX_CLAMPS}")]
+    TooManyClamps(usize),
+    /// The drive point is a support: it cannot move, so it excites nothing.
+    #[error(
+        "[plate] drive_mm = {drive:?} mm is at clamps_mm[{index}]: a supported point does not \
+         move, so it drives nothing; move the drive point or the clamp"
+    )]
+    DriveAtClamp {
+        /// Drive point.
+        drive: [f64; 2],
+        /// The clamp's index.
+        index: usize,
+    },
+    /// Damping ratio outside (0, 0.2].
+    #[error(
+        "[plate] damping_ratio must be in (0, 0.2] (a lightly damped plate: 0.005–0.02), got \
+         {0}"
+    )]
+    Damping(f64),
     /// The rod point lies on the hinge line (the plate could then rock freely).
     #[error("[plate] rod_mm {rod:?} lies on the hinge line x = {hinge} mm")]
     RodOnHinge {
@@ -383,6 +461,7 @@ impl PlateTable {
                 return Err(PlateFileError::RodOnHinge { rod, hinge });
             }
         }
+        let (drive_mm, clamps_mm, damping_ratio) = self.drive_and_clamps([w, h])?;
         Ok(Plate {
             name: self.name.clone(),
             size_mm: [w, h],
@@ -393,7 +472,49 @@ impl PlateTable {
             boundary,
             hinge_x_mm: hinge,
             rod_mm: rod,
+            drive_mm,
+            clamps_mm,
+            damping_ratio,
         })
+    }
+
+    /// `drive_mm`, `clamps_mm` and `damping_ratio`, checked against the plate [W, H].
+    #[allow(clippy::type_complexity)]
+    fn drive_and_clamps(
+        &self,
+        size: [f64; 2],
+    ) -> Result<(Option<[f64; 2]>, Vec<[f64; 2]>, f64), PlateFileError> {
+        let inside =
+            |p: [f64; 2]| (0.0..=size[0]).contains(&p[0]) && (0.0..=size[1]).contains(&p[1]);
+        // Two points closer than this are one point (a Ritz basis cannot tell them apart).
+        let same = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]) < 1e-3 * size[0];
+        if let Some(d) = self.drive_mm.filter(|&d| !inside(d)) {
+            return Err(PlateFileError::OutsidePlate {
+                key: "drive_mm",
+                value: d.to_vec(),
+                limit: size,
+            });
+        }
+        let clamps = self.clamps_mm.clone().unwrap_or_default();
+        if clamps.len() > MAX_CLAMPS {
+            return Err(PlateFileError::TooManyClamps(clamps.len()));
+        }
+        for (index, &c) in clamps.iter().enumerate() {
+            if !inside(c) {
+                return Err(PlateFileError::ClampOutside { index, value: c, limit: size });
+            }
+            if let Some(first) = clamps[..index].iter().position(|&o| same(o, c)) {
+                return Err(PlateFileError::ClampDuplicate { first, second: index, value: c });
+            }
+            if let Some(drive) = self.drive_mm.filter(|&d| same(d, c)) {
+                return Err(PlateFileError::DriveAtClamp { drive, index });
+            }
+        }
+        let zeta = self.damping_ratio.unwrap_or(DEFAULT_DAMPING);
+        if !(zeta > 0.0 && zeta <= 0.2) {
+            return Err(PlateFileError::Damping(zeta));
+        }
+        Ok((self.drive_mm, clamps, zeta))
     }
 }
 
@@ -495,5 +616,34 @@ node = { kind = "line", angle_deg = 90.0, offset_mm = 0.0 }
             mech("poisson = 0.33", "poisson = 0.33\nrod_mm = [400.0, 10.0]"),
             Err(PlateFileError::OutsidePlate { key: "rod_mm", .. })
         ));
+    }
+
+    #[test]
+    fn drive_point_and_clamps_are_checked_and_named() {
+        let with = |extra: &str| {
+            PlateFile::parse(
+                &GOOD.replace("poisson = 0.33", &format!("poisson = 0.33\n{extra}")),
+                "t",
+            )
+            .map(|f| f.plate.mechanics())
+        };
+        let p = with("drive_mm = [100.0, 50.0]\nclamps_mm = [[10.0, 10.0], [290.0, 10.0]]")
+            .unwrap()
+            .unwrap();
+        assert_eq!(p.drive_mm, Some([100.0, 50.0]));
+        assert_eq!(p.clamps_mm, vec![[10.0, 10.0], [290.0, 10.0]]);
+        assert_eq!(p.damping_ratio, DEFAULT_DAMPING);
+        let e = with("drive_mm = [310.0, 50.0]").unwrap().unwrap_err();
+        assert!(matches!(e, PlateFileError::OutsidePlate { key: "drive_mm", .. }), "{e}");
+        let e = with("clamps_mm = [[10.0, 10.0], [10.0, -1.0]]").unwrap().unwrap_err();
+        assert!(e.to_string().contains("clamps_mm[1] = [10.0, -1.0]"), "{e}");
+        let e = with("clamps_mm = [[10.0, 10.0], [10.0, 10.0]]").unwrap().unwrap_err();
+        assert!(matches!(e, PlateFileError::ClampDuplicate { first: 0, second: 1, .. }), "{e}");
+        let e = with("drive_mm = [10.0, 10.0]\nclamps_mm = [[10.0, 10.0]]").unwrap().unwrap_err();
+        assert!(e.to_string().contains("drives nothing"), "{e}");
+        let e = with("damping_ratio = 0.0").unwrap().unwrap_err();
+        assert!(matches!(e, PlateFileError::Damping(z) if z == 0.0), "{e}");
+        let e = with("clamps_mm = [[10.0, 10.0, 1.0]]").unwrap_err().to_string();
+        assert!(e.contains("exactly two"), "{e}");
     }
 }

@@ -6,6 +6,9 @@
 //! support conditions are imposed exactly as linear constraints `C q = 0` on the coefficients
 //! (clamped edge: `w = ∂w/∂x = 0` along `x = 0`; hinge line: `w = 0` along `x = x_h`; rod: `w`
 //! and both slopes zero at a point), by restricting the problem to the null space of `C`.
+//! Point supports (`[plate] clamps_mm`) are one more row each, `w = 0` at the point: exact
+//! elimination like the other supports, so no penalty stiffness has to be chosen and a
+//! supported point is a node to rounding.
 //! Free edges need nothing: the Ritz method satisfies natural boundary conditions on its own.
 //! The problem is solved in non-dimensional form (`a = W`, `D = ρh = 1`), whose eigenvalues are
 //! the frequency parameters `λ² = ω² a⁴ ρh / D`.
@@ -41,10 +44,12 @@ pub struct ModalSolution {
     pub terms: usize,
     /// Elastic modes in ascending frequency (rigid-body modes removed).
     pub modes: Vec<SolvedMode>,
+    /// Rigid-body motions of an unsupported plate (λ ≈ 0; empty when supported).
+    pub rigid: Vec<SolvedMode>,
 }
 
 /// Geometry of the problem in non-dimensional units (lengths divided by `W`).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct Setup {
     /// Aspect ratio `H / W`.
     pub aspect: f64,
@@ -52,6 +57,8 @@ pub struct Setup {
     pub poisson: f64,
     /// Support conditions.
     pub support: Support,
+    /// Point supports (ξ, η): `w = 0` there.
+    pub points: Vec<[f64; 2]>,
 }
 
 /// Support conditions in non-dimensional coordinates (`x/W`, `y/W`... expressed as ξ, η ∈ [−1, 1]).
@@ -186,7 +193,7 @@ fn stiffness(n: usize, aspect: f64, nu: f64) -> DMatrix<f64> {
 }
 
 /// Constraint rows `C` (one per row of the returned matrix) for the supports.
-fn constraints(n: usize, support: Support) -> DMatrix<f64> {
+fn constraints(n: usize, support: Support, points: &[[f64; 2]]) -> DMatrix<f64> {
     let mut rows: Vec<Vec<f64>> = Vec::new();
     // Row for "Σ_i q_ij a_i = 0 for each j" (a condition along a whole line ξ = const).
     let line = |a: &[f64], rows: &mut Vec<Vec<f64>>| {
@@ -221,6 +228,10 @@ fn constraints(n: usize, support: Support) -> DMatrix<f64> {
             }
         }
     }
+    for &[xi, eta] in points {
+        let (bx, by) = (basis(n, xi), basis(n, eta));
+        rows.push((0..n * n).map(|k| bx[0][k / n] * by[0][k % n]).collect());
+    }
     let m = n * n;
     DMatrix::from_fn(rows.len(), m, |r, c| rows[r][c])
 }
@@ -246,10 +257,15 @@ fn null_space(c: &DMatrix<f64>, m: usize) -> DMatrix<f64> {
 
 /// Non-dimensional modal analysis: returns `(λ, coefficients)` pairs ascending, elastic only.
 pub fn solve_nondim(setup: &Setup, terms: usize) -> Vec<(f64, Vec<f64>)> {
+    solve_nondim_all(setup, terms).into_iter().filter(|(lam, _)| *lam >= RIGID_LAMBDA).collect()
+}
+
+/// Every mode of the Ritz problem, rigid-body motions (λ ≈ 0) included, ascending.
+pub fn solve_nondim_all(setup: &Setup, terms: usize) -> Vec<(f64, Vec<f64>)> {
     let n = terms;
     let m = n * n;
     let k = stiffness(n, setup.aspect, setup.poisson);
-    let z = null_space(&constraints(n, setup.support), m);
+    let z = null_space(&constraints(n, setup.support, &setup.points), m);
     // Mass matrix = (H/4)·I in the normalised basis; Zᵀ Z = I.
     let mass = setup.aspect / 4.0;
     let kr = z.transpose() * &k * &z / mass;
@@ -259,13 +275,10 @@ pub fn solve_nondim(setup: &Setup, terms: usize) -> Vec<(f64, Vec<f64>)> {
     order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
     order
         .into_iter()
-        .filter_map(|i| {
+        .map(|i| {
             let lam = eig.eigenvalues[i].max(0.0).sqrt();
-            if lam < RIGID_LAMBDA {
-                return None;
-            }
             let v: DVector<f64> = &z * eig.eigenvectors.column(i);
-            Some((lam, v.iter().copied().collect()))
+            (lam, v.iter().copied().collect())
         })
         .collect()
 }
@@ -283,25 +296,39 @@ impl Setup {
                 rod_eta: 2.0 * plate.rod_mm[1] / h - 1.0,
             },
         };
-        Setup { aspect: h / w, poisson: plate.poisson, support }
+        let points =
+            plate.clamps_mm.iter().map(|c| [2.0 * c[0] / w - 1.0, 2.0 * c[1] / h - 1.0]).collect();
+        Setup { aspect: h / w, poisson: plate.poisson, support, points }
     }
 }
 
-/// Modal analysis of a plate: the first `count` elastic modes.
-pub fn solve(plate: &Plate, count: usize, terms: usize) -> ModalSolution {
-    let setup = Setup::of(plate);
+/// Hz per unit of λ for a plate: `f = λ/(2π a²)·√(D/ρh)`.
+pub fn hz_per_lambda(plate: &Plate) -> f64 {
     let a = plate.size_mm[0] * 1e-3;
     let h = plate.thickness_mm * 1e-3;
     let e = plate.youngs_modulus_gpa * 1e9;
     let d = e * h.powi(3) / (12.0 * (1.0 - plate.poisson * plate.poisson));
     let rho_h = plate.density_kg_m3 * h;
-    let scale = (d / rho_h).sqrt() / (a * a) / (2.0 * std::f64::consts::PI);
-    let modes = solve_nondim(&setup, terms)
+    (d / rho_h).sqrt() / (a * a) / (2.0 * std::f64::consts::PI)
+}
+
+/// Modal analysis of a plate: the first `count` elastic modes.
+pub fn solve(plate: &Plate, count: usize, terms: usize) -> ModalSolution {
+    let mut sol = solve_all(plate, terms);
+    sol.modes.truncate(count);
+    sol
+}
+
+/// Modal analysis of a plate: every mode of the Ritz problem, the rigid-body motions
+/// (λ < [`RIGID_LAMBDA`]) in [`ModalSolution::rigid`]. The forced response
+/// ([`crate::plate::drive`]) sums over all of them.
+pub fn solve_all(plate: &Plate, terms: usize) -> ModalSolution {
+    let scale = hz_per_lambda(plate);
+    let (rigid, modes) = solve_nondim_all(&Setup::of(plate), terms)
         .into_iter()
-        .take(count)
         .map(|(lambda, coeffs)| SolvedMode { freq_hz: lambda * scale, lambda, coeffs })
-        .collect();
-    ModalSolution { size_mm: plate.size_mm, terms, modes }
+        .partition(|m| m.lambda < RIGID_LAMBDA);
+    ModalSolution { size_mm: plate.size_mm, terms, modes, rigid }
 }
 
 /// Grid points along x a sampled mode may have: at least 3 for a node to show, at most 401 to
@@ -342,40 +369,56 @@ impl Grid {
     }
 }
 
+/// `w(p) = Σ q_ij p_i(ξ) p_j(η)` of Ritz coefficients `q` (`terms` per direction) at plate
+/// point `p` (mm) of a plate of `size` (mm).
+pub fn value_at(q: &[f64], terms: usize, size: [f64; 2], p: [f64; 2]) -> f64 {
+    let bx = basis(terms, 2.0 * p[0] / size[0] - 1.0);
+    let by = basis(terms, 2.0 * p[1] / size[1] - 1.0);
+    (0..terms * terms).map(|k| q[k] * bx[0][k / terms] * by[0][k % terms]).sum()
+}
+
 impl ModalSolution {
+    /// Mode `index`'s shape at plate point `p` (mm), unnormalised Ritz units.
+    pub fn value_at(&self, index: usize, p: [f64; 2]) -> f64 {
+        value_at(&self.modes[index].coeffs, self.terms, self.size_mm, p)
+    }
+
     /// Samples mode `index` on an `nx × ny` grid (both ≥ 2).
     pub fn sample(&self, index: usize, nx: usize, ny: usize) -> Grid {
-        let n = self.terms;
-        let q = &self.modes[index].coeffs;
-        let bx: Vec<Vec<f64>> =
-            (0..nx).map(|i| basis(n, -1.0 + 2.0 * i as f64 / (nx - 1) as f64)[0].clone()).collect();
-        let by: Vec<Vec<f64>> =
-            (0..ny).map(|j| basis(n, -1.0 + 2.0 * j as f64 / (ny - 1) as f64)[0].clone()).collect();
-        let mut values = Vec::with_capacity(nx * ny);
-        for pj in &by {
-            for pi in &bx {
-                let mut s = 0.0;
-                for i in 0..n {
-                    for j in 0..n {
-                        s += q[i * n + j] * pi[i] * pj[j];
-                    }
-                }
-                values.push(s);
-            }
-        }
-        let peak =
-            values.iter().copied().fold(0.0f64, |m, v| if v.abs() > m.abs() { v } else { m });
-        if peak != 0.0 {
-            for v in &mut values {
-                *v /= peak;
-                // Exact zeros (constraint lines) come out as ±1e-16 noise: snap them.
-                if v.abs() < 1e-9 {
-                    *v = 0.0;
-                }
-            }
-        }
-        Grid { nx, ny, size_mm: self.size_mm, values }
+        sample_coeffs(&self.modes[index].coeffs, self.terms, self.size_mm, nx, ny)
     }
+}
+
+/// Samples Ritz coefficients `q` on an `nx × ny` grid (both ≥ 2), normalised as [`Grid`] says.
+pub fn sample_coeffs(q: &[f64], terms: usize, size_mm: [f64; 2], nx: usize, ny: usize) -> Grid {
+    let n = terms;
+    let bx: Vec<Vec<f64>> =
+        (0..nx).map(|i| basis(n, -1.0 + 2.0 * i as f64 / (nx - 1) as f64)[0].clone()).collect();
+    let by: Vec<Vec<f64>> =
+        (0..ny).map(|j| basis(n, -1.0 + 2.0 * j as f64 / (ny - 1) as f64)[0].clone()).collect();
+    let mut values = Vec::with_capacity(nx * ny);
+    for pj in &by {
+        for pi in &bx {
+            let mut s = 0.0;
+            for i in 0..n {
+                for j in 0..n {
+                    s += q[i * n + j] * pi[i] * pj[j];
+                }
+            }
+            values.push(s);
+        }
+    }
+    let peak = values.iter().copied().fold(0.0f64, |m, v| if v.abs() > m.abs() { v } else { m });
+    if peak != 0.0 {
+        for v in &mut values {
+            *v /= peak;
+            // Exact zeros (constraint lines) come out as ±1e-16 noise: snap them.
+            if v.abs() < 1e-9 {
+                *v = 0.0;
+            }
+        }
+    }
+    Grid { nx, ny, size_mm, values }
 }
 
 #[cfg(test)]
@@ -383,7 +426,7 @@ mod tests {
     use super::*;
 
     fn square(support: Support) -> Vec<f64> {
-        let setup = Setup { aspect: 1.0, poisson: 0.3, support };
+        let setup = Setup { aspect: 1.0, poisson: 0.3, support, points: vec![] };
         solve_nondim(&setup, DEFAULT_TERMS).into_iter().map(|(l, _)| l).collect()
     }
 
@@ -426,8 +469,37 @@ mod tests {
             aspect: 1.0,
             poisson: 0.3,
             support: Support::HingedRod { hinge_xi: 0.0, rod_xi: 0.5, rod_eta: 0.0 },
+            points: vec![],
         };
         let modes = solve_nondim(&setup, 10);
         assert!(modes[0].0 > 1.0, "first λ {}", modes[0].0);
+    }
+
+    #[test]
+    fn a_point_support_is_a_node_and_leaves_modes_already_zero_there_alone() {
+        let free = Setup { aspect: 1.0, poisson: 0.3, support: Support::Free, points: vec![] };
+        let centre = Setup { points: vec![[0.0, 0.0]], ..free.clone() };
+        let (a, b) = (solve_nondim(&free, 12), solve_nondim(&centre, 12));
+        let at = |q: &[f64], p: [f64; 2]| value_at(q, 12, [2.0, 2.0], [p[0] + 1.0, p[1] + 1.0]);
+        // Every mode of the supported plate is a node at the support.
+        for (lam, q) in &b[..8] {
+            assert!(at(q, [0.0, 0.0]).abs() < 1e-9, "λ {lam}: w = {}", at(q, [0.0, 0.0]));
+        }
+        // By symmetry the free square's first mode (twisting, nodes along both mid-lines) is
+        // zero at the centre: supporting it there changes nothing (λ = 13.468 on both plates;
+        // the supported plate gains a lower one, the rigid translation turned into a bowl).
+        assert!(at(&a[0].1, [0.0, 0.0]).abs() < 1e-9);
+        assert!(b.iter().any(|m| (m.0 - a[0].0).abs() < 1e-6 * a[0].0), "{} not kept", a[0].0);
+        // The plate's rigid translation is gone (two rigid rotations about the point remain).
+        let rigid =
+            |s: &Setup| solve_nondim_all(s, 12).iter().filter(|m| m.0 < RIGID_LAMBDA).count();
+        assert_eq!((rigid(&free), rigid(&centre)), (3, 2));
+        // Off the centre the support moves the nodes: a mode gains a node there.
+        let off = Setup { points: vec![[0.4, -0.3]], ..free };
+        let c = solve_nondim(&off, 12);
+        assert!(c.iter().take(6).all(|(_, q)| at(q, [0.4, -0.3]).abs() < 1e-9));
+        // Free mode 2 moves there, so no supported mode keeps its shape and frequency.
+        assert!(at(&a[1].1, [0.4, -0.3]).abs() > 0.05);
+        assert!(c.iter().all(|m| (m.0 - a[1].0).abs() > 1e-3 * a[1].0), "{:?}", &c[..4]);
     }
 }
