@@ -15,7 +15,7 @@ use chladni::model::plate_file::{Boundary, ModeEntry, Plate, PlateFile, PlateTab
 use chladni::output::write_atomic;
 use chladni::plate::contour::{node_lines, total_length};
 use chladni::plate::photo::job::{PhotoGrid, PhotoRequest};
-use chladni::plate::{photo, solver};
+use chladni::plate::{drive, photo, solver, suggest};
 use chladni::plot::plate as plot;
 use serde::Serialize;
 
@@ -27,6 +27,8 @@ pub enum PlateCommand {
     FromPhoto(FromPhotoArgs),
     /// Fit a mode's settle speed (speed_mm_s) to observed parts and write it to the plate file.
     CalibrateSpeed(super::calibrate::CalibrateArgs),
+    /// Try drive points and clamp positions and report which give a part a plan.
+    Suggest(SuggestArgs),
 }
 
 impl PlateCommand {
@@ -35,6 +37,7 @@ impl PlateCommand {
             PlateCommand::Modes(a) => a.run(),
             PlateCommand::FromPhoto(a) => a.run(),
             PlateCommand::CalibrateSpeed(a) => a.run(),
+            PlateCommand::Suggest(a) => a.run(),
         }
     }
 }
@@ -86,12 +89,14 @@ impl ModesArgs {
         let spinner =
             ProgressBar::new_spinner().with_message(format!("solving ({0}×{0} terms)", self.terms));
         spinner.enable_steady_tick(std::time::Duration::from_millis(120));
-        let sol = solver::solve(&plate, self.count, self.terms);
+        let all = solver::solve_all(&plate, self.terms);
         spinner.finish_and_clear();
+        let shown = self.resonances(&plate, &all)?;
+        let sol = &shown.sol;
         if let Some(dir) = &self.plot {
-            plot_modes(dir, &plate, &sol)?;
+            plot_modes(dir, &plate, &shown)?;
         }
-        let rocking = self.rocking_mode(&plate, &sol)?;
+        let rocking = self.rocking_mode(&plate, sol)?;
         if let Some(out) = &self.write_modes {
             let (nx, ny) = solver::grid_dims(self.grid, plate.size_mm);
             let entries = rocking
@@ -99,7 +104,7 @@ impl ModesArgs {
                 .cloned()
                 .chain(sol.modes.iter().enumerate().map(|(k, m)| {
                     modes_file::grid_mode(
-                        &format!("mode {}", k + 1),
+                        &shown.labels[k],
                         m.freq_hz,
                         m.lambda,
                         &sol.sample(k, nx, ny),
@@ -109,12 +114,65 @@ impl ModesArgs {
             write(out, &modes_file::render(&file.plate, entries)?)?;
         }
         if self.json {
-            let modes = sol.modes.iter().map(|m| ModeJson { freq_hz: m.freq_hz, lambda: m.lambda });
+            let modes = sol.modes.iter().enumerate().map(|(k, m)| ModeJson {
+                freq_hz: m.freq_hz,
+                lambda: m.lambda,
+                name: shown.labels[k].clone(),
+                excitation: shown.excitation.get(k).copied(),
+            });
             println!("{}", serde_json::to_string(&ModesJson { modes: modes.collect() })?);
         } else {
-            self.print(&plate, &sol, rocking.is_some());
+            self.print(&plate, &shown, rocking.is_some());
         }
         Ok(ExitCode::SUCCESS)
+    }
+
+    /// The modes to show and write: the first `--count` free modes, or with `[plate]
+    /// drive_mm` the forced response at each resonance among them (unexcited ones dropped
+    /// with a warning naming them). Without a drive point a degenerate pair has no one shape,
+    /// so `--write-modes` is refused (the planner would refuse the file: one frequency is one
+    /// mode), naming the modes and the fix.
+    fn resonances(&self, plate: &Plate, all: &solver::ModalSolution) -> Result<Shown, InputError> {
+        let Some(d) = plate.drive_mm else {
+            let pairs: Vec<Vec<usize>> =
+                drive::first_groups(all, self.count).into_iter().filter(|g| g.len() > 1).collect();
+            if let (Some(g), Some(_)) = (pairs.first(), &self.write_modes) {
+                return Err(InputError(format!(
+                    "{} of this plate share {:.3} Hz (a degenerate pair, as a symmetric plate \
+                     has): the shape the plate takes there depends on where it is driven, and \
+                     the planner refuses two modes at one frequency; set [plate] drive_mm = \
+                     [x, y] (where the shaker drives the plate) in {}",
+                    drive::members_label(g),
+                    all.modes[g[0]].freq_hz,
+                    self.plate.display()
+                )));
+            }
+            let mut sol = all.clone();
+            sol.modes.truncate(self.count);
+            let labels = (1..=sol.modes.len()).map(|k| format!("mode {k}")).collect();
+            return Ok(Shown { sol, labels, excitation: vec![] });
+        };
+        let forced = drive::forced(all, self.count, d, plate.damping_ratio);
+        for r in &forced.dropped {
+            eprintln!(
+                "warning: {} ({:.2} Hz) is not excited from drive_mm = {d:?} (response there \
+                 {:.1} % of its peak, under {:.0} %: a node at the drive point): left out",
+                drive::members_label(&r.members),
+                r.freq_hz,
+                100.0 * r.excitation,
+                100.0 * drive::MIN_EXCITATION
+            );
+        }
+        if forced.resonances.is_empty() {
+            return Err(InputError(format!(
+                "[plate] drive_mm = {d:?} mm excites none of the first {} modes (it lies on their \
+                 nodes): move the drive point off the nodes (`chladni plate suggest` tries some)",
+                self.count
+            )));
+        }
+        let labels = forced.resonances.iter().map(|r| drive::members_label(&r.members)).collect();
+        let excitation = forced.resonances.iter().map(|r| r.excitation).collect();
+        Ok(Shown { sol: forced.as_solution(all), labels, excitation })
     }
 
     /// Refuses, before solving, outputs that would overwrite the plate file.
@@ -132,25 +190,35 @@ impl ModesArgs {
     }
 
     /// The modes as a table, and the forced rocking of a hinged-rod plate.
-    fn print(&self, plate: &Plate, sol: &solver::ModalSolution, rocking: bool) {
+    fn print(&self, plate: &Plate, shown: &Shown, rocking: bool) {
+        let sol = &shown.sol;
         println!(
             "{} ({:?}, {:.0}×{:.0} mm):",
             plate.name, plate.boundary, plate.size_mm[0], plate.size_mm[1]
         );
+        if let Some(d) = plate.drive_mm {
+            println!(
+                "forced response to a point drive at ({:.1}, {:.1}) mm, ζ = {}; excitation = \
+                 response at the drive point / its peak",
+                d[0], d[1], plate.damping_ratio
+            );
+        }
         println!(
-            "{:>4} {:>12} {:>10} {:>8} {:>16}",
-            "mode", "freq (Hz)", "lambda", "lines", "node length (mm)"
+            "{:>10} {:>12} {:>10} {:>8} {:>16} {:>10}",
+            "mode", "freq (Hz)", "lambda", "lines", "node length (mm)", "excitation"
         );
         let (nx, ny) = solver::grid_dims(121, plate.size_mm);
         for (k, m) in sol.modes.iter().enumerate() {
             let lines = node_lines(&sol.sample(k, nx, ny));
+            let exc = shown.excitation.get(k).map_or("-".into(), |e| format!("{e:.3}"));
             println!(
-                "{:>4} {:>12.2} {:>10.4} {:>8} {:>16.1}",
-                k + 1,
+                "{:>10} {:>12.2} {:>10.4} {:>8} {:>16.1} {:>10}",
+                shown.labels[k].trim_start_matches("mode ").trim_start_matches("modes "),
                 m.freq_hz,
                 m.lambda,
                 lines.len(),
-                total_length(&lines) + 0.0
+                total_length(&lines) + 0.0,
+                exc
             );
         }
         if rocking {
@@ -201,8 +269,17 @@ fn mode_figure_name(k: usize) -> String {
     format!("mode-{:02}.png", k + 1)
 }
 
+/// The modes `plate modes` shows and writes, with their names and, for a drive point, their
+/// excitation.
+struct Shown {
+    sol: solver::ModalSolution,
+    labels: Vec<String>,
+    excitation: Vec<f64>,
+}
+
 /// One Chladni figure per mode in `dir`.
-fn plot_modes(dir: &Path, plate: &Plate, sol: &solver::ModalSolution) -> anyhow::Result<()> {
+fn plot_modes(dir: &Path, plate: &Plate, shown: &Shown) -> anyhow::Result<()> {
+    let sol = &shown.sol;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let bar = ProgressBar::new(sol.modes.len() as u64).with_style(
         ProgressStyle::with_template("plotting {bar:30} {pos}/{len}")
@@ -212,8 +289,10 @@ fn plot_modes(dir: &Path, plate: &Plate, sol: &solver::ModalSolution) -> anyhow:
     for (k, m) in sol.modes.iter().enumerate() {
         let grid = sol.sample(k, nx, ny);
         let lines = node_lines(&grid);
-        let title =
-            format!("{} — mode {}: {:.1} Hz, λ = {:.3}", plate.name, k + 1, m.freq_hz, m.lambda);
+        let title = format!(
+            "{} — {}: {:.1} Hz, λ = {:.3}",
+            plate.name, shown.labels[k], m.freq_hz, m.lambda
+        );
         plot::chladni_figure(&dir.join(mode_figure_name(k)), &title, plate, &grid, &lines)
             .map_err(plot_error)?;
         bar.inc(1);
@@ -228,11 +307,15 @@ struct ModesJson {
     modes: Vec<ModeJson>,
 }
 
-/// One mode in [`ModesJson`] (keys in alphabetical order, as printed).
+/// One mode in [`ModesJson`]: its name ("mode 4", or "modes 4+5" for a degenerate pair
+/// driven at `drive_mm`) and, with a drive point, its excitation.
 #[derive(Debug, Serialize)]
 struct ModeJson {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    excitation: Option<f64>,
     freq_hz: f64,
     lambda: f64,
+    name: String,
 }
 
 /// Writes a text file atomically.
@@ -479,5 +562,109 @@ fn print_photo(found: &photo::Found, grid: Option<&PhotoGrid>) {
             f.note.as_deref().unwrap_or("regions not 2-colourable")
         ),
         Some(Err(e)) => println!("no grid node: {e}"),
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct SuggestArgs {
+    /// Plate file with the solver's keys (`[plate]` material and boundary; docs/plate.md).
+    plate: PathBuf,
+    /// The part to plan for (.json, .svg or .dxf).
+    part: PathBuf,
+    #[command(flatten)]
+    read: super::part::PartRead,
+    /// Solver modes per candidate (as `plate modes --count`).
+    #[arg(long, default_value_t = 6, value_parser = usize_in("count", 1, 12))]
+    count: usize,
+    /// Robustness margin of the plans (deg, as `plan --margin-deg`).
+    #[arg(long, default_value_t = 3.0, value_parser = super::parse::f64_where("margin-deg", "in [0, 30]", |v| (0.0..=30.0).contains(&v)))]
+    margin_deg: f64,
+    /// No new candidate starts after this many seconds (the rest are reported "not tried").
+    #[arg(long, default_value_t = 60, value_parser = usize_in("budget-s", 1, 3600))]
+    budget_s: usize,
+    /// Print the rows as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+impl SuggestArgs {
+    fn run(&self) -> anyhow::Result<ExitCode> {
+        let file = PlateFile::load(&self.plate).map_err(|e| InputError(e.to_string()))?;
+        let plate = file.plate.mechanics().map_err(|e| InputError(e.to_string()))?;
+        let part = self.read.load(&self.part)?;
+        let set = suggest::Settings {
+            count: self.count,
+            terms: solver::DEFAULT_TERMS,
+            grid: 41,
+            budget: std::time::Duration::from_secs(self.budget_s as u64),
+            plan: chladni::planner::PlanOptions {
+                margin_deg: self.margin_deg,
+                maps: chladni::planner::MapKind::Static,
+                ..Default::default()
+            },
+        };
+        let n = suggest::candidates(plate.size_mm).len() as u64;
+        let bar = ProgressBar::new(n).with_style(
+            ProgressStyle::with_template("trying {bar:30} {pos}/{len} candidates ({elapsed})")
+                .unwrap_or(ProgressStyle::default_bar()),
+        );
+        if self.json {
+            bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+        }
+        let rows = suggest::run(&file, &plate, &part, &set, || bar.inc(1));
+        bar.finish_and_clear();
+        let found = rows.iter().filter(|r| matches!(r.outcome, suggest::Outcome::Plan(_))).count();
+        if self.json {
+            println!("{}", json!({"part": part.name, "plate": plate.name, "rows": rows}));
+        } else {
+            print_suggest(&rows);
+        }
+        if found == 0 {
+            eprintln!(
+                "error: no candidate drive point or clamp set gives {} a plan on {}",
+                part.name,
+                self.plate.display()
+            );
+            return Ok(ExitCode::from(1));
+        }
+        Ok(ExitCode::SUCCESS)
+    }
+}
+
+/// The suggest table: drive point, clamps, plan found, plan length, predicted orientation.
+fn print_suggest(rows: &[suggest::Row]) {
+    println!(
+        "{:>16} {:<28} {:>5} {:>5} {:>6} {:>9} {:>16}",
+        "drive (mm)", "clamps (mm)", "modes", "plan", "steps", "total s", "final θ (deg)"
+    );
+    for r in rows {
+        let drive = format!("({:.0}, {:.0})", r.candidate.drive_mm[0], r.candidate.drive_mm[1]);
+        let clamps = if r.candidate.clamps_mm.is_empty() {
+            "none".to_string()
+        } else {
+            let c: Vec<String> = r
+                .candidate
+                .clamps_mm
+                .iter()
+                .map(|c| format!("({:.0}, {:.0})", c[0], c[1]))
+                .collect();
+            c.join(" ")
+        };
+        let (plan, steps, total, theta) = match &r.outcome {
+            suggest::Outcome::Plan(f) => (
+                "y",
+                f.steps.to_string(),
+                format!("{:.1}", f.total_s),
+                format!("{:.2} mod {}", f.final_orientation_deg, f.period_deg),
+            ),
+            suggest::Outcome::NoPlan { .. } => ("n", "-".into(), "-".into(), "-".into()),
+            suggest::Outcome::NotTried => {
+                ("?", "not tried (budget)".into(), String::new(), String::new())
+            }
+        };
+        println!(
+            "{drive:>16} {clamps:<28} {:>5} {plan:>5} {steps:>6} {total:>9} {theta:>16}",
+            r.modes
+        );
     }
 }
