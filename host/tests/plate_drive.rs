@@ -1,0 +1,199 @@
+//! The drive point, clamps and `plate suggest` (docs/plate.md): a square plate's solver file is
+//! one the planner takes, a drive point on a node does not excite that mode, a clamped point
+//! is a node, and `suggest` finds a drive point and clamps that give a plan.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+use chladni::model::plate::PlateModel;
+use chladni::model::plate_file::PlateFile;
+use chladni::plate::contour::node_lines;
+use chladni::plate::solver;
+
+fn chladni(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
+}
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn example(rel: &str) -> String {
+    root().join(rel).display().to_string()
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("chladni-plate-drive-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn text(o: &Output) -> (String, String) {
+    (String::from_utf8_lossy(&o.stdout).into(), String::from_utf8_lossy(&o.stderr).into())
+}
+
+#[test]
+fn a_square_plates_solver_file_is_one_the_planner_takes_and_plans() {
+    let square = example("examples/plate-square.toml");
+    let out = tmp("square.toml");
+    let o = chladni(&[
+        "plate",
+        "modes",
+        &square,
+        "--count",
+        "3",
+        "--grid",
+        "31",
+        "--write-modes",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    let model = PlateModel::load(&out).expect("the planner loads the solver's own file");
+    assert_eq!(model.modes.len(), 3);
+    // With the pair in: six modes, pairs 4+5 and 6+7 one resonance each (five).
+    let all = tmp("square6.toml");
+    let o = chladni(&[
+        "plate",
+        "modes",
+        &square,
+        "--count",
+        "6",
+        "--write-modes",
+        all.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    let model = PlateModel::load(&all).expect("no SameFrequency");
+    let names: Vec<&str> = model.modes.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names, ["mode 1", "mode 2", "mode 3", "modes 4+5", "modes 6+7"]);
+    // The clamped variant `suggest` finds (test below) plans through `chladni plan`.
+    let clamped = tmp("square-clamped.toml");
+    std::fs::write(
+        &clamped,
+        std::fs::read_to_string(&square).unwrap().replace("[70.0, 45.0]", "[60.0, 74.0]")
+            + "clamps_mm = [[20.0, 24.0]]\n",
+    )
+    .unwrap();
+    let file = tmp("square-clamped-modes.toml");
+    let o = chladni(&[
+        "plate",
+        "modes",
+        clamped.to_str().unwrap(),
+        "--count",
+        "3",
+        "--write-modes",
+        file.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    let part = example("examples/parts/rectangle.json");
+    let o = chladni(&["plan", &part, "--plate", file.to_str().unwrap(), "--maps", "static"]);
+    assert!(o.status.success(), "{:?}", text(&o));
+}
+
+#[test]
+fn without_a_drive_point_a_degenerate_pair_refuses_write_modes_naming_it() {
+    let square = std::fs::read_to_string(root().join("examples/plate-square.toml")).unwrap();
+    let plain = tmp("square-nodrive.toml");
+    std::fs::write(&plain, square.replace("drive_mm = [70.0, 45.0]\n", "")).unwrap();
+    let out = tmp("never.toml");
+    let o = chladni(&[
+        "plate",
+        "modes",
+        plain.to_str().unwrap(),
+        "--write-modes",
+        out.to_str().unwrap(),
+    ]);
+    let (_, err) = text(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("modes 4+5") && err.contains("drive_mm"), "{err}");
+    assert!(!out.exists());
+    // The table alone is fine.
+    assert!(chladni(&["plate", "modes", plain.to_str().unwrap()]).status.success());
+}
+
+#[test]
+fn a_drive_point_on_a_nodal_line_does_not_excite_that_mode() {
+    let square = std::fs::read_to_string(root().join("examples/plate-square.toml")).unwrap();
+    // Mode 1 of the free square twists about both mid-lines: x = 100 mm is on its node.
+    let on_node = tmp("square-on-node.toml");
+    std::fs::write(&on_node, square.replace("[70.0, 45.0]", "[100.0, 37.0]")).unwrap();
+    let o = chladni(&["plate", "modes", on_node.to_str().unwrap(), "--count", "3", "--json"]);
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("warning: mode 1 ") && err.contains("not excited"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let names: Vec<&str> =
+        v["modes"].as_array().unwrap().iter().map(|m| m["name"].as_str().unwrap()).collect();
+    assert!(!names.contains(&"mode 1"), "{names:?}");
+    assert!(
+        v["modes"].as_array().unwrap().iter().all(|m| m["excitation"].as_f64().unwrap() >= 0.05)
+    );
+    // Off the node (the example's drive point) mode 1 is there.
+    let o = chladni(&[
+        "plate",
+        "modes",
+        &example("examples/plate-square.toml"),
+        "--count",
+        "3",
+        "--json",
+    ]);
+    assert!(text(&o).0.contains("\"name\":\"mode 1\""), "{:?}", text(&o));
+    // A drive point off the plate is refused, naming the key and value.
+    let off = tmp("square-off.toml");
+    std::fs::write(&off, square.replace("[70.0, 45.0]", "[70.0, 245.0]")).unwrap();
+    let o = chladni(&["plate", "modes", off.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(text(&o).1.contains("drive_mm = [70.0, 245.0]"), "{:?}", text(&o));
+}
+
+#[test]
+fn clamps_move_the_nodes_and_a_clamped_point_is_a_node() {
+    let square = std::fs::read_to_string(root().join("examples/plate-square.toml")).unwrap();
+    let free = PlateFile::parse(&square, "sq").unwrap().plate.mechanics().unwrap();
+    let clamped = PlateFile::parse(&(square + "clamps_mm = [[40.0, 30.0]]\n"), "sq")
+        .unwrap()
+        .plate
+        .mechanics()
+        .unwrap();
+    let (a, b) = (solver::solve(&free, 4, 12), solver::solve(&clamped, 4, 12));
+    // A 41×41 grid over 200 mm has a point at (40, 30) mm: i = 8, j = 6.
+    let (ga, gb) = (a.sample(1, 41, 41), b.sample(1, 41, 41));
+    assert_eq!(gb.point(8, 6), [40.0, 30.0]);
+    for k in 0..4 {
+        assert_eq!(b.sample(k, 41, 41).at(8, 6), 0.0, "clamped mode {} moves at the clamp", k + 1);
+    }
+    assert!(ga.at(8, 6).abs() > 0.05, "the free mode moves there: {}", ga.at(8, 6));
+    // The node lines differ: the clamped mode's pass through the clamp.
+    let near = |g: &solver::Grid| {
+        node_lines(g)
+            .iter()
+            .flat_map(|l| l.iter())
+            .map(|p| (p[0] - 40.0).hypot(p[1] - 30.0))
+            .fold(f64::INFINITY, f64::min)
+    };
+    assert!(near(&gb) < 1.0 && near(&ga) > 5.0, "{} {}", near(&gb), near(&ga));
+}
+
+#[test]
+fn suggest_on_a_symmetric_plate_finds_a_drive_point_that_plans() {
+    let o = chladni(&[
+        "plate",
+        "suggest",
+        &example("examples/plate-square.toml"),
+        &example("examples/parts/rectangle.json"),
+        "--count",
+        "3",
+        "--budget-s",
+        "1",
+        "--json",
+    ]);
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "{err}\n{out}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 15);
+    // The budget lets the first candidate run (one clamp near a corner, drive off centre).
+    assert!(rows.iter().skip(1).all(|r| r["outcome"] == "not_tried"), "{out}");
+    let plans: Vec<&serde_json::Value> = rows.iter().filter(|r| r["outcome"] == "plan").collect();
+    assert!(!plans.is_empty(), "{out}");
+    assert!(plans.iter().all(|r| r["steps"].as_u64().unwrap() >= 1));
+}
