@@ -47,6 +47,15 @@ pub mod simulated;
 pub mod sweep;
 
 pub use simulated::SimulatedDac;
+
+/// Plan steps [`DriveShared::check_plan`] checks between two yields.
+pub const STEPS_PER_YIELD: usize = 64;
+
+/// A plan checked against the drive's limits: only [`DriveShared::run_plan`] and
+/// [`DriveShared::check_plan`] make one, so [`DriveShared::stage_plan`] takes no unchecked plan.
+/// (Only the link changes the limits, and it stages what it checked before doing anything
+/// else.)
+pub struct CheckedPlan<'p>(&'p Plan);
 pub use sweep::CheckedSweep;
 use sweep::{SweepRecord, SweepRun};
 
@@ -224,6 +233,31 @@ impl DriveShared {
     /// (the drive may preempt it); only the flag and the queueing are critical sections.
     pub fn run_plan(&self, plan: &Plan) -> Result<RunNumber, DriveError> {
         plan.validate(&self.limits()).map_err(DriveError::Plan)?;
+        self.stage_plan(CheckedPlan(plan))
+    }
+
+    /// Checks `plan` against the limits as [`Plan::validate`] does, in one pass, yielding to
+    /// the other thread-mode tasks every [`STEPS_PER_YIELD`] steps (the link's way:
+    /// a 256-step check is a few thousand instructions, not worth holding the executor for).
+    pub async fn check_plan<'p>(&self, plan: &'p Plan) -> Result<CheckedPlan<'p>, DriveError> {
+        let limits = self.limits();
+        let len = plan.steps.len().min(u16::MAX as usize) as u16;
+        limits.check_plan_header(plan.repeat, len).map_err(DriveError::Plan)?;
+        let mut total_ms = 0u64;
+        for (i, step) in plan.steps.iter().enumerate() {
+            limits.check_step(i as u16, step).map_err(DriveError::Plan)?;
+            total_ms += step.duration_ms as u64;
+            if (i + 1) % STEPS_PER_YIELD == 0 {
+                embassy_futures::yield_now().await;
+            }
+        }
+        limits.check_total_ms(total_ms * plan.repeat as u64).map_err(DriveError::Plan)?;
+        Ok(CheckedPlan(plan))
+    }
+
+    /// [`DriveShared::run_plan`] of a plan [`DriveShared::check_plan`] passed.
+    pub fn stage_plan(&self, plan: CheckedPlan<'_>) -> Result<RunNumber, DriveError> {
+        let CheckedPlan(plan) = plan;
         self.check_not_faulted()?;
         if self.staging.lock(|s| s.replace(true)) {
             return Err(DriveError::QueueFull);
