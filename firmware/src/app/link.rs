@@ -459,7 +459,9 @@ impl<F: NorFlash> Handler for Link<'_, F> {
 
     async fn inject_fault(&mut self, _: Call, inject: InjectFault) -> Result<(), Refusal> {
         let simulate = self.identity.inject.ok_or(Refusal::Unsupported)?;
-        defmt::warn!("link: simulating {}", inject.0);
+        // The drive's sample clock at the injection, for the tests' fault latencies (the
+        // status polled before it is a round trip older).
+        defmt::warn!("link: simulating {} at sample {=u64}", inject.0, self.drive.status().clock);
         simulate(inject.0);
         Ok(())
     }
