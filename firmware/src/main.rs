@@ -74,7 +74,8 @@ mod image {
 
     #[embassy_executor::task]
     async fn drive_task(mut output: board::DriveOutput) -> ! {
-        app::drive::run(&DRIVE, &SUPERVISOR, &mut output).await
+        let (clock, unit) = (board::refill_clock, board::REFILL_CLOCK_UNIT);
+        app::drive::run_metered(&DRIVE, &SUPERVISOR, &mut output, clock, unit).await
     }
 
     #[embassy_executor::task]

@@ -463,3 +463,17 @@ fn telemetry_streams_the_asked_count_at_the_asked_rate() {
     assert_eq!(seen, [(0, 0, 2), (100, 1, 1), (200, 2, 0)]);
     assert_eq!(link.next_sample_at(), None);
 }
+
+#[test]
+fn refill_cost_reports_mean_and_most_every_2000_blocks_then_starts_again() {
+    use super::drive::RefillCost;
+    let mut cost = RefillCost::new();
+    for i in 0..RefillCost::BLOCKS - 1 {
+        assert_eq!(cost.note(10_000 + i % 3), None);
+    }
+    // 1999 blocks of 10 000..10 002 and one of 40 000.
+    let (mean, max) = cost.note(40_000).expect("a report at the 2000th block");
+    assert_eq!(max, 40_000);
+    assert_eq!(mean, (10_001 * 1_999 - 1 + 40_000) / 2_000);
+    assert_eq!(cost.note(5), None, "counting starts again");
+}

@@ -521,6 +521,11 @@ impl<'a> DriveCore<'a> {
     /// output had run dry, and keep the least slack the output reports.
     pub async fn play_block<O: SampleOutput>(&mut self, block: &mut [u16], output: &mut O) {
         self.refill(block);
+        self.hand_over(block, output).await;
+    }
+
+    /// Gives the refilled `block` to `output` (waiting for room) and notes its slack.
+    pub async fn hand_over<O: SampleOutput>(&mut self, block: &[u16], output: &mut O) {
         match output.write_block(block).await {
             Ok(Some(slack_us)) => self.shared.note_slack_us(slack_us),
             Ok(None) => {}
@@ -575,6 +580,68 @@ pub async fn run<O: SampleOutput>(
     let mut block = [0u16; BLOCK_LEN];
     loop {
         core.play_block(&mut block, output).await;
+    }
+}
+
+/// [`run`], also timing every refill with `clock` (a free-running counter: the board's
+/// `refill_clock`, cycles on the chip) and logging the mean and the most per
+/// [`RefillCost::BLOCKS`] blocks, in `unit`.
+pub async fn run_metered<O: SampleOutput>(
+    shared: &DriveShared,
+    supervisor: &Supervisor,
+    output: &mut O,
+    clock: fn() -> u32,
+    unit: &'static str,
+) -> ! {
+    let mut core = DriveCore::new(shared).with_supervisor(supervisor);
+    let mut block = [0u16; BLOCK_LEN];
+    let mut cost = RefillCost::new();
+    loop {
+        let start = clock();
+        core.refill(&mut block);
+        if let Some((mean, max)) = cost.note(clock().wrapping_sub(start)) {
+            defmt::info!(
+                "drive: refill mean {=u32} max {=u32} {=str} over {=u32} blocks",
+                mean,
+                max,
+                unit,
+                RefillCost::BLOCKS
+            );
+        }
+        core.hand_over(&block, output).await;
+    }
+}
+
+/// Refill costs of the last [`RefillCost::BLOCKS`] blocks (interrupt handlers that preempt a
+/// refill count in it).
+#[derive(Debug, Default)]
+pub struct RefillCost {
+    blocks: u32,
+    sum: u64,
+    max: u32,
+}
+
+impl RefillCost {
+    /// Blocks per report: 10 s.
+    pub const BLOCKS: u32 = 2_000;
+
+    /// Nothing counted yet.
+    pub const fn new() -> Self {
+        Self { blocks: 0, sum: 0, max: 0 }
+    }
+
+    /// Counts one refill's `cost`; every [`Self::BLOCKS`] refills, their mean and most (and
+    /// starts again).
+    pub fn note(&mut self, cost: u32) -> Option<(u32, u32)> {
+        self.blocks += 1;
+        self.sum += cost as u64;
+        self.max = self.max.max(cost);
+        if self.blocks < Self::BLOCKS {
+            return None;
+        }
+        let report = ((self.sum / self.blocks as u64) as u32, self.max);
+        *self = Self::new();
+        Some(report)
     }
 }
 
