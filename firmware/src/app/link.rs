@@ -461,7 +461,7 @@ impl<F: NorFlash> Handler for Link<'_, F> {
         let simulate = self.identity.inject.ok_or(Refusal::Unsupported)?;
         // The drive's sample clock at the injection, for the tests' fault latencies (the
         // status polled before it is a round trip older).
-        defmt::warn!("link: simulating {} at sample {=u64}", inject.0, self.drive.status().clock);
+        defmt::warn!("link: simulating {} at sample {=u64}", inject.0, self.drive.clock());
         simulate(inject.0);
         Ok(())
     }
