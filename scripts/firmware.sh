@@ -14,6 +14,8 @@
 #   scripts/firmware.sh bench  qemu             -> per-sample cost of the drive (QEMU -icount)
 #   scripts/firmware.sh bench-link qemu         -> instructions of UploadChunk and RunPlan (-icount)
 #   scripts/firmware.sh build-bin qemu NAME     -> builds firmware/src/bin/NAME, prints its ELF path
+#   scripts/firmware.sh frames qemu|stm32l475   -> the largest stack frames of the image (bytes a
+#                                                  function reserves at entry: pushes + sub sp)
 # BOARD stm32l475-pwm is the B-L475E-IOT01A with the PWM drive (features board-stm32l475 +
 # drive-pwm: TIM3 ch3 on PB0 instead of the DAC; docs/pwm.md); build, clippy, size and run
 # take it like stm32l475.
@@ -79,6 +81,18 @@ case "$cmd" in
   bench-link) [ "$board" = qemu ] || { echo "bench-link runs on the qemu board only" >&2; exit 2; }
          elf=$("$0" build-bin qemu bench_link) &&
          QEMU_EXTRA="-icount shift=0" scripts/qemu-run.sh "$elf" ;;
+  frames) elf=$("$0" build "$board") &&
+    # Per function: the registers pushed (push/stmdb/vpush) and the `sub sp` before the first
+    # use, i.e. the frame it reserves at entry. Async poll functions show their temporaries.
+    arm-none-eabi-objdump -d --no-show-raw-insn -C "$elf" | awk '
+      /^[0-9a-f]+ <.*>:$/ { fn = $0; sub(/^[0-9a-f]+ </, "", fn); sub(/>:$/, "", fn); push = 0; seen = 0; next }
+      seen { next }
+      /\t(push|stmdb)(\.w)?\t/ { s = $0; n = gsub(/,/, ",", s) + 1; if ($0 ~ /stmdb/) n--; push += 4 * n; next }
+      /\tvpush\t/ { s = $0; if (match(s, /d[0-9]+-d[0-9]+/)) { split(substr(s, RSTART, RLENGTH), a, "-");
+                       push += 8 * (substr(a[2], 2) - substr(a[1], 2) + 1) } else push += 8; next }
+      /\t(sub|subw|sub\.w)\tsp, / { s = $0; sub(/.*#/, "", s); sub(/[^0-9].*/, "", s)
+                       printf "%8d B  %s\n", s + push, substr(fn, 1, 150); seen = 1 }' |
+      sort -rn | head -n "${FRAMES_TOP:-15}" ;;
   build-bin) name=${3:?usage: firmware.sh build-bin BOARD NAME}
     cargo build "${args[@]}" --bin "$name" >&2
     echo "target/firmware/thumbv7em-none-eabihf/firmware/$name" ;;

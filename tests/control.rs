@@ -47,13 +47,14 @@ fn sensing_and_control() {
     let mut client = client(&controller, "main");
     closed_loop_plan_holds_its_targets(&mut client);
     sweep_finds_the_resonance(&mut client);
+    let log = chladni_e2e::log_path("control");
     for fault in [
         TestFault::ShakerDisconnected,
         TestFault::AmplifierSaturated,
         TestFault::SensorSilent,
         TestFault::SensorWrongId,
     ] {
-        injected_fault_stops_the_drive(&mut client, fault);
+        injected_fault_stops_the_drive(&mut client, fault, &log);
     }
     drop(client);
     watchdog_reset_comes_back_idle(&controller);
@@ -157,15 +158,43 @@ fn sweep_finds_the_resonance(client: &mut DeviceClient) {
     assert!(spread(phase(0), phase(40)).abs() > 120.0, "the phase turns across f0");
 }
 
+/// The drive's sample clock at the `n`-th injection of `fault`, from the controller's log
+/// (`link: simulating {fault} at sample N`), waiting for the log to have it.
+fn injection_sample(log: &std::path::Path, fault: TestFault, n: usize) -> u64 {
+    let tag = format!("link: simulating {fault:?} at sample ");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let text = chladni_e2e::read_log(log);
+        let found: Vec<u64> = text
+            .lines()
+            .filter_map(|l| l.split_once(&tag).and_then(|(_, n)| n.trim().parse().ok()))
+            .collect();
+        if let Some(&at) = found.get(n) {
+            return at;
+        }
+        assert!(Instant::now() < deadline, "no '{tag}' line #{n} in {}", log.display());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 /// `fault` injected while a closed-loop drive runs: the drive ramps to zero, the fault is
-/// named and latched, a new run is refused until `ClearFault`, and the latency is printed.
-fn injected_fault_stops_the_drive(client: &mut DeviceClient, fault: TestFault) {
+/// named and latched, a new run is refused until `ClearFault`, and the latency is printed:
+/// from the drive's clock when the link carried the injection out (its log line) to the
+/// fault's sample, and (an upper bound the earlier measurements used) from the last status
+/// before the injection, a round trip earlier.
+fn injected_fault_stops_the_drive(
+    client: &mut DeviceClient,
+    fault: TestFault,
+    log: &std::path::Path,
+) {
     let run = client.drive(170_000, Level::Accel(15_000)).expect("closed-loop drive");
     let settled = poll_until(client, Duration::from_secs(30), |s| {
         s.run == run && s.elapsed_samples > 40_000 && s.fault.is_none()
     });
     let before = settled.last().unwrap().clock;
+    let earlier = chladni_e2e::read_log(log).matches(&format!("simulating {fault:?} at")).count();
     client.inject_fault(fault).expect("inject");
+    let injected = injection_sample(log, fault, earlier);
     let seen = poll_until(client, Duration::from_secs(30), |s| s.state == DriveState::Faulted);
     let faulted = seen.last().unwrap();
     let latched = faulted.fault.expect("a faulted drive names its fault");
@@ -180,14 +209,28 @@ fn injected_fault_stops_the_drive(client: &mut DeviceClient, fault: TestFault) {
     // saturated); the first one detected is latched and must be the expected one.
     assert_eq!(latched.cause, want, "{fault:?} latched {latched:?}");
     assert_eq!(faulted.amplitude_q15, 0, "ramped to zero");
-    let latency = latched.at_sample.saturating_sub(before);
+    let latency = latched.at_sample.saturating_sub(injected);
+    let from_status = latched.at_sample.saturating_sub(before);
     println!(
-        "{fault:?} → {} (value {} {}) detected ≤ {latency} samples = {:.0} ms after injection",
+        "{fault:?} → {} (value {} {}) detected {latency} samples = {:.1} ms after the \
+         injection ({from_status} samples = {:.1} ms after the status before it)",
         latched.cause.name(),
         latched.value,
         latched.cause.unit(),
-        ms(latency)
+        ms(latency),
+        ms(from_status)
     );
+    // The issue's bounds, in samples of the drive's clock (not wall time): loop open within
+    // max(3 cycles at 170 Hz, 50 ms), saturation 100 ms, no data 20 ms.
+    let bound_ms = match fault {
+        TestFault::ShakerDisconnected => Some(50.0f64.max(3000.0 / 170.0)),
+        TestFault::AmplifierSaturated => Some(100.0),
+        TestFault::SensorSilent => Some(20.0),
+        _ => None,
+    };
+    if let Some(bound_ms) = bound_ms {
+        assert!(ms(latency) <= bound_ms, "{fault:?}: {:.1} ms > {bound_ms} ms", ms(latency));
+    }
     // Latched: neither a stop nor a new run clears it.
     client.stop().expect("stop is always taken");
     let refused = client.drive(170_000, Level::Accel(15_000));

@@ -33,27 +33,49 @@ mod image {
     /// How often the stack gauge reads the painted stack (a read is ≤ 8 Ki words).
     const STACK_POLL: Duration = Duration::from_millis(200);
 
+    /// The store's flash: yielding, so a long store request lets the other thread-mode tasks
+    /// (sense, watchdog, USB) run between its flash operations.
+    type StoreFlash = app::store::yielding::Yielding<board::Flash>;
+    /// The link's state (~17 KiB: the store's index and cache, the plan buffer) lives here,
+    /// built in place once, not in the link task's future or on its stack.
+    static LINK: static_cell::StaticCell<app::link::Link<'static, StoreFlash>> =
+        static_cell::StaticCell::new();
+
+    /// Builds the link into [`LINK`]. Out of line and called from `main` before the drive's
+    /// executor starts: building it takes about 18 KiB of stack for a moment (the link is made
+    /// by value, then moved into place), which the drive must not stack on top of, and which
+    /// must not sit in the link task's poll frame (on the stack whenever the drive preempts
+    /// the link).
+    #[inline(never)]
+    fn make_link(flash: Option<board::Flash>) -> &'static mut app::link::Link<'static, StoreFlash> {
+        LINK.init_with(|| {
+            let store = flash.map(|flash| {
+                app::store::PlanStore::new(
+                    app::store::yielding::Yielding::new(flash),
+                    board::STORE_RANGE,
+                )
+            });
+            if store.is_none() {
+                defmt::warn!("no flash: plans and configuration cannot be stored");
+            }
+            let identity = app::link::Identity { board: board::BOARD, inject: board::INJECT };
+            app::link::Link::new(identity, &DRIVE, store)
+        })
+    }
+
     #[embassy_executor::task]
-    async fn link_task(mut port: board::Link, flash: Option<board::Flash>) -> ! {
-        // Yielding: a long store request must not keep the drive task from its next block.
-        let store = flash.map(|flash| {
-            app::store::PlanStore::new(
-                app::store::yielding::Yielding::new(flash),
-                board::STORE_RANGE,
-            )
-        });
-        if store.is_none() {
-            defmt::warn!("no flash: plans and configuration cannot be stored");
-        }
-        let identity = app::link::Identity { board: board::BOARD, inject: board::INJECT };
-        let mut link = app::link::Link::new(identity, &DRIVE, store);
+    async fn link_task(
+        mut port: board::Link,
+        link: &'static mut app::link::Link<'static, StoreFlash>,
+    ) -> ! {
         link.load_config().await;
-        app::link::serve(&mut link, &mut port, &SUPERVISOR).await
+        app::link::serve(link, &mut port, &SUPERVISOR).await
     }
 
     #[embassy_executor::task]
     async fn drive_task(mut output: board::DriveOutput) -> ! {
-        app::drive::run(&DRIVE, &SUPERVISOR, &mut output).await
+        let (clock, unit) = (board::refill_clock, board::REFILL_CLOCK_UNIT);
+        app::drive::run_metered(&DRIVE, &SUPERVISOR, &mut output, clock, unit).await
     }
 
     #[embassy_executor::task]
@@ -94,12 +116,11 @@ mod image {
             chladni_firmware::BUILD_ID,
             cause
         );
+        let link = make_link(board.flash);
         let drive = board::start_drive_executor();
         drive.spawn(drive_task(board.drive).expect("drive task: spawn pool exhausted"));
         board::run(|spawner| {
-            spawner.spawn(
-                link_task(board.link, board.flash).expect("link task: spawn pool exhausted"),
-            );
+            spawner.spawn(link_task(board.link, link).expect("link task: spawn pool exhausted"));
             spawner.spawn(stack_task().expect("stack task: spawn pool exhausted"));
             spawner.spawn(sense_task(board.sensor).expect("sense task: spawn pool exhausted"));
             spawner

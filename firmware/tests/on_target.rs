@@ -62,14 +62,24 @@ async fn timer_task() {
 /// The link's answer to `request` (no flash: nothing is stored).
 fn answer(request: chladni_shared::icd::link::Request) -> chladni_shared::icd::link::Response {
     use chladni_firmware::app::link::{Identity, Link};
-    // A static, as in the application (~9 KiB: the staged plan, the sweep's points).
+    use core::cell::RefCell;
+    use embassy_sync::blocking_mutex::{Mutex, raw::CriticalSectionRawMutex};
+    type TestLink = Link<'static, chladni_firmware::board::qemu::flash::FileFlash>;
+    // Statics, as in the application (the drive ~9 KiB: the staged plan, the sweep's points;
+    // the link ~17 KiB, which beside the request's future would not fit the 32 KiB stack).
     static DRIVE: chladni_firmware::app::drive::DriveShared =
         chladni_firmware::app::drive::DriveShared::new();
-    let identity = Identity { board: chladni_shared::icd::link::Board::Qemu, inject: None };
-    // ~17 KiB on the 32 KiB stack, and the request's future beside it.
-    let mut link =
-        Link::<chladni_firmware::board::qemu::flash::FileFlash>::new(identity, &DRIVE, None);
-    embassy_futures::block_on(link.handle(7, 1, request, embassy_time::Instant::now()))
+    static LINK: static_cell::StaticCell<TestLink> = static_cell::StaticCell::new();
+    static TAKEN: Mutex<CriticalSectionRawMutex, RefCell<Option<&'static mut TestLink>>> =
+        Mutex::new(RefCell::new(None));
+    let link = TAKEN.lock(|t| t.borrow_mut().take()).unwrap_or_else(|| {
+        let identity = Identity { board: chladni_shared::icd::link::Board::Qemu, inject: None };
+        LINK.init_with(|| Link::new(identity, &DRIVE, None))
+    });
+    let response =
+        embassy_futures::block_on(link.handle(7, 1, request, embassy_time::Instant::now()));
+    TAKEN.lock(|t| *t.borrow_mut() = Some(link));
+    response
 }
 
 #[defmt_test::tests]

@@ -199,7 +199,21 @@ impl<'a, F: NorFlash> Link<'a, F> {
         frame: Result<&mut [u8], LinkError>,
         now: Instant,
     ) -> Envelope<Response> {
-        let (session, id, body) = match frame.map(link::decode::<Request>) {
+        let mut out = blank();
+        self.respond_into(frame, now, &mut out).await;
+        out
+    }
+
+    /// [`Link::respond`] written into `out`, the link task's one response buffer (a response
+    /// is up to ~660 bytes: built in place and encoded from there, it is never moved by value
+    /// through the callers' frames).
+    pub async fn respond_into(
+        &mut self,
+        frame: Result<&mut [u8], LinkError>,
+        now: Instant,
+        out: &mut Envelope<Response>,
+    ) {
+        let (session, id) = match frame.map(link::decode::<Request>) {
             Ok(Ok(env)) => {
                 defmt::debug!(
                     "link: {=u32:08x}/{=u32} {=str}",
@@ -207,18 +221,27 @@ impl<'a, F: NorFlash> Link<'a, F> {
                     env.id,
                     env.body.name()
                 );
-                let body = self.handle(env.session, env.id, env.body, now).await;
-                (env.session, env.id, body)
+                let (session, id) = (env.session, env.id);
+                self.handle_into(session, id, env.body, now, &mut out.body).await;
+                (session, id)
             }
-            Ok(Err(e)) => (e.session, e.id, Response::Error(e.error)),
-            Err(error) => (0, 0, Response::Error(error)),
+            Ok(Err(e)) => {
+                out.body = Response::Error(e.error);
+                (e.session, e.id)
+            }
+            Err(error) => {
+                out.body = Response::Error(error);
+                (0, 0)
+            }
         };
-        match &body {
+        match &out.body {
             Response::Error(e) => defmt::warn!("link: refused frame ({=u32}): {}", id, e),
             Response::Refused(r) => defmt::info!("link: refused request {=u32}: {}", id, r),
             _ => {}
         }
-        Envelope { version: PROTOCOL_VERSION, session, id, body }
+        out.version = PROTOCOL_VERSION;
+        out.session = session;
+        out.id = id;
     }
 
     /// Answers one request of `session`.
@@ -229,10 +252,24 @@ impl<'a, F: NorFlash> Link<'a, F> {
         request: Request,
         now: Instant,
     ) -> Response {
-        if let Err(refusal) = self.sessions.admit(session, &request, now) {
-            return Response::Refused(refusal);
+        let mut out = blank().body;
+        self.handle_into(session, id, request, now, &mut out).await;
+        out
+    }
+
+    /// [`Link::handle`] written into `out`.
+    pub async fn handle_into(
+        &mut self,
+        session: u32,
+        id: u32,
+        request: Request,
+        now: Instant,
+        out: &mut Response,
+    ) {
+        match self.sessions.admit(session, &request, now) {
+            Err(refusal) => *out = Response::Refused(refusal),
+            Ok(()) => request.answer_into(self, Call { session, id, now }, out).await,
         }
-        request.answer(self, Call { session, id, now }).await
     }
 
     fn store(&mut self) -> Result<&mut PlanStore<F>, Refusal> {
@@ -267,14 +304,25 @@ impl<'a, F: NorFlash> Link<'a, F> {
 
     /// The telemetry sample due at `now`, if any (and schedules the next one).
     pub fn sample(&mut self, now: Instant) -> Option<Envelope<Response>> {
-        let stream = self.stream.as_mut().filter(|s| s.next <= now)?;
+        let mut out = blank();
+        self.sample_into(now, &mut out).then_some(out)
+    }
+
+    /// [`Link::sample`] written into `out`; whether a sample was due.
+    pub fn sample_into(&mut self, now: Instant, out: &mut Envelope<Response>) -> bool {
+        let Some(stream) = self.stream.as_mut().filter(|s| s.next <= now) else {
+            return false;
+        };
         stream.left -= 1;
-        let sample = Telemetry { seq: stream.seq, left: stream.left, status: self.drive.status() };
-        let envelope = Envelope {
+        *out = Envelope {
             version: PROTOCOL_VERSION,
             session: stream.session,
             id: stream.id,
-            body: Response::Telemetry(sample),
+            body: Response::Telemetry(Telemetry {
+                seq: stream.seq,
+                left: stream.left,
+                status: self.drive.status(),
+            }),
         };
         stream.seq += 1;
         // Catch up without bursts: a late sample moves the schedule, it does not pile up.
@@ -282,7 +330,17 @@ impl<'a, F: NorFlash> Link<'a, F> {
         if stream.left == 0 {
             self.stream = None;
         }
-        Some(envelope)
+        true
+    }
+}
+
+/// An envelope to be overwritten (the link task's response buffer before its first answer).
+pub fn blank() -> Envelope<Response> {
+    Envelope {
+        version: PROTOCOL_VERSION,
+        session: 0,
+        id: 0,
+        body: Response::Error(LinkError::Malformed),
     }
 }
 
@@ -327,7 +385,8 @@ impl<F: NorFlash> Handler for Link<'_, F> {
         if let Some(repeat) = run.repeat {
             self.plan.repeat = repeat;
         }
-        self.drive.run_plan(&self.plan).map_err(Refusal::Drive)
+        let checked = self.drive.check_plan(&self.plan).await.map_err(Refusal::Drive)?;
+        self.drive.stage_plan(checked).map_err(Refusal::Drive)
     }
 
     async fn stop(&mut self, _: Call, _: link::Stop) -> Result<RunNumber, Refusal> {
@@ -400,7 +459,9 @@ impl<F: NorFlash> Handler for Link<'_, F> {
 
     async fn inject_fault(&mut self, _: Call, inject: InjectFault) -> Result<(), Refusal> {
         let simulate = self.identity.inject.ok_or(Refusal::Unsupported)?;
-        defmt::warn!("link: simulating {}", inject.0);
+        // The drive's sample clock at the injection, for the tests' fault latencies (the
+        // status polled before it is a round trip older).
+        defmt::warn!("link: simulating {} at sample {=u64}", inject.0, self.drive.clock());
         simulate(inject.0);
         Ok(())
     }
@@ -434,6 +495,8 @@ pub async fn serve<F: NorFlash, P: Read + Write>(
     let mut reader = FrameReader::<MAX_FRAME>::new();
     let mut rx = [0u8; 64];
     let mut tx = [0u8; link::ENCODE_BUF];
+    // The one response buffer: answers and samples are built here and encoded from here.
+    let mut out = blank();
     loop {
         supervisor.check_in(Task::Link);
         let check_in = Instant::now() + CHECK_IN;
@@ -449,16 +512,16 @@ pub async fn serve<F: NorFlash, P: Read + Write>(
                 continue;
             }
             Either::Second(()) => {
-                if let Some(sample) = link.sample(Instant::now()) {
-                    send(port, &sample, &mut tx).await;
+                if link.sample_into(Instant::now(), &mut out) {
+                    send(port, &out, &mut tx).await;
                 }
                 continue;
             }
         };
         for &byte in &rx[..n] {
             let Some(frame) = reader.push(byte) else { continue };
-            let envelope = link.respond(frame, Instant::now()).await;
-            send(port, &envelope, &mut tx).await;
+            link.respond_into(frame, Instant::now(), &mut out).await;
+            send(port, &out, &mut tx).await;
         }
     }
 }

@@ -395,6 +395,9 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         let upload_bank = self.upload.as_ref().map(|u| u.bank);
         let tomb: ChunkItem = None;
         let size = self.geometry.tombstone_size() as u16;
+        if !self.index.any_strays(upload_bank) {
+            return Ok(());
+        }
         for bank in 0..BANKS {
             let strays = self.index.strays(bank, upload_bank);
             for index in (0..MAX_CHUNKS as u8).filter(|i| strays & 1 << i != 0) {

@@ -180,6 +180,44 @@ fn plans_switch_through_two_buffers_and_the_least_slack_is_kept() {
     assert_eq!(drive.status().least_slack_us, Some(5_000 - 10 * out.blocks as u32));
 }
 
+/// Polls `f` to completion; its output and how many times it was pending (yielded).
+fn polls<T>(f: impl core::future::Future<Output = T>) -> (T, u32) {
+    let mut f = core::pin::pin!(f);
+    let mut cx = core::task::Context::from_waker(core::task::Waker::noop());
+    let mut pending = 0;
+    loop {
+        match f.as_mut().poll(&mut cx) {
+            core::task::Poll::Ready(v) => return (v, pending),
+            core::task::Poll::Pending => pending += 1,
+        }
+    }
+}
+
+#[test]
+fn the_links_plan_check_yields_every_64_steps_and_agrees_with_validate() {
+    use super::drive::STEPS_PER_YIELD;
+    let drive = DriveShared::new();
+    let limits = drive.limits();
+    let steps: Vec<_> = (0..256).map(|_| (100_000, 10_000, 1_000, 2)).collect();
+    let good = plan("long", &steps);
+    let (checked, pending) = polls(drive.check_plan(&good));
+    assert_eq!(pending, (256 / STEPS_PER_YIELD) as u32);
+    let run = drive.stage_plan(checked.unwrap()).unwrap();
+    assert_eq!(drive.run_plan(&good), Err(DriveError::QueueFull), "one plan waits: {run:?}");
+    // Each kind of refusal is the one Plan::validate gives.
+    let mut bad_step = good.clone();
+    bad_step.steps[200].ramp_ms = 5_000;
+    let mut too_long = good.clone();
+    too_long.repeat = 20;
+    let mut no_steps = good.clone();
+    no_steps.steps.clear();
+    for bad in [bad_step, too_long, no_steps] {
+        let (checked, _) = polls(drive.check_plan(&bad));
+        let expected = bad.validate(&limits).unwrap_err();
+        assert_eq!(checked.err(), Some(DriveError::Plan(expected)));
+    }
+}
+
 #[test]
 fn manual_drive_stop_underruns_and_a_full_queue() {
     let drive = DriveShared::new();
@@ -424,4 +462,18 @@ fn telemetry_streams_the_asked_count_at_the_asked_rate() {
     }
     assert_eq!(seen, [(0, 0, 2), (100, 1, 1), (200, 2, 0)]);
     assert_eq!(link.next_sample_at(), None);
+}
+
+#[test]
+fn refill_cost_reports_mean_and_most_every_2000_blocks_then_starts_again() {
+    use super::drive::RefillCost;
+    let mut cost = RefillCost::new();
+    for i in 0..RefillCost::BLOCKS - 1 {
+        assert_eq!(cost.note(10_000 + i % 3), None);
+    }
+    // 1999 blocks of 10 000..10 002 and one of 40 000.
+    let (mean, max) = cost.note(40_000).expect("a report at the 2000th block");
+    assert_eq!(max, 40_000);
+    assert_eq!(mean, (10_001 * 1_999 - 1 + 40_000) / 2_000);
+    assert_eq!(cost.note(5), None, "counting starts again");
 }

@@ -144,6 +144,7 @@ pub fn init() -> Board {
     // A debugger halting the core (breakpoint, or a fault caught before its handler runs)
     // also stops TIM6, so the DAC holds one code instead of the DMA replaying the ring.
     pac::DBGMCU.apb1fzr1().modify(|w| w.set_tim6(true));
+    start_cycle_counter();
     console::start(p.USART1, p.PB6);
     let (link, usb) = usb::new(p.USB_OTG_FS, p.PA12, p.PA11);
     let flash = bank2::Bank2::new(flash::Flash::new(p.FLASH, Irqs).into_regions().bank2_region);
@@ -155,6 +156,25 @@ pub fn init() -> Board {
     #[cfg(feature = "drive-pwm")]
     let drive = pwm::PwmOutput::new(p.TIM3, p.PB0, p.DMA1_CH2);
     Board { link, flash: Some(flash), drive, sensor, tasks: BoardTasks { usb }, watchdog }
+}
+
+/// What [`refill_clock`] counts.
+pub const REFILL_CLOCK_UNIT: &str = "cycles (DWT CYCCNT, 80 MHz)";
+
+/// The core's cycle counter (DWT CYCCNT, wraps every 53 s at 80 MHz): the drive's per-block
+/// refill cost.
+pub fn refill_clock() -> u32 {
+    cortex_m::peripheral::DWT::cycle_count()
+}
+
+/// Turns DWT CYCCNT on (trace enable in DEMCR, then CYCCNTENA). A debugger may have done it
+/// already; doing it again is harmless.
+fn start_cycle_counter() {
+    // SAFETY: only DCB.DEMCR's TRCENA and DWT_CTRL's CYCCNTENA are written, at boot, before
+    // any task runs; nothing else in the firmware uses the DWT or the DCB.
+    let mut core = unsafe { cortex_m::Peripherals::steal() };
+    core.DCB.enable_trace();
+    core.DWT.enable_cycle_counter();
 }
 
 /// Spawns this board's background tasks: the USB device ([`usb::run`]). Call once.

@@ -167,12 +167,28 @@ macro_rules! endpoints {
             /// Carries the request out with `handler`'s method for it: its reply as this
             /// request's response, or `Refused`.
             pub async fn answer<H: Handler>(self, handler: &mut H, context: H::Context) -> Response {
+                let mut out = Response::Error(LinkError::Malformed);
+                self.answer_into(handler, context, &mut out).await;
+                out
+            }
+
+            /// [`Request::answer`] written into `out` (the controller keeps one response in
+            /// its link state): the reply goes from the handler's future straight into `out`,
+            /// with no response-sized value returned through the callers' frames.
+            pub async fn answer_into<H: Handler>(
+                self,
+                handler: &mut H,
+                context: H::Context,
+                out: &mut Response,
+            ) {
                 match self {
                     $(
-                        Request::$name(request) => match handler.$method(context, request).await {
-                            Ok(reply) => Response::$name(reply),
-                            Err(refusal) => Response::Refused(refusal),
-                        },
+                        Request::$name(request) => {
+                            *out = match handler.$method(context, request).await {
+                                Ok(reply) => Response::$name(reply),
+                                Err(refusal) => Response::Refused(refusal),
+                            }
+                        }
                     )*
                 }
             }

@@ -47,6 +47,15 @@ pub mod simulated;
 pub mod sweep;
 
 pub use simulated::SimulatedDac;
+
+/// Plan steps [`DriveShared::check_plan`] checks between two yields.
+pub const STEPS_PER_YIELD: usize = 64;
+
+/// A plan checked against the drive's limits: only [`DriveShared::run_plan`] and
+/// [`DriveShared::check_plan`] make one, so [`DriveShared::stage_plan`] takes no unchecked plan.
+/// (Only the link changes the limits, and it stages what it checked before doing anything
+/// else.)
+pub struct CheckedPlan<'p>(&'p Plan);
 pub use sweep::CheckedSweep;
 use sweep::{SweepRecord, SweepRun};
 
@@ -224,6 +233,31 @@ impl DriveShared {
     /// (the drive may preempt it); only the flag and the queueing are critical sections.
     pub fn run_plan(&self, plan: &Plan) -> Result<RunNumber, DriveError> {
         plan.validate(&self.limits()).map_err(DriveError::Plan)?;
+        self.stage_plan(CheckedPlan(plan))
+    }
+
+    /// Checks `plan` against the limits as [`Plan::validate`] does, in one pass, yielding to
+    /// the other thread-mode tasks every [`STEPS_PER_YIELD`] steps (the link's way:
+    /// a 256-step check is a few thousand instructions, not worth holding the executor for).
+    pub async fn check_plan<'p>(&self, plan: &'p Plan) -> Result<CheckedPlan<'p>, DriveError> {
+        let limits = self.limits();
+        let len = plan.steps.len().min(u16::MAX as usize) as u16;
+        limits.check_plan_header(plan.repeat, len).map_err(DriveError::Plan)?;
+        let mut total_ms = 0u64;
+        for (i, step) in plan.steps.iter().enumerate() {
+            limits.check_step(i as u16, step).map_err(DriveError::Plan)?;
+            total_ms += step.duration_ms as u64;
+            if (i + 1) % STEPS_PER_YIELD == 0 {
+                embassy_futures::yield_now().await;
+            }
+        }
+        limits.check_total_ms(total_ms * plan.repeat as u64).map_err(DriveError::Plan)?;
+        Ok(CheckedPlan(plan))
+    }
+
+    /// [`DriveShared::run_plan`] of a plan [`DriveShared::check_plan`] passed.
+    pub fn stage_plan(&self, plan: CheckedPlan<'_>) -> Result<RunNumber, DriveError> {
+        let CheckedPlan(plan) = plan;
         self.check_not_faulted()?;
         if self.staging.lock(|s| s.replace(true)) {
             return Err(DriveError::QueueFull);
@@ -487,6 +521,11 @@ impl<'a> DriveCore<'a> {
     /// output had run dry, and keep the least slack the output reports.
     pub async fn play_block<O: SampleOutput>(&mut self, block: &mut [u16], output: &mut O) {
         self.refill(block);
+        self.hand_over(block, output).await;
+    }
+
+    /// Gives the refilled `block` to `output` (waiting for room) and notes its slack.
+    pub async fn hand_over<O: SampleOutput>(&mut self, block: &[u16], output: &mut O) {
         match output.write_block(block).await {
             Ok(Some(slack_us)) => self.shared.note_slack_us(slack_us),
             Ok(None) => {}
@@ -541,6 +580,75 @@ pub async fn run<O: SampleOutput>(
     let mut block = [0u16; BLOCK_LEN];
     loop {
         core.play_block(&mut block, output).await;
+    }
+}
+
+/// [`run`], also timing every refill with `clock` (a free-running counter: the board's
+/// `refill_clock`, cycles on the chip) and logging the mean and the most per
+/// [`RefillCost::BLOCKS`] blocks, in `unit`.
+pub async fn run_metered<O: SampleOutput>(
+    shared: &DriveShared,
+    supervisor: &Supervisor,
+    output: &mut O,
+    clock: fn() -> u32,
+    unit: &'static str,
+) -> ! {
+    let mut core = DriveCore::new(shared).with_supervisor(supervisor);
+    let mut block = [0u16; BLOCK_LEN];
+    let mut cost = RefillCost::new();
+    loop {
+        let start = clock();
+        core.refill(&mut block);
+        let spent = clock().wrapping_sub(start);
+        // A clock that stepped back (QEMU's SysTick-based clock can, by up to a tick, when
+        // read at the drive's priority around a SysTick wrap) gives no measurement.
+        if spent >= 1 << 31 {
+            core.hand_over(&block, output).await;
+            continue;
+        }
+        if let Some((mean, max)) = cost.note(spent) {
+            defmt::info!(
+                "drive: refill mean {=u32} max {=u32} {=str} over {=u32} blocks",
+                mean,
+                max,
+                unit,
+                RefillCost::BLOCKS
+            );
+        }
+        core.hand_over(&block, output).await;
+    }
+}
+
+/// Refill costs of the last [`RefillCost::BLOCKS`] blocks (interrupt handlers that preempt a
+/// refill count in it).
+#[derive(Debug, Default)]
+pub struct RefillCost {
+    blocks: u32,
+    sum: u64,
+    max: u32,
+}
+
+impl RefillCost {
+    /// Blocks per report: 10 s.
+    pub const BLOCKS: u32 = 2_000;
+
+    /// Nothing counted yet.
+    pub const fn new() -> Self {
+        Self { blocks: 0, sum: 0, max: 0 }
+    }
+
+    /// Counts one refill's `cost`; every [`Self::BLOCKS`] refills, their mean and most (and
+    /// starts again).
+    pub fn note(&mut self, cost: u32) -> Option<(u32, u32)> {
+        self.blocks += 1;
+        self.sum += cost as u64;
+        self.max = self.max.max(cost);
+        if self.blocks < Self::BLOCKS {
+            return None;
+        }
+        let report = ((self.sum / self.blocks as u64) as u32, self.max);
+        *self = Self::new();
+        Some(report)
     }
 }
 

@@ -1,13 +1,15 @@
 //! A flash that lets other tasks run between its operations.
 //!
-//! The drive and the link share one cooperative executor, and the drive must refill its
-//! output every block (5 ms). A store request can cost thousands of flash reads (the first
-//! uploads after boot, while sequential-storage's garbage collection learns where old items
-//! are; docs/store.md has the counts), and neither the QEMU file flash (a semihosting call per
-//! operation) nor memory-mapped reads on the board ever wait, so without this the store would
-//! hold the executor for the whole request and the drive would run dry. [`Yielding`] yields to
-//! the executor every [`OPS_PER_YIELD`] operations: a yield only lets other ready tasks run
-//! first, it never cancels the operation.
+//! The drive has its own interrupt executor above the link, so a store request can no
+//! longer make a refill late; but the link still shares the thread-mode executor with the
+//! sense task (the accelerometer's FIFO), the watchdog's feeding and, on the board, the USB
+//! device. A store request can cost thousands of flash reads (the first uploads after boot,
+//! while sequential-storage's garbage collection learns where old items are; docs/store.md has
+//! the counts), each followed by sequential-storage's item CRC, and neither the QEMU file
+//! flash (a semihosting call per operation) nor memory-mapped reads on the board ever wait. So
+//! [`Yielding`] yields to the executor every [`OPS_PER_YIELD`] operations: a yield only lets
+//! other ready tasks run first, it never cancels the operation (no timeout is ever put around a
+//! store call: a cancelled sequential-storage operation leaves the map to repair).
 
 use embassy_futures::yield_now;
 use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};

@@ -98,6 +98,16 @@ pub fn init() -> Board {
 
 pub use executor::{run, start_drive_executor};
 
+/// What [`refill_clock`] counts: QEMU models no DWT cycle counter, so the time driver's
+/// nanoseconds, which are instructions when QEMU runs with `-icount shift=0`
+/// (`scripts/firmware.sh bench`), 2ᴺ ns per instruction with `shift=N` (`chladni emulator --mips`).
+pub const REFILL_CLOCK_UNIT: &str = "ns of QEMU time (instructions under -icount shift=0)";
+
+/// The drive's per-block refill cost clock (see [`REFILL_CLOCK_UNIT`]); wraps every 4.3 s.
+pub fn refill_clock() -> u32 {
+    time_driver::now_ns() as u32
+}
+
 /// Host wall-clock time in seconds since the epoch (semihosting `SYS_TIME`), so tests can
 /// compare the firmware's sense of time with the host's. (`SYS_CLOCK` would be QEMU's CPU time,
 /// which stands still while the core sleeps in WFI, and QEMU 10 does not implement
