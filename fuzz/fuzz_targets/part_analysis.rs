@@ -59,7 +59,7 @@ fn field(c: &mut Choices<'_>) -> Field {
     };
     let (mut gl, mut gr) = (raw(36), raw(36));
     if c.u8() & 1 == 1 {
-        gl = Fx(-gl.raw());
+        gl = Fx(gl.raw().wrapping_neg());
     }
     match c.u8() % 4 {
         1 => (gl, gr) = (Fx::ONE, Fx::from_int(2)),

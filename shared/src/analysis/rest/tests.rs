@@ -409,11 +409,11 @@ proptest! {
         let slices: StdVec<&[Pt]> = rings.iter().map(StdVec::as_slice).collect();
         let gain_left = if sign_l { gl } else { -gl };
         let fld = Field { kind, gain_left, gain_right: gr };
-        if let Ok(an) = Analyzer::new(&slices, fld) {
-            if let Ok(a) = an.analyze() {
-                prop_assert!(a.rests.windows(2).all(|w| w[0].angle <= w[1].angle));
-                let _ = an.align(&a, 12345);
-            }
+        if let Ok(an) = Analyzer::new(&slices, fld)
+            && let Ok(a) = an.analyze()
+        {
+            prop_assert!(a.rests.windows(2).all(|w| w[0].angle <= w[1].angle));
+            let _ = an.align(&a, 12345);
         }
     }
 }
