@@ -30,7 +30,7 @@ use libfuzzer_sys::fuzz_target;
 fuzz_target!(|data: &[u8]| {
     let mut c = Choices::new(data);
     let field = field(&mut c);
-    let rings = if c.u8() % 2 == 0 { raw_rings(&mut c) } else { valid_part(&mut c) };
+    let rings = if c.u8().is_multiple_of(2) { raw_rings(&mut c) } else { valid_part(&mut c) };
     let slices: Vec<&[Pt]> = rings.iter().map(Vec::as_slice).collect();
     let Ok(an) = Analyzer::new(&slices, field) else { return };
     let Ok(a) = an.analyze() else { return };
