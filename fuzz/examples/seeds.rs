@@ -19,6 +19,7 @@ fn main() -> std::io::Result<()> {
         ("frame_decoder", frame_decoder()),
         ("request_handler", request_handler()),
         ("plan_store", plan_store()),
+        ("part_analysis", part_analysis()),
     ];
     for (target, seeds) in targets {
         let sub = dir.join(target);
@@ -167,6 +168,35 @@ fn plan_store() -> Vec<(String, Vec<u8>)> {
         let mut prog = upload(1, 10, None);
         prog.extend(cut(delete_slot(0), after / 8, 0xa5));
         seeds.push((format!("cut-delete-{i}"), prog));
+    }
+    seeds
+}
+
+/// Inputs of `fuzz_targets/part_analysis.rs`: each law with unit and 1:2 gains, over a raw
+/// 40 × 10 rectangle (raw rings, 2⁻⁸ mm units) and a valid star part with a hole.
+fn part_analysis() -> Vec<(String, Vec<u8>)> {
+    let mut seeds = Vec::new();
+    for law in 0..3u8 {
+        for ratio in [3u8, 1] {
+            // law, wavelength (1000 mm), gains (unused: ratio picks), sign byte, ratio.
+            let mut head = vec![law];
+            head.extend(1000u32.to_le_bytes());
+            head.push(32);
+            head.extend([0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, ratio]);
+            let mut rect = head.clone();
+            rect.extend([0, 1, 4, 24]);
+            for (x, y) in [(0i32, 0i32), (40 << 8, 0), (40 << 8, 10 << 8), (0, 10 << 8)] {
+                rect.extend(x.to_le_bytes());
+                rect.extend(y.to_le_bytes());
+            }
+            seeds.push((format!("rect-law{law}-ratio{ratio}"), rect));
+            let mut star = head;
+            star.extend([1, 29, 5]);
+            star.extend((0..16).map(|i| (i * 37 % 256) as u8));
+            star.push(5);
+            star.extend((0..10).map(|i| (i * 91 % 256) as u8));
+            seeds.push((format!("star-law{law}-ratio{ratio}"), star));
+        }
     }
     seeds
 }

@@ -5,12 +5,28 @@ mod cli;
 
 fn main() -> std::process::ExitCode {
     quiet_on_closed_stdout();
-    let cli = cli::Cli::parse();
+    let json = cli::wants_json(std::env::args_os().skip(1));
+    let cli = match cli::Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            // Usage errors with --json: the one JSON object too (help and version are no
+            // failure and print as usual).
+            if json && e.use_stderr() {
+                cli::print_failure_json("usage", &e.render().to_string());
+            }
+            e.exit()
+        }
+    };
     match cli.run() {
         Ok(code) => code,
         Err(err) => {
+            let code = cli::exit_code_of(&err);
+            if json && !cli::failure_json_printed() {
+                let kind = if code == 2 { "bad_input" } else { "failed" };
+                cli::print_failure_json(kind, &format!("{err:#}"));
+            }
             eprintln!("error: {err:#}");
-            std::process::ExitCode::from(cli::exit_code_of(&err))
+            std::process::ExitCode::from(code)
         }
     }
 }

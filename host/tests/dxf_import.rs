@@ -170,10 +170,17 @@ fn layer_option_picks_one_layer() {
         }
         other => panic!("{other:?}"),
     }
-    // Without --layer both outlines are read: refused, naming both and the option.
+    // Without --layer: closed loops on two layers, refused naming both, their loops and the
+    // option.
     let e = load("layers.dxf", None).unwrap_err();
-    assert!(matches!(e, PartError::Dxf(DxfError::SeparateOutlines { count: 2, .. })), "{e}");
-    assert!(e.to_string().contains("--layer") && e.to_string().contains("FIXTURE"), "{e}");
+    assert!(matches!(e, PartError::Dxf(DxfError::SeveralLayers { count: 2, .. })), "{e}");
+    let m = e.to_string();
+    assert!(
+        m.contains("--layer")
+            && m.contains("\"FIXTURE\" (1 closed loop(s))")
+            && m.contains("\"PART\""),
+        "{m}"
+    );
     assert_same_rests(
         orientations(&data("layers.dxf"), &["--layer", "PART"]),
         orientations(&example("rectangle.json"), &[]),
@@ -206,10 +213,9 @@ fn refusals_are_named_errors() {
         other => panic!("{other:?}"),
     }
     match load("disjoint.dxf", None) {
-        Err(PartError::Dxf(DxfError::SeparateOutlines { count, loops, hint })) => {
+        Err(PartError::Dxf(DxfError::SeparateOutlines { count, loops })) => {
             assert_eq!(count, 2);
             assert_eq!(loops.matches("LWPOLYLINE #").count(), 2, "{loops}");
-            assert!(hint.is_empty(), "one layer: no --layer hint");
         }
         other => panic!("{other:?}"),
     }
@@ -238,4 +244,61 @@ fn cli_names_the_entity_and_exits_2() {
         err.contains("open chain") && err.contains("LINE #") && err.contains("layer \"0\""),
         "{err}"
     );
+}
+
+fn load_notes(name: &str, layer: Option<&str>) -> Result<(Part, Vec<String>), PartError> {
+    let opt = ImportOptions { layer: layer.map(str::to_string), ..ImportOptions::default() };
+    Part::load_with(&data(name), &opt)
+}
+
+#[test]
+fn cad_drawing_with_dimensions_centre_lines_and_text_reads_its_part() {
+    let twin = Part::load(&data("hole-arc.json")).unwrap();
+    let (part, notes) = load_notes("cad-dims.dxf", None).unwrap();
+    assert_twins(&part, &twin, 2e-3);
+    // One note names the ignored layers with their counts; the annotation is named by type.
+    let ignored: Vec<&String> = notes.iter().filter(|n| n.contains("close no loop")).collect();
+    assert_eq!(ignored.len(), 1, "{notes:?}");
+    assert!(ignored[0].contains("\"CENTER\" (2 entities)"), "{notes:?}");
+    let skipped =
+        notes.iter().filter(|n| n.starts_with("skipped")).cloned().collect::<Vec<_>>().join("; ");
+    for kind in ["3 DIMENSION", "1 TEXT", "1 MTEXT", "1 HATCH"] {
+        assert!(skipped.contains(kind), "{kind}: {skipped}");
+    }
+}
+
+#[test]
+fn title_block_on_its_own_layer_needs_layer_and_says_so() {
+    match load("cad-title.dxf", None) {
+        Err(PartError::Dxf(e @ DxfError::SeveralLayers { .. })) => {
+            let m = e.to_string();
+            assert!(m.contains("\"PART\" (2 closed loop(s))") && m.contains("\"TITLE\""), "{m}");
+            assert!(m.contains("--layer NAME"), "{m}");
+        }
+        other => panic!("{other:?}"),
+    }
+    let part = load("cad-title.dxf", Some("part")).unwrap();
+    assert_twins(&part, &Part::load(&data("hole-arc.json")).unwrap(), 2e-3);
+}
+
+#[test]
+fn inserted_blocks_are_exploded_with_their_placement() {
+    // The same part drawn in place (flattened alike: a rigid placement commutes with it).
+    let twin = load("hole-arc.dxf", None).unwrap();
+    let turned = load("block.dxf", Some("PART")).unwrap();
+    assert!((turned.area() - twin.area()).abs() < 1e-9 * twin.area(), "{}", turned.area());
+    // The block's base point (25, 10) lands on (100, 50); the centroid turns by 30° about it.
+    let [cx, cy] = twin.centroid();
+    let (s, c) = 30f64.to_radians().sin_cos();
+    let want =
+        [100.0 + c * (cx - 25.0) - s * (cy - 10.0), 50.0 + s * (cx - 25.0) + c * (cy - 10.0)];
+    let got = turned.centroid();
+    assert!((got[0] - want[0]).hypot(got[1] - want[1]) < 1e-9, "{got:?} vs {want:?}");
+    let big = load("block.dxf", Some("BIG")).unwrap();
+    assert!((big.area() - 4.0 * twin.area()).abs() < 8e-3 * twin.area(), "{}", big.area());
+    // Both inserts without --layer: closed loops on two layers.
+    assert!(matches!(
+        load("block.dxf", None),
+        Err(PartError::Dxf(DxfError::SeveralLayers { count: 2, .. }))
+    ));
 }

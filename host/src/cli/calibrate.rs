@@ -70,7 +70,9 @@ impl CalibrateArgs {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
         self.calibrate().map_err(|f| {
             if self.json {
-                println!("{}", json!({"error": f.kind, "message": format!("{:#}", f.error)}));
+                super::print_failure_value(
+                    json!({"error": f.kind, "message": format!("{:#}", f.error)}),
+                );
             }
             f.error
         })

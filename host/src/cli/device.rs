@@ -266,8 +266,13 @@ pub fn read_plan(path: &Path) -> Result<Plan, InputError> {
         .map_err(|e| InputError(format!("cannot read plan {}: {e}", path.display())))?;
     let file =
         PlanFile::parse(&text).map_err(|e| InputError(format!("plan {}: {e}", path.display())))?;
-    file.to_plan(&DeviceLimits::DEFAULT)
-        .map_err(|e| InputError(format!("plan {} refused: {e}", path.display())))
+    file.to_plan(&DeviceLimits::DEFAULT).map_err(|e| match e.device_limit_fix() {
+        Some(fix) => InputError(format!(
+            "plan {} refused by the controller's limits: {e}; {fix}",
+            path.display()
+        )),
+        None => InputError(format!("plan {} refused: {e}", path.display())),
+    })
 }
 
 impl DeviceCommand {

@@ -61,6 +61,32 @@ pub fn check_plot(
     Ok(())
 }
 
+/// Set once a command has printed its own `--json` failure object.
+static FAILURE_JSON_PRINTED: std::sync::atomic::AtomicBool =
+    std::sync::atomic::AtomicBool::new(false);
+
+/// Does the command line ask for `--json` (before a `--`)? Read from the raw arguments, so
+/// that even a command line clap refuses can answer in JSON.
+pub fn wants_json(args: impl Iterator<Item = std::ffi::OsString>) -> bool {
+    args.take_while(|a| a != "--").any(|a| a == "--json")
+}
+
+/// Prints a failure's one JSON object on stdout, `{"error": kind, "message": …}`.
+pub fn print_failure_json(kind: &str, message: &str) {
+    print_failure_value(serde_json::json!({"error": kind, "message": message.trim_end()}));
+}
+
+/// Prints a command's own failure object (with its data) on stdout; `main` then prints none.
+pub fn print_failure_value(value: serde_json::Value) {
+    FAILURE_JSON_PRINTED.store(true, std::sync::atomic::Ordering::Relaxed);
+    println!("{value}");
+}
+
+/// Has a failure object been printed already?
+pub fn failure_json_printed() -> bool {
+    FAILURE_JSON_PRINTED.load(std::sync::atomic::Ordering::Relaxed)
+}
+
 /// Exit code for an error: 2 for bad input, 1 for everything else.
 pub fn exit_code_of(err: &anyhow::Error) -> u8 {
     if err.chain().any(|e| e.is::<InputError>()) { 2 } else { 1 }

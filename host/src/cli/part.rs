@@ -1,5 +1,5 @@
 //! Part files on the command line of `analyze`, `plan` and `simulate`, with the options of
-//! the DXF reader (`--layer`, `--chord-mm`): one place, so every command reads parts alike.
+//! the DXF and SVG readers (`--layer`, `--chord-mm`): one place, so every command reads parts alike.
 
 use std::path::{Path, PathBuf};
 
@@ -16,7 +16,8 @@ pub struct PartRead {
     /// DXF parts: read only this layer (case-insensitive).
     #[arg(long, value_name = "NAME")]
     pub layer: Option<String>,
-    /// DXF parts: arcs become chords at most this far (sagitta, mm) from the arc.
+    /// DXF and SVG parts: arcs and curves become chords at most this far (sagitta, mm) from
+    /// the curve.
     #[arg(long, value_name = "MM", default_value_t = DEFAULT_CHORD_MM,
           value_parser = f64_where("chord-mm", "in [0.0001, 5] mm", |v| CHORD_RANGE_MM.contains(&v)))]
     pub chord_mm: f64,
@@ -38,8 +39,8 @@ impl PartRead {
 /// One part file and how to read it.
 #[derive(Debug, Args)]
 pub struct PartArgs {
-    /// Part file: .json (docs/analyze.md), .svg (<polygon>/<path>, straight segments) or .dxf
-    /// (closed polylines, circles, LINE/ARC chains; docs/analyze.md).
+    /// Part file: .json (docs/analyze.md), .svg (every shape, curves flattened, units honoured)
+    /// or .dxf (closed polylines, circles, LINE/ARC chains, blocks; docs/analyze.md).
     pub part: PathBuf,
     #[command(flatten)]
     pub read: PartRead,

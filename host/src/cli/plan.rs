@@ -78,7 +78,7 @@ pub struct PlanArgs {
     margin_deg: f64,
     /// Step duration = slowest simulated settle time × this.
     #[arg(long, value_name = "X", default_value_t = 1.5,
-          value_parser = f64_where("safety", "in [1, 100]", |v| (1.0..=100.0).contains(&v)))]
+          value_parser = f64_where("safety", "in (0, 100]", |v| v > 0.0 && v <= 100.0))]
     safety: f64,
     /// Print the plan as one JSON object.
     #[arg(long)]
@@ -171,6 +171,7 @@ impl PlanArgs {
         if let Some(out) = &self.out {
             check_output("--out", out, &inputs)?;
         }
+        warn_safety(self.safety);
         let given_goals = self.goals()?;
         let given =
             self.part.iter().map(|p| self.read.load(p)).collect::<anyhow::Result<Vec<_>>>()?;
@@ -207,8 +208,7 @@ impl PlanArgs {
                 p.face = o.face;
             }
         }
-        file.to_plan(&DeviceLimits::DEFAULT)
-            .map_err(|e| anyhow::anyhow!("planned steps refused: {e}"))?;
+        warn_device_limits(&file).map_err(|e| anyhow::anyhow!("planned steps refused: {e}"))?;
         let json = file.to_json();
         if let Some(out) = &self.out {
             write_atomic(out, (serde_json::to_string_pretty(&json)? + "\n").as_bytes())
@@ -267,6 +267,24 @@ impl PlanArgs {
             }
             None => planner::plan_parts(parts, plate, &opt, goals),
         }
+    }
+}
+
+/// Device limits apply at `device upload`: here they are a warning (research first).
+fn warn_device_limits(file: &PlanFile) -> Result<(), chladni::model::plan_file::PlanFileError> {
+    if let Some(w) = file.device_limit_warning(&DeviceLimits::DEFAULT)? {
+        eprintln!("warning: {w}");
+    }
+    Ok(())
+}
+
+/// `--safety` below 1 makes steps shorter than the slowest simulated settle: allowed, said.
+fn warn_safety(safety: f64) {
+    if safety < 1.0 {
+        eprintln!(
+            "warning: --safety {safety} < 1: steps end before the slowest simulated start has \
+             settled; check the plan with `chladni simulate`"
+        );
     }
 }
 
@@ -625,7 +643,7 @@ impl SimulateArgs {
             .map_err(|e| bad(format!("cannot read plan {}: {e}", self.plan.display())))?;
         let file = PlanFile::parse(&text)
             .map_err(|e| bad(format!("plan {}: {e}", self.plan.display())))?;
-        file.to_plan(&DeviceLimits::DEFAULT)
+        warn_device_limits(&file)
             .map_err(|e| bad(format!("plan {} refused: {e}", self.plan.display())))?;
         Ok(file)
     }

@@ -13,7 +13,7 @@ use super::{InputError, check_output, output_error, plot_error};
 use chladni::model::modes_file;
 use chladni::model::plate_file::{Boundary, ModeEntry, Plate, PlateFile, PlateTable};
 use chladni::output::write_atomic;
-use chladni::plate::contour::{node_lines, total_length};
+use chladni::plate::contour::{line_count, node_lines, total_length};
 use chladni::plate::photo::job::{PhotoGrid, PhotoRequest};
 use chladni::plate::{drive, photo, solver, suggest};
 use chladni::plot::plate as plot;
@@ -42,6 +42,9 @@ impl PlateCommand {
     }
 }
 
+/// The forced rocking's default drive frequency (Hz): the paper's setup 2 ran at 10 Hz.
+const DEFAULT_ROCKING_HZ: f64 = 10.0;
+
 #[derive(Debug, Args)]
 pub struct ModesArgs {
     /// Plate file (TOML with a `[plate]` table; see docs/plate.md).
@@ -69,8 +72,9 @@ pub struct ModesArgs {
     /// Hinged-rod plates: drive frequency (Hz) of the rigid rocking about the hinge that the
     /// rod forces below the first elastic mode (the paper's setup 2 ran it at 10 Hz); written
     /// by `--write-modes` as a straight `line` node on the hinge, ahead of the elastic modes.
-    #[arg(long, value_name = "HZ", default_value_t = 10.0)]
-    rocking_hz: f64,
+    /// Default 10 Hz; refused for other boundaries.
+    #[arg(long, value_name = "HZ")]
+    rocking_hz: Option<f64>,
 }
 
 impl ModesArgs {
@@ -193,8 +197,11 @@ impl ModesArgs {
     fn print(&self, plate: &Plate, shown: &Shown, rocking: bool) {
         let sol = &shown.sol;
         println!(
-            "{} ({:?}, {:.0}×{:.0} mm):",
-            plate.name, plate.boundary, plate.size_mm[0], plate.size_mm[1]
+            "{} ({}, {:.0}×{:.0} mm):",
+            plate.name,
+            plate.boundary.key(),
+            plate.size_mm[0],
+            plate.size_mm[1]
         );
         if let Some(d) = plate.drive_mm {
             println!(
@@ -216,7 +223,7 @@ impl ModesArgs {
                 shown.labels[k].trim_start_matches("mode ").trim_start_matches("modes "),
                 m.freq_hz,
                 m.lambda,
-                lines.len(),
+                line_count(&lines),
                 total_length(&lines) + 0.0,
                 exc
             );
@@ -224,7 +231,7 @@ impl ModesArgs {
         if rocking {
             println!(
                 "forced: rigid rocking about the hinge at {} Hz, node = the hinge line x = {:.1} mm (linear field){}",
-                self.rocking_hz,
+                self.rocking_hz.unwrap_or(DEFAULT_ROCKING_HZ),
                 plate.hinge_x_mm,
                 if self.write_modes.is_some() { ", written as the first mode" } else { "" }
             );
@@ -241,21 +248,29 @@ impl ModesArgs {
         sol: &solver::ModalSolution,
     ) -> Result<Option<ModeEntry>, InputError> {
         if plate.boundary != Boundary::HingedRod {
-            return Ok(None);
+            return match self.rocking_hz {
+                Some(hz) => Err(InputError(format!(
+                    "--rocking-hz {hz}: only hinged-rod plates rock about a hinge; this plate is \
+                     {} (boundary = \"{}\"): leave the option out",
+                    plate.name,
+                    plate.boundary.key()
+                ))),
+                None => Ok(None),
+            };
         }
+        let rocking_hz = self.rocking_hz.unwrap_or(DEFAULT_ROCKING_HZ);
         let first = sol.modes.first().map_or(f64::INFINITY, |m| m.freq_hz);
         // Half the first resonance keeps the elastic response small against the rigid
         // rocking (dynamic amplification of mode 1 ≤ 1/(1 − 0.5²) ≈ 1.33).
         let limit = (0.5 * first).min(2000.0);
-        if !(self.rocking_hz.is_finite() && self.rocking_hz >= 1.0 && self.rocking_hz <= limit) {
+        if !(rocking_hz.is_finite() && (1.0..=limit).contains(&rocking_hz)) {
             return Err(InputError(format!(
-                "--rocking-hz must be in [1, {limit:.1}] Hz (half the first elastic mode at {first:.1} Hz, so the plate rocks rigidly), got {}",
-                self.rocking_hz
+                "--rocking-hz must be in [1, {limit:.1}] Hz (half the first elastic mode at {first:.1} Hz, so the plate rocks rigidly), got {rocking_hz}"
             )));
         }
         let mut m = modes_file::line_mode(
             "rocking (forced)",
-            Some(self.rocking_hz),
+            Some(rocking_hz),
             90.0,
             plate.hinge_x_mm - plate.size_mm[0] / 2.0,
         );

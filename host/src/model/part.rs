@@ -3,10 +3,10 @@
 //!
 //! JSON: `{"name": "...", "outline": [[x,y],...], "holes": [[[x,y],...],...], "flips": false}`,
 //! mm, any winding, y up; `flips: true` says the part can land on either face (plan and
-//! simulate it and its mirror image, [`mirror`]). SVG: every `<polygon>` and every sub-path
-//! of every `<path>` (straight segments only: M/L/H/V/Z, absolute or relative; `transform`
-//! attributes are applied) is a ring; the ring of largest area is the outline, the others are
-//! holes. SVG user units are taken as mm and SVG's y-down axis is flipped, so the part looks
+//! simulate it and its mirror image, [`mirror`]). SVG ([`svg`], through usvg): every shape,
+//! curves flattened to the chord tolerance, physical units honoured, the fill rule deciding
+//! holes within an element; the largest filled region is the outline, other elements inside it
+//! holes; SVG's y-down axis is flipped, so the part looks
 //! as drawn. DXF: closed polylines, circles and LINE/ARC chains of the model space (or of one
 //! layer), arcs flattened to a chord tolerance, scaled from `$INSUNITS` to mm (see [`dxf`]).
 //!
@@ -26,11 +26,18 @@ pub use dxf::{DxfError, ImportOptions};
 
 pub mod dxf;
 pub mod mirror;
+pub mod svg;
 
 /// Coordinates beyond this (mm) are rejected as absurd.
 pub const MAX_COORD_MM: f64 = 1.0e5;
 /// Parts smaller than this across (mm) are rejected as absurd.
 pub const MIN_SIZE_MM: f64 = 1.0e-3;
+/// Parts whose area (outline minus holes) is below this fraction of the square of their
+/// larger bounding-box side are refused as slivers: a 10 mm part needs at least 10⁻⁴ mm². Below
+/// it the part is a line for the physics (no area for the field to act on), and the analysis's
+/// fixed-point area (the part scaled into a unit box, 2⁻³² steps) keeps fewer than three
+/// significant digits.
+pub const MIN_AREA_FRACTION: f64 = 1.0e-6;
 /// Rings with more vertices than this are rejected.
 pub const MAX_VERTICES: usize = 1_000_000;
 
@@ -103,7 +110,7 @@ pub enum PartError {
     SvgSeparateOutlines {
         /// How many rings lie outside each other.
         count: usize,
-        /// The elements they come from, e.g. `<path> 0`, `<polygon> 1`.
+        /// The elements they come from, e.g. `shape 0`, `shape 1 (id \"b\")`.
         names: String,
     },
     /// Not well-formed XML.
@@ -119,14 +126,8 @@ pub enum PartError {
         /// What is wrong.
         message: String,
     },
-    /// A curve in an SVG path.
-    #[error("SVG <path> {path}: curved segment (only straight segments M/L/H/V/Z are supported)")]
-    Curve {
-        /// Index of the path element in the document.
-        path: usize,
-    },
     /// No polygon or path found.
-    #[error("SVG has no <polygon> or <path> element")]
+    #[error("SVG has no filled shape (<path>, <rect>, <circle>, <ellipse>, <polygon>, …)")]
     NoShape,
     /// Unknown file type.
     #[error("unknown part format (expected .json, .svg or .dxf)")]
@@ -180,6 +181,19 @@ pub enum PartError {
     TooSmall {
         /// Its size.
         size: f64,
+    },
+    /// Outline minus holes below [`MIN_AREA_FRACTION`] of the size squared.
+    #[error(
+        "part is a sliver: area {area:e} mm² for {size} mm across (at least {min:e} mm², \
+         {MIN_AREA_FRACTION:e} of the size squared); draw the part with its real width"
+    )]
+    Sliver {
+        /// Its area, mm².
+        area: f64,
+        /// Its larger bounding-box side, mm.
+        size: f64,
+        /// The least area accepted for that size, mm².
+        min: f64,
     },
     /// Two consecutive vertices coincide.
     #[error("{ring}, vertex {index}: repeats the previous vertex (zero-length edge)")]
@@ -275,7 +289,7 @@ impl Part {
         let text = std::fs::read_to_string(path)?;
         let part = match ext.as_deref() {
             Some("json") => Part::from_json(&text, &stem),
-            Some("svg") => Part::from_svg(&text, &stem),
+            Some("svg") => return svg::read(&text, &stem, opt.chord_mm),
             _ => Err(PartError::UnknownFormat),
         }?;
         Ok((part, Vec::new()))
@@ -289,34 +303,9 @@ impl Part {
         Ok(Part { flips: j.flips, ..part })
     }
 
-    /// Parses an SVG drawing (see the module docs).
+    /// Parses an SVG drawing with the default chord tolerance ([`svg`]).
     pub fn from_svg(text: &str, name: &str) -> Result<Part, PartError> {
-        let doc = roxmltree::Document::parse(text)?;
-        let (mut rings, mut sources) = svg_rings(&doc)?;
-        if rings.is_empty() {
-            return Err(PartError::NoShape);
-        }
-        // Largest ring by area is the outline.
-        let outer = (0..rings.len())
-            .max_by(|&a, &b| signed_area(&rings[a]).abs().total_cmp(&signed_area(&rings[b]).abs()))
-            .unwrap_or(0);
-        let outline = rings.remove(outer);
-        let outline_source = sources.remove(outer);
-        // Rings with no vertex inside the outline are further outlines, not holes.
-        let apart: Vec<&String> = rings
-            .iter()
-            .zip(&sources)
-            .filter(|(r, _)| r.len() >= 3 && !r.iter().any(|&p| inside(p, &outline)))
-            .map(|(_, s)| s)
-            .collect();
-        if !apart.is_empty() && outline.len() >= 3 {
-            let names = std::iter::once(&outline_source).chain(apart.iter().copied());
-            return Err(PartError::SvgSeparateOutlines {
-                count: apart.len() + 1,
-                names: names.map(String::as_str).collect::<Vec<_>>().join(", "),
-            });
-        }
-        Part::new(name.to_string(), outline, rings)
+        svg::read(text, name, dxf::DEFAULT_CHORD_MM).map(|(part, _)| part)
     }
 
     /// Validates and normalises a part.
@@ -394,6 +383,11 @@ impl Part {
                 }
             }
         }
+        let area: f64 = rings.iter().map(|r| signed_area(r)).sum();
+        let min = MIN_AREA_FRACTION * size * size;
+        if area < min {
+            return Err(PartError::Sliver { area, size, min });
+        }
         let outline = rings.remove(0);
         Ok(Part { name, outline, holes: rings, flips: false })
     }
@@ -470,117 +464,11 @@ fn last_key(text: &str) -> String {
 }
 
 /// The first NaN/Infinity token of an SVG coordinate list (`points` or `d`).
-fn svg_non_finite(list: &str) -> Option<String> {
+pub(crate) fn svg_non_finite(list: &str) -> Option<String> {
     list.split(|c: char| c.is_whitespace() || c == ',')
         .flat_map(|t| t.split(|c: char| "MLHVZmlhvz".contains(c)))
         .find(|t| non_finite_token(t))
         .map(str::to_string)
-}
-
-/// Every ring of an SVG document with the element it comes from (`<path> 0`, …).
-type SvgRings = (Vec<Vec<[f64; 2]>>, Vec<String>);
-
-fn svg_rings(doc: &roxmltree::Document<'_>) -> Result<SvgRings, PartError> {
-    let (mut rings, mut sources) = (Vec::new(), Vec::new());
-    let (mut path_index, mut polygon_index) = (0, 0);
-    for node in doc.descendants().filter(|n| n.is_element()) {
-        let tag = node.tag_name().name();
-        let bad = |attribute: &'static str, message: String| PartError::SvgAttribute {
-            element: tag.to_string(),
-            attribute,
-            message,
-        };
-        let not_finite = |attribute: &'static str, list: &str| match svg_non_finite(list) {
-            Some(token) => {
-                Err(PartError::SvgNotFinite { element: tag.to_string(), attribute, token })
-            }
-            None => Ok(()),
-        };
-        let ts = transform_of(node).map_err(|m| bad("transform", m))?;
-        match tag {
-            "polygon" => {
-                let pts =
-                    node.attribute("points").ok_or_else(|| bad("points", "missing".into()))?;
-                not_finite("points", pts)?;
-                rings.push(
-                    svgtypes::PointsParser::from(pts).map(|(x, y)| apply(&ts, x, y)).collect(),
-                );
-                sources.push(format!("<polygon> {polygon_index}"));
-                polygon_index += 1;
-            }
-            "path" => {
-                let d = node.attribute("d").ok_or_else(|| bad("d", "missing".into()))?;
-                not_finite("d", d)?;
-                for ring in path_rings(d, &ts, path_index).map_err(|e| match e {
-                    Ok(message) => bad("d", message),
-                    Err(curve) => curve,
-                })? {
-                    rings.push(ring);
-                    sources.push(format!("<path> {path_index}"));
-                }
-                path_index += 1;
-            }
-            _ => {}
-        }
-    }
-    Ok((rings, sources))
-}
-
-/// The sub-paths of a `<path>`'s `d` as rings. `Err(Ok(message))` for a malformed `d`,
-/// `Err(Err(curve))` for a curved segment.
-fn path_rings(
-    d: &str,
-    ts: &svgtypes::Transform,
-    path_index: usize,
-) -> Result<Vec<Vec<[f64; 2]>>, Result<String, PartError>> {
-    let mut rings = Vec::new();
-    let mut current: Vec<[f64; 2]> = Vec::new();
-    for seg in svgtypes::SimplifyingPathParser::from(d) {
-        match seg.map_err(|e| Ok(e.to_string()))? {
-            svgtypes::SimplePathSegment::MoveTo { x, y } => {
-                if current.len() > 1 {
-                    rings.push(std::mem::take(&mut current));
-                }
-                current = vec![apply(ts, x, y)];
-            }
-            svgtypes::SimplePathSegment::LineTo { x, y } => current.push(apply(ts, x, y)),
-            svgtypes::SimplePathSegment::ClosePath => {
-                if !current.is_empty() {
-                    rings.push(std::mem::take(&mut current));
-                }
-            }
-            _ => return Err(Err(PartError::Curve { path: path_index })),
-        }
-    }
-    if current.len() > 1 {
-        rings.push(current);
-    }
-    Ok(rings)
-}
-
-fn apply(ts: &svgtypes::Transform, x: f64, y: f64) -> [f64; 2] {
-    let (x, y) = (ts.a * x + ts.c * y + ts.e, ts.b * x + ts.d * y + ts.f);
-    [x, -y] // SVG y points down; ours up.
-}
-
-/// Product of the `transform` attributes of a node and its ancestors (outermost last).
-fn transform_of(node: roxmltree::Node<'_, '_>) -> Result<svgtypes::Transform, String> {
-    let mut ts = svgtypes::Transform::default();
-    for n in node.ancestors() {
-        if let Some(t) = n.attribute("transform") {
-            let t: svgtypes::Transform = t.parse().map_err(|e: svgtypes::Error| e.to_string())?;
-            // ts := t ∘ ts
-            ts = svgtypes::Transform::new(
-                t.a * ts.a + t.c * ts.b,
-                t.b * ts.a + t.d * ts.b,
-                t.a * ts.c + t.c * ts.d,
-                t.b * ts.c + t.d * ts.d,
-                t.a * ts.e + t.c * ts.f + t.e,
-                t.b * ts.e + t.d * ts.f + t.f,
-            );
-        }
-    }
-    Ok(ts)
 }
 
 /// Adjacent edges of one ring meet only at their shared vertex (no fold-back).

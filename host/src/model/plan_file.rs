@@ -216,7 +216,48 @@ pub enum PlanFileError {
     Invalid(PlanError),
 }
 
+impl PlanFileError {
+    /// What only the controller limits (a plan's hour, its step count, the drive's frequency
+    /// and level ranges, the stored name), with the fix; `None` for a plan no run can take.
+    pub fn device_limit_fix(&self) -> Option<&'static str> {
+        match self {
+            PlanFileError::Invalid(PlanError::TooLong { .. }) => Some(
+                "shorten it (fewer repeats, shorter steps: a lower --safety) or split it into \
+                 plans of at most an hour",
+            ),
+            PlanFileError::Invalid(PlanError::TooManySteps { .. })
+            | PlanFileError::TooManySteps(_) => Some("split it into several plans"),
+            PlanFileError::Invalid(PlanError::FrequencyOutOfRange { .. }) => {
+                Some("plan with modes between 1 and 2000 Hz")
+            }
+            PlanFileError::Invalid(
+                PlanError::AmplitudeTooHigh { .. } | PlanError::AccelTooHigh { .. },
+            ) => Some("lower the step's level"),
+            PlanFileError::NameTooLong(_) => Some("give the plan a shorter name"),
+            _ => None,
+        }
+    }
+}
+
 impl PlanFile {
+    /// Research first: a plan only a simulation will run may pass the controller's limits
+    /// ([`PlanFileError::device_limit_fix`]). `Ok(Some(warning))` names the limit and that
+    /// `chladni device upload` refuses it, with the fix; `Err` for what no run can take.
+    pub fn device_limit_warning(
+        &self,
+        limits: &DeviceLimits,
+    ) -> Result<Option<String>, PlanFileError> {
+        match self.to_plan(limits) {
+            Ok(_) => Ok(None),
+            Err(e) => match e.device_limit_fix() {
+                Some(fix) => Ok(Some(format!(
+                    "{e}: the controller refuses this plan at `chladni device upload`; {fix}"
+                ))),
+                None => Err(e),
+            },
+        }
+    }
+
     /// Parses JSON text.
     pub fn parse(text: &str) -> Result<PlanFile, PlanFileError> {
         serde_json::from_str(text).map_err(|e| PlanFileError::Json(e.to_string()))

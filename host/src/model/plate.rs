@@ -178,7 +178,10 @@ pub enum ModelError {
         fix: &'static str,
     },
     /// No modes.
-    #[error("the plate file has no [[mode]] entries: add at least one (docs/plan.md)")]
+    #[error(
+        "the plate file has no [[mode]] entries: write them with `chladni plate modes PLATE.toml \
+         --write-modes OUT.toml` (or by hand, docs/plan.md)"
+    )]
     NoModes,
     /// Two entries at one drive frequency that cannot be one mode.
     #[error(

@@ -261,6 +261,17 @@ pub enum Boundary {
     HingedRod,
 }
 
+impl Boundary {
+    /// The plate file's key for it (`cantilever`, `free`, `hinged-rod`).
+    pub fn key(self) -> &'static str {
+        match self {
+            Boundary::Cantilever => "cantilever",
+            Boundary::Free => "free",
+            Boundary::HingedRod => "hinged-rod",
+        }
+    }
+}
+
 /// A validated plate, ready for the mode solver.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Plate {

@@ -32,7 +32,7 @@ impl SimStep {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("plan step {step}: no mode at {freq_hz} Hz (modes: {modes})")]
 pub struct NoModeAt {
-    /// Step index (0-based).
+    /// Step number, 1-based (as `chladni plan` prints steps).
     pub step: usize,
     /// The step's frequency.
     pub freq_hz: f64,
@@ -56,7 +56,7 @@ pub enum PlanStepsError {
          an open-loop \"amplitude\" (0..1) for this step"
     )]
     ClosedLoop {
-        /// Step index (0-based).
+        /// Step number, 1-based (as `chladni plan` prints steps).
         step: usize,
         /// The step's acceleration target, m/s².
         accel_mps2: f64,
@@ -72,12 +72,12 @@ pub fn plan_steps(file: &PlanFile, plate: &PlateModel) -> Result<Vec<SimStep>, P
         let amplitude = match s.level(i)? {
             StepLevel::Amplitude(a) => a,
             StepLevel::AccelMps2(accel_mps2) => {
-                return Err(PlanStepsError::ClosedLoop { step: i, accel_mps2 });
+                return Err(PlanStepsError::ClosedLoop { step: i + 1, accel_mps2 });
             }
         };
         let k = plate.modes.iter().position(|m| (m.freq_hz - s.freq_hz).abs() < 1e-3).ok_or_else(
             || NoModeAt {
-                step: i,
+                step: i + 1,
                 freq_hz: s.freq_hz,
                 modes: plate
                     .modes

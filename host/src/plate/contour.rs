@@ -68,6 +68,13 @@ pub fn node_lines(grid: &Grid) -> Vec<Polyline> {
     lines
 }
 
+/// The node lines of `lines` that have a length: an isolated zero of the mode shape (the
+/// hinged-rod plate's rod point, where w = 0 is imposed) traces as a one-point polyline, which
+/// is no line to count (the hinged-rod plate's first mode read "2 lines" and drew one).
+pub fn line_count(lines: &[Polyline]) -> usize {
+    lines.iter().filter(|l| total_length(std::slice::from_ref(*l)) > 0.0).count()
+}
+
 /// Marching squares: the zero crossings of φ in each grid cell joined in pairs (a saddle cell,
 /// all four edges cut, is split by the sign at its centre).
 fn cell_segments(grid: &Grid) -> Vec<[EdgeId; 2]> {
@@ -153,6 +160,22 @@ pub fn distance_to(p: [f64; 2], lines: &[Polyline]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The hinged-rod example's first mode: its node is the hinge line, plus the rod point (an
+    /// isolated zero), which `plate modes` counted as a second line.
+    #[test]
+    fn hinged_rod_first_mode_is_one_line() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../examples/plates/hinged-rod-solver.toml");
+        let file = crate::model::plate_file::PlateFile::load(&path).unwrap();
+        let plate = file.plate.mechanics().unwrap();
+        let sol = crate::plate::solver::solve(&plate, 1, crate::plate::solver::DEFAULT_TERMS);
+        let (nx, ny) = crate::plate::solver::grid_dims(121, plate.size_mm);
+        let lines = node_lines(&sol.sample(0, nx, ny));
+        let ends: Vec<_> = lines.iter().map(|l| (l[0], l[l.len() - 1])).collect();
+        assert_eq!(line_count(&lines), 1, "{ends:?}");
+        assert!((total_length(&lines) - 200.0).abs() < 1.0);
+    }
 
     fn grid(nx: usize, ny: usize, f: impl Fn(f64, f64) -> f64) -> Grid {
         let size_mm = [100.0, 50.0];

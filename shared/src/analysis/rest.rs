@@ -62,6 +62,38 @@ pub enum AnalysisError {
     WavelengthTooShort,
     /// More rest orientations than [`MAX_RESTS`].
     TooManyRests,
+    /// The centroid lies outside the part's bounding box: rings that cross, or a hole outside
+    /// the outline (a valid part's centroid is inside its convex hull).
+    CentroidOutside,
+}
+
+impl core::fmt::Display for AnalysisError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            AnalysisError::NoOutline => write!(f, "no outline"),
+            AnalysisError::TooFewVertices { ring } => {
+                write!(f, "ring {ring} has fewer than 3 vertices")
+            }
+            AnalysisError::Winding { ring: 0 } => {
+                write!(f, "the outline is not counter-clockwise (or has no area)")
+            }
+            AnalysisError::Winding { ring } => {
+                write!(f, "hole {ring} is not clockwise (or has no area)")
+            }
+            AnalysisError::ZeroArea => write!(f, "the part has no area"),
+            AnalysisError::TooLarge => write!(f, "the part spans more than 2^29 mm"),
+            AnalysisError::BadGain => write!(f, "a gain is zero or negative"),
+            AnalysisError::WavelengthTooShort => {
+                write!(f, "the wavelength is shorter than the part's diameter")
+            }
+            AnalysisError::TooManyRests => write!(f, "more than {MAX_RESTS} rest orientations"),
+            AnalysisError::CentroidOutside => write!(
+                f,
+                "the centroid lies outside the part's bounding box (crossing rings, or a hole \
+                 outside the outline)"
+            ),
+        }
+    }
 }
 
 /// A rest orientation.
@@ -211,6 +243,12 @@ impl<'a> Analyzer<'a> {
         }
         self.area = total.area;
         self.centroid = total.centroid().ok_or(AnalysisError::ZeroArea)?;
+        // The box is (−½, ½)²; a centroid beyond it means crossing rings, and its distance
+        // would overflow the products below.
+        let c = self.centroid;
+        if c.x < -Fx::HALF || c.x > Fx::HALF || c.y < -Fx::HALF || c.y > Fx::HALF {
+            return Err(AnalysisError::CentroidOutside);
+        }
         let mut r2 = Fx::ZERO;
         for p in self.rings.iter().flat_map(|r| r.iter()) {
             let q = self.normalized(*p);
@@ -357,7 +395,8 @@ impl<'a> Analyzer<'a> {
                 hi = s;
             }
             let newton = if fm.dforce < Fx::ZERO { fm.force.checked_div(fm.dforce) } else { None };
-            let next = match newton.map(|step| s - step) {
+            // A huge step (∂F/∂s ≈ 0) leaves the bracket anyway: bisect instead of overflowing.
+            let next = match newton.and_then(|step| s.0.checked_sub(step.0)).map(Fx) {
                 Some(n) if n > lo && n < hi => n,
                 _ => Fx((lo.raw() >> 1) + (hi.raw() >> 1)),
             };
@@ -399,8 +438,7 @@ impl<'a> Analyzer<'a> {
                 break;
             }
             let span = (x1 - x0) as i128;
-            let frac = span * f0 as i128 / (f0 as i128 - f1 as i128);
-            let x = (x0 + frac as u64).clamp(x0 + 1, x1 - 1);
+            let x = (x0 + secant(span, f0, f1) as u64).clamp(x0 + 1, x1 - 1);
             let b = self.balance(a.wrapping_add(x as u32), s);
             s = b.offset;
             let fx = b.turn.raw();
@@ -423,9 +461,7 @@ impl<'a> Analyzer<'a> {
                 side = 1;
             }
         }
-        let span = (x1 - x0) as i128;
-        let frac = if f0 == f1 { span / 2 } else { span * f0 as i128 / (f0 as i128 - f1 as i128) };
-        a.wrapping_add((x0 + frac.clamp(0, span) as u64) as u32)
+        a.wrapping_add((x0 + secant((x1 - x0) as i128, f0, f1) as u64) as u32)
     }
 
     /// All rest orientations over 360°.
@@ -484,6 +520,16 @@ impl<'a> Analyzer<'a> {
         let order = symmetry_order(&rests).max(field_order);
         Ok(Analysis { rests, neutral: false, order })
     }
+}
+
+/// Where the secant through `(0, f0)` and `(span, f1)` crosses zero, within `[0, span]`.
+/// The Illinois halving can take both ends' values down to 0 (|f| = 1 halves to 0): then, or
+/// whenever the ends are equal, the midpoint (the old form divided by zero there). The ends
+/// never have the same strict sign, so the clamp changes no other result: it only makes that
+/// plain to the reader and to the fuzzer.
+fn secant(span: i128, f0: i64, f1: i64) -> i128 {
+    let den = f0 as i128 - f1 as i128;
+    if den == 0 { span / 2 } else { (span * f0 as i128 / den).clamp(0, span) }
 }
 
 /// Largest m such that turning the rest pattern by 360°/m maps it onto itself (same kinds),

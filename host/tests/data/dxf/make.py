@@ -19,6 +19,14 @@ Each file tests one thing of `Part::load` for DXF (docs/analyze.md, "DXF parts")
   spline.dxf      a closed SPLINE                             (error: spline)
   disjoint.dxf    two closed LWPOLYLINEs apart                (error: separate outlines)
   miles.dxf       the rectangle in miles ($INSUNITS 3)        (error: unsupported units)
+  cad-dims.dxf    hole-arc's part on layer PART (LWPOLYLINE + CIRCLE) as CAD exports it: linear
+                  and radial DIMENSIONs on DIMS, centre lines (LINEs) on CENTER, TEXT and MTEXT
+                  on NOTES, a HATCH of the part on HATCH    (twin hole-arc.json; one note)
+  cad-title.dxf   cad-dims plus an A4 title block (frame and cells, LINEs) on layer TITLE
+                                                      (error without --layer; --layer PART: twin)
+  block.dxf       the part as a block (its entities on layer "0"), inserted on layer PART turned
+                  by 30 degrees at (100, 50) (twin hole-arc.json, turned: same area), and a
+                  second INSERT at scale 2 on layer BIG    (--layer BIG: 4x the area)
 """
 
 import json
@@ -143,7 +151,68 @@ def miles():
     save(doc, "miles.dxf")
 
 
+def part_on(msp, layer):
+    """hole-arc's part on one layer."""
+    msp.add_lwpolyline(
+        [(0, 0, 0, 0, 0), (50, 0, 0, 0, 0), (50, 20, 0, 0, 1.0), (0, 20, 0, 0, 0)],
+        format="xyseb", close=True, dxfattribs={"layer": layer})
+    msp.add_circle(HOLE_C, HOLE_R, dxfattribs={"layer": layer})
+
+
+def annotate(doc, msp):
+    for name in ["PART", "DIMS", "CENTER", "NOTES", "HATCH"]:
+        doc.layers.add(name)
+    part_on(msp, "PART")
+    msp.add_linear_dim(base=(25, -10), p1=(0, 0), p2=(50, 0),
+                       dxfattribs={"layer": "DIMS"}).render()
+    msp.add_linear_dim(base=(60, 10), p1=(50, 0), p2=(50, 20), angle=90,
+                       dxfattribs={"layer": "DIMS"}).render()
+    msp.add_radius_dim(center=HOLE_C, radius=HOLE_R, angle=45,
+                       dxfattribs={"layer": "DIMS"}).render()
+    for a, b in [((25, -5), (25, 50)), ((-5, 18), (55, 18))]:
+        msp.add_line(a, b, dxfattribs={"layer": "CENTER", "linetype": "CENTER"})
+    msp.add_text("PART 7", dxfattribs={"layer": "NOTES", "height": 3}).set_placement((0, 55))
+    msp.add_mtext("material: steel\\Pthickness 2 mm", dxfattribs={"layer": "NOTES"}).set_location((0, 65))
+    hatch = msp.add_hatch(dxfattribs={"layer": "HATCH"})
+    hatch.paths.add_polyline_path([(0, 0), (50, 0), (50, 20), (0, 20)], is_closed=True)
+
+
+def cad_dims():
+    doc, msp = new(MM)
+    annotate(doc, msp)
+    save(doc, "cad-dims.dxf")
+
+
+def cad_title():
+    doc, msp = new(MM)
+    annotate(doc, msp)
+    doc.layers.add("TITLE")
+    t = {"layer": "TITLE"}
+    # A4 landscape frame around the part, and a title block of four cells at its lower right.
+    x0, y0, x1, y1 = -40, -60, 257, 150
+    for a, b in [((x0, y0), (x1, y0)), ((x1, y0), (x1, y1)), ((x1, y1), (x0, y1)),
+                 ((x0, y1), (x0, y0))]:
+        msp.add_line(a, b, dxfattribs=t)
+    bx, by = 157, -60
+    for a, b in [((bx, by), (bx, by + 30)), ((bx, by + 30), (x1, by + 30)),
+                 ((bx, by + 15), (x1, by + 15)), ((bx + 50, by), (bx + 50, by + 30))]:
+        msp.add_line(a, b, dxfattribs=t)
+    msp.add_text("CHLADNI TEST PART", dxfattribs={"layer": "TITLE", "height": 4}).set_placement((bx + 2, by + 20))
+    save(doc, "cad-title.dxf")
+
+
+def block():
+    doc, msp = new(MM)
+    doc.layers.add("PART")
+    doc.layers.add("BIG")
+    blk = doc.blocks.new(name="HOLEARC", base_point=(25, 10))
+    part_on(blk, "0")
+    msp.add_blockref("HOLEARC", (100, 50), dxfattribs={"layer": "PART", "rotation": 30})
+    msp.add_blockref("HOLEARC", (300, 50), dxfattribs={"layer": "BIG", "xscale": 2, "yscale": 2})
+    save(doc, "block.dxf")
+
+
 if __name__ == "__main__":
     for make in [rectangle, l_shape, hole_arc, arc_chain, hole_arc_twin, inch, layers,
-                 open_chain, spline, disjoint, miles]:
+                 open_chain, spline, disjoint, miles, cad_dims, cad_title, block]:
         make()

@@ -330,3 +330,90 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn secant_of_two_zero_ends_is_the_midpoint() {
+    // The Illinois halving took both ends to 0 with gains 1 and 2 (`analyze --gain-right 2`):
+    // the secant divided by zero there.
+    assert_eq!(secant(1 << 20, 0, 0), 1 << 19);
+    assert_eq!(secant(1 << 20, 5, 5), 1 << 19);
+    assert_eq!(secant(100, 1, -1), 50);
+    assert_eq!(secant(100, 0, -7), 0);
+    assert_eq!(secant(100, 7, 0), 100);
+}
+
+#[test]
+fn crossing_rings_with_a_far_centroid_are_refused() {
+    // A bow tie whose lobes almost cancel: the net area is tiny and the centroid far outside.
+    let bow = ring(&[(0.0, 0.0), (10.0, 10.0), (10.0, 0.0), (0.0, 10.001)]);
+    let rings = [&bow[..]];
+    let got = Analyzer::new(&rings, field(FieldKind::Sign)).err();
+    assert!(
+        matches!(got, Some(AnalysisError::CentroidOutside | AnalysisError::Winding { .. })),
+        "{got:?}"
+    );
+}
+
+/// Any gain in (0, 10⁶], with exact ratios 1:2 and 2:1 (the old division by zero) often.
+fn gain() -> impl Strategy<Value = Fx> {
+    prop_oneof![
+        Just(Fx::ONE),
+        Just(Fx::from_int(2)),
+        (1i64..=1_000_000i64 << 32).prop_map(Fx),
+        (1i64..1 << 32).prop_map(Fx),
+    ]
+}
+
+/// Any law: sign, linear, or sine with any positive wavelength (too short is an error).
+fn kind() -> impl Strategy<Value = FieldKind> {
+    prop_oneof![
+        Just(FieldKind::Sign),
+        Just(FieldKind::Linear),
+        (1i64..i64::MAX).prop_map(|w| FieldKind::Sine { wavelength: Fx(w) }),
+    ]
+}
+
+/// Raw rings: any coordinates, any count (mostly nonsense: crossing, tiny, huge).
+fn raw_rings() -> impl Strategy<Value = StdVec<StdVec<Pt>>> {
+    let coord = prop_oneof![any::<i64>(), -(1i64 << 40)..(1i64 << 40), -64i64..64];
+    let pt = (coord.clone(), coord).prop_map(|(x, y)| Pt::new(Fx(x), Fx(y)));
+    prop::collection::vec(prop::collection::vec(pt, 0..12), 0..4)
+}
+
+/// A star-shaped outline with a star-shaped hole inside it (possibly none), scaled.
+fn part_with_hole() -> impl Strategy<Value = StdVec<StdVec<Pt>>> {
+    (star(), star(), any::<bool>(), -20i32..20).prop_map(|(outer, inner, hole, exp)| {
+        let s = 2f64.powi(exp);
+        let mut rings =
+            StdVec::from([outer.iter().map(|&(x, y)| Pt::new(q(x * s), q(y * s))).collect()]);
+        if hole {
+            // Radii of the outline are ≥ 0.3·scale about the origin: a hole of radius
+            // < 0.25·(its scale) scaled to 0.3·outline/50 fits inside.
+            let k = 0.005 * s * outer.iter().map(|p| p.0.hypot(p.1)).fold(f64::MAX, f64::min);
+            rings.push(inner.iter().rev().map(|&(x, y)| Pt::new(q(x * k), q(y * k))).collect());
+        }
+        rings
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// No input panics (debug build: overflow and division are checked): an error or an
+    /// analysis, nothing else.
+    #[test]
+    fn no_part_field_or_gain_panics(
+        rings in prop_oneof![raw_rings(), part_with_hole()],
+        kind in kind(), gl in gain(), gr in gain(), sign_l in any::<bool>(),
+    ) {
+        let slices: StdVec<&[Pt]> = rings.iter().map(StdVec::as_slice).collect();
+        let gain_left = if sign_l { gl } else { -gl };
+        let fld = Field { kind, gain_left, gain_right: gr };
+        if let Ok(an) = Analyzer::new(&slices, fld)
+            && let Ok(a) = an.analyze()
+        {
+            prop_assert!(a.rests.windows(2).all(|w| w[0].angle <= w[1].angle));
+            let _ = an.align(&a, 12345);
+        }
+    }
+}
