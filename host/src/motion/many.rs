@@ -26,11 +26,11 @@ use crate::motion::shape::{self, Pieces};
 use crate::motion::steps::SimStep;
 
 /// Gauss–Seidel sweeps at most per solve.
-const SWEEPS: usize = 300;
+const SWEEPS: usize = 100;
 /// Passes of the pairwise separation after a step.
-const SEPARATION_PASSES: usize = 30;
+const SEPARATION_PASSES: usize = 10;
 /// Integration steps at most per run.
-const MAX_STEPS: usize = 50_000;
+const MAX_STEPS: usize = 20_000;
 
 /// The parts simulated together.
 #[derive(Debug, Clone, Copy)]
@@ -203,6 +203,9 @@ impl Group<'_> {
     }
 }
 
+/// Picks a row entry's normal or tangent Jacobian.
+type Pick = fn(&(usize, [f64; 3], [f64; 3])) -> [f64; 3];
+
 /// Projected Gauss–Seidel on the contact rows: diagonal mobilities `mob`, friction `mu`, the
 /// free twists. Returns the constrained twists.
 fn solve(rows: &[Row], mob: &[[f64; 3]], mu: f64, free: &[[f64; 3]]) -> Vec<[f64; 3]> {
@@ -210,8 +213,7 @@ fn solve(rows: &[Row], mob: &[[f64; 3]], mu: f64, free: &[[f64; 3]]) -> Vec<[f64
     if rows.is_empty() {
         return xi;
     }
-    let eff = |on: &[(usize, [f64; 3], [f64; 3])],
-               pick: fn(&(usize, [f64; 3], [f64; 3])) -> [f64; 3]| {
+    let eff = |on: &[(usize, [f64; 3], [f64; 3])], pick: Pick| {
         on.iter()
             .map(|e| {
                 let j = pick(e);
@@ -229,23 +231,20 @@ fn solve(rows: &[Row], mob: &[[f64; 3]], mu: f64, free: &[[f64; 3]]) -> Vec<[f64
     for _ in 0..SWEEPS {
         let mut change = 0.0f64;
         for (k, row) in rows.iter().enumerate() {
-            let speed = |xi: &[[f64; 3]], pick: fn(&(usize, [f64; 3], [f64; 3])) -> [f64; 3]| {
+            let speed = |xi: &[[f64; 3]], pick: Pick| {
                 row.on
                     .iter()
                     .map(|e| (0..3).map(|c| pick(e)[c] * xi[e.0][c]).sum::<f64>())
                     .sum::<f64>()
             };
-            let apply =
-                |xi: &mut [[f64; 3]],
-                 d: f64,
-                 pick: fn(&(usize, [f64; 3], [f64; 3])) -> [f64; 3]| {
-                    for e in &row.on {
-                        let j = pick(e);
-                        for c in 0..3 {
-                            xi[e.0][c] += mob[e.0][c] * j[c] * d;
-                        }
+            let apply = |xi: &mut [[f64; 3]], d: f64, pick: Pick| {
+                for e in &row.on {
+                    let j = pick(e);
+                    for c in 0..3 {
+                        xi[e.0][c] += mob[e.0][c] * j[c] * d;
                     }
-                };
+                }
+            };
             let ln = (lam[k][0] - speed(&xi, normal) / effs[k].0).max(0.0);
             apply(&mut xi, ln - lam[k][0], normal);
             change = change.max((ln - lam[k][0]).abs() * effs[k].0);
@@ -256,7 +255,7 @@ fn solve(rows: &[Row], mob: &[[f64; 3]], mu: f64, free: &[[f64; 3]]) -> Vec<[f64
             change = change.max((lt - lam[k][1]).abs() * effs[k].1);
             lam[k][1] = lt;
         }
-        if change < 1e-12 * scale {
+        if change < 1e-9 * scale {
             break;
         }
     }

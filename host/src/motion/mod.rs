@@ -4,6 +4,7 @@
 //! bouncing on a vibrating string.
 
 pub mod body;
+pub mod bulk;
 pub mod contact;
 pub mod field;
 pub mod integrate;

@@ -118,7 +118,7 @@ fn bridged(rings: &[Vec<[f64; 2]>]) -> Vec<[f64; 2]> {
             continue;
         };
         let mp = hole[m];
-        let others: Vec<&Vec<[f64; 2]>> = holes[k + 1..].iter().copied().collect();
+        let others: Vec<&Vec<[f64; 2]>> = holes[k + 1..].to_vec();
         let visible = |i: usize| {
             let p = ring[i];
             let blocked_by = |r: &[[f64; 2]]| {
