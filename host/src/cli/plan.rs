@@ -20,6 +20,8 @@ use super::parse::{f64_where, finite, positive};
 use super::part::PartRead;
 use super::{InputError, check_output, check_plot, output_error, plot_error};
 
+mod together;
+
 fn bad(msg: String) -> anyhow::Error {
     InputError(msg).into()
 }
@@ -461,6 +463,11 @@ pub struct SimulateArgs {
     /// (its mirror image), reported per face; the plan must have been made for both faces.
     #[arg(long)]
     both_faces: bool,
+    /// Bulk feeding: drop N copies of the part together in each trial (random non-overlapping
+    /// poses, contacts between them); reports the oriented fraction, the lost copies and the
+    /// oriented parts per minute of plan time.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1000))]
+    copies: Option<u32>,
 }
 
 /// One part's `chladni simulate --json` entry in a plan for several parts (or faces).
@@ -535,8 +542,15 @@ impl SimulateArgs {
         })?;
         let fields: Vec<FieldModel> =
             plate.modes.iter().map(|m| FieldModel::new(m, &plate)).collect();
+        let sim =
+            together::Sim { plate: &plate, fields: &fields, steps: &steps, feed: region.as_ref() };
+        if let Some(n) = self.copies {
+            return self.run_copies(n, parts, &faces, &sim, &views);
+        }
+        let mut together = self.together(parts, &faces, &sim)?;
         let mut reports = Vec::new();
-        for ((part, view), &(trials, seed)) in parts.iter().zip(&views).zip(&runs) {
+        for (k, ((part, view), &(trials, seed))) in parts.iter().zip(&views).zip(&runs).enumerate()
+        {
             let body = Body::new(part);
             let setup = Setup {
                 body: &body,
@@ -545,7 +559,10 @@ impl SimulateArgs {
                 steps: &steps,
                 feed: region.as_ref(),
             };
-            let sims = self.trials_of(&setup, trials, seed);
+            let sims = match together.as_mut() {
+                Some(t) => std::mem::take(&mut t[k]),
+                None => self.trials_of(&setup, trials, seed),
+            };
             let stats = montecarlo::statistics(&sims, view, self.tol_deg);
             if !self.json {
                 self.print(part, steps.len(), &stats, (trials, seed));

@@ -179,10 +179,9 @@ pub fn solve(
 mod tests {
     use super::*;
     use crate::model::field::Law;
-    use crate::model::part::Part;
     use crate::motion::field::FieldModel;
     use crate::motion::integrate::{SimParams, run};
-    use crate::motion::testkit::rect;
+    use crate::motion::testkit::{predicted_rest, quad, rect, uniform};
 
     const W: f64 = 300.0;
     const H: f64 = 200.0;
@@ -191,38 +190,8 @@ mod tests {
         Rim { size_mm: [W, H], edge: Edge::Wall, friction }
     }
 
-    /// A uniform field of unit pull along `dir` over the whole plate (a sign-law line node far
-    /// beyond the plate in that direction).
-    fn uniform(dir: [f64; 2]) -> FieldModel {
-        FieldModel::Line { xhat: dir, c: 1e3, law: Law::Sign, k: [1.0, 1.0] }
-    }
-
     fn params(r: Option<Rim>) -> SimParams {
         SimParams { speed: 10.0, t_limit: 1e4, run_to_limit: false, rim: r }
-    }
-
-    /// An irregular quadrilateral (no symmetry: its stable edges differ).
-    fn quad() -> Part {
-        Part::new("q".into(), vec![[0.0, 0.0], [30.0, 0.0], [24.0, 14.0], [4.0, 20.0]], vec![])
-            .unwrap()
-    }
-
-    /// Push alignment: the distance from the centroid to the wall (+x) when the part touches
-    /// it, d(θ) = max over vertices of their x; a part pushed against a fence descends d(θ)
-    /// from the orientation it arrives at to the local minimum (a stable edge).
-    fn predicted_rest(body: &Body, theta0: f64) -> f64 {
-        let d = |th: f64| {
-            let (s, c) = f64::sin_cos(th);
-            body.rings[0].iter().map(|p| c * p[0] - s * p[1]).fold(f64::MIN, f64::max)
-        };
-        let (mut th, h) = (theta0, 1e-5);
-        loop {
-            let best = [th - h, th + h].into_iter().min_by(|a, b| d(*a).total_cmp(&d(*b)));
-            match best {
-                Some(b) if d(b) < d(th) - 1e-15 => th = b,
-                _ => return th,
-            }
-        }
     }
 
     #[test]

@@ -4,11 +4,14 @@
 //! bouncing on a vibrating string.
 
 pub mod body;
+pub mod bulk;
 pub mod contact;
 pub mod field;
 pub mod integrate;
+pub mod many;
 pub mod montecarlo;
 pub mod potential;
+pub mod shape;
 pub mod sim;
 pub mod steps;
 pub mod string;

@@ -3,6 +3,8 @@
 
 use crate::model::part::Part;
 use crate::model::plate::{Law, Mode, PlateModel, parse_mode};
+use crate::motion::body::Body;
+use crate::motion::field::FieldModel;
 
 /// A mode parsed from plate-file TOML on a 300 × 200 mm plate.
 pub fn mode(toml_text: &str) -> Mode {
@@ -39,4 +41,33 @@ pub fn holed_part() -> Part {
 /// The pull of a law at 20 mm (a scale for force errors).
 pub fn law_scale(law: Law) -> f64 {
     law.g(20.0).abs()
+}
+
+/// A uniform field of unit pull along `dir` over the whole plate (a sign-law line node far
+/// beyond the plate in that direction).
+pub fn uniform(dir: [f64; 2]) -> FieldModel {
+    FieldModel::Line { xhat: dir, c: 1e3, law: Law::Sign, k: [1.0, 1.0] }
+}
+
+/// An irregular quadrilateral (no symmetry: its stable edges differ).
+pub fn quad() -> Part {
+    Part::new("q".into(), vec![[0.0, 0.0], [30.0, 0.0], [24.0, 14.0], [4.0, 20.0]], vec![]).unwrap()
+}
+
+/// Push alignment: the distance from the centroid to the wall (+x) when the part touches
+/// it, d(θ) = max over vertices of their x; a part pushed against a fence descends d(θ)
+/// from the orientation it arrives at to the local minimum (a stable edge).
+pub fn predicted_rest(body: &Body, theta0: f64) -> f64 {
+    let d = |th: f64| {
+        let (s, c) = f64::sin_cos(th);
+        body.rings[0].iter().map(|p| c * p[0] - s * p[1]).fold(f64::MIN, f64::max)
+    };
+    let (mut th, h) = (theta0, 1e-5);
+    loop {
+        let best = [th - h, th + h].into_iter().min_by(|a, b| d(*a).total_cmp(&d(*b)));
+        match best {
+            Some(b) if d(b) < d(th) - 1e-15 => th = b,
+            _ => return th,
+        }
+    }
 }
