@@ -107,9 +107,10 @@ pub struct PlanArgs {
     /// What the plan is shortest in: steps, or time (the sum of the step durations).
     #[arg(long, value_enum, default_value_t = MinimizeArg::Steps)]
     minimize: MinimizeArg,
-    /// Straight-node step maps: simulated approach from both sides of the node (dynamic),
-    /// or the static alignment function checked by simulation afterwards (static).
-    #[arg(long, value_enum, default_value_t = Maps::Dynamic)]
+    /// Straight-node step maps: the static alignment function checked by simulation
+    /// afterwards (static), the simulated approach from both sides of the node (dynamic), or
+    /// static first and dynamic when that gives no plan (auto).
+    #[arg(long, value_enum, default_value_t = Maps::Auto)]
     maps: Maps,
     /// Every part may land on either face: plan for it and its mirror image at once (as a
     /// part file's `"flips": true` does for that part; docs/plan.md, "Both faces").
@@ -120,6 +121,7 @@ pub struct PlanArgs {
 /// `--maps`: which step maps straight-node modes use ([`MapKind`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum Maps {
+    Auto,
     Static,
     Dynamic,
 }
@@ -246,6 +248,7 @@ impl PlanArgs {
             safety: self.safety,
             feed: region,
             maps: match self.maps {
+                Maps::Auto => MapKind::Auto,
                 Maps::Static => MapKind::Static,
                 Maps::Dynamic => MapKind::Dynamic,
             },

@@ -41,10 +41,15 @@ use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
 /// Which model gives straight-node step maps ([`super::PlanOptions::maps`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum MapKind {
+    /// The static maps first (checked by simulation), the dynamic ones when those give no
+    /// plan ([`super::fallback`]): the static maps are 10–30× cheaper and a scan of 750
+    /// problems found no plan the dynamic maps find and they miss (docs/plan.md).
+    #[default]
+    Auto,
     /// The paper's alignment function (balance, then rotate), checked afterwards by simulation.
     Static,
-    /// Measured by simulating the approach from both sides of the node (this module).
-    #[default]
+    /// Measured by simulating the approach from both sides of the node (this module); the
+    /// static maps when those give no plan.
     Dynamic,
 }
 

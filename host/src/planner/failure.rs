@@ -4,6 +4,7 @@
 use super::Problem;
 use super::maps::StepMap;
 use super::options::PlanOptions;
+use super::symmetry::symmetry_note;
 use crate::model::angle::cdist;
 
 /// Why no plan was found.
@@ -106,7 +107,7 @@ impl Problem {
         };
         let set: Vec<f64> = best.0.iter().map(|&u| uni[u]).collect();
         let list = set.iter().map(|v| format!("{v:.2}°")).collect::<Vec<_>>().join(", ");
-        let mut why = Vec::new();
+        let (mut why, mut rules) = (Vec::new(), Vec::new());
         for (k, map) in self.maps.iter().enumerate() {
             if map.neutral {
                 why.push(format!("mode {} is neutral (keeps every orientation)", k + 1));
@@ -119,20 +120,47 @@ impl Problem {
                     "mode {}: a simulated approach from {t:.2}° does not come to rest",
                     k + 1
                 )),
-                Some((t, d)) => why.push(format!(
-                    "mode {} would put {t:.2}° only {d:.2}° from a basin boundary (margin {}°)",
-                    k + 1,
-                    opt.margin_deg
-                )),
+                Some((t, d)) => {
+                    why.push(format!(
+                        "mode {} may not act on {t:.2}° ({d:.2}° from a basin boundary)",
+                        k + 1
+                    ));
+                    let rule = margin_rule(map, opt.margin_deg);
+                    if !rules.contains(&rule) {
+                        rules.push(rule);
+                    }
+                }
                 None => why.push(keeps_apart(k, map, &set, opt.margin_deg, p)),
             }
         }
+        let rules =
+            if rules.is_empty() { String::new() } else { format!(" ({})", rules.join("; ")) };
+        let note = symmetry_note(self.symmetry_centre, &set, p)
+            .map(|n| format!(". {n}"))
+            .unwrap_or_default();
         format!(
-            "orientations {list} (mod {p}°) stay apart after every sequence ({} sets searched): {}",
+            "orientations {list} (mod {p}°) stay apart after every sequence ({} sets searched): \
+             {}{rules}{note}",
             nodes.len(),
             why.join("; ")
         )
     }
+}
+
+/// The margin rule a map's steps obey, stated: `--margin-deg`, plus the sampling allowance of a
+/// simulated map.
+fn margin_rule(map: &StepMap, margin: f64) -> String {
+    let slack = map.slack;
+    let rule = if slack > 1e-9 {
+        format!(
+            "{:.2}° (--margin-deg {margin}° plus {slack:.2}°, half the spacing of the map's \
+             simulated start orientations)",
+            margin + slack
+        )
+    } else {
+        format!("{margin}° (--margin-deg)")
+    };
+    format!("a step keeps every orientation at least {rule} from its basin boundaries")
 }
 
 /// Why mode `k` leaves the orientations `set` apart: their images, and which orientation a

@@ -127,19 +127,20 @@ pub fn plan_parts(
         parts.iter().map(|p| Problem::new(p, plate, opt)).collect::<Result<Vec<_>, _>>()?;
     let parts: Vec<&Part> = parts.iter().collect();
     let refs: Vec<&Problem> = problems.iter().collect();
-    match plan_parts_with(&parts, plate, opt, &refs, goals) {
-        // As in [`super::plan`]: the static maps' plan rather than none.
-        Err(e) if super::falls_back(&e, plate, opt) => {
-            let st = PlanOptions { maps: super::MapKind::Static, ..*opt };
-            let statics = parts
+    let first = plan_parts_with(&parts, plate, opt, &refs, goals);
+    match (first, super::fallback(opt)) {
+        (Err(e), Some(kind)) if super::falls_back(&e, plate, opt) => {
+            let other = PlanOptions { maps: kind, ..*opt };
+            let remapped = parts
                 .iter()
                 .zip(&problems)
-                .map(|(p, pr)| super::static_problem(p, plate, opt, pr))
+                .map(|(p, pr)| super::remapped(p, plate, opt, pr, kind))
                 .collect::<Result<Vec<_>, _>>()?;
-            let refs: Vec<&Problem> = statics.iter().collect();
-            plan_parts_with(&parts, plate, &st, &refs, goals).map_err(|_| e)
+            let refs: Vec<&Problem> = remapped.iter().collect();
+            plan_parts_with(&parts, plate, &other, &refs, goals)
+                .map_err(|second| super::reported(e, second, opt))
         }
-        other => other,
+        (other, _) => other,
     }
 }
 

@@ -2,10 +2,12 @@
 //! brings every start orientation to one final orientation.
 //!
 //! 1. **Step maps.** Each mode gives a map θ ↦ θ' (plate frame) with its basin boundaries:
-//!    - straight node of direction α, static ([`MapKind::Static`]): the shared fixed-point analysis in the node frame,
+//!    - straight node of direction α, static ([`MapKind::Static`]; by default first,
+//!      [`MapKind::Auto`]): the shared fixed-point analysis in the node frame,
 //!      θ' = α − 90° + a(θ − α + 90°); boundaries = unstable rests (the f64 reference can be
 //!      used instead, [`Backend::F64`], to check agreement);
-//!    - straight nodes, by default ([`MapKind::Dynamic`], [`dynamic`]): measured by
+//!    - straight nodes, [`MapKind::Dynamic`] ([`dynamic`]; by default when the static maps
+//!      give no plan): measured by
 //!      simulating the approach to the node from both sides for 72 start orientations; an
 //!      orientation whose outcome depends on the side is mapped to every rest it reaches;
 //!    - hyperbola and grid nodes: quasi-static simulation ([`crate::motion::sim`]) from `sim_starts`
@@ -67,7 +69,9 @@ pub use options::{Backend, PlanOptions};
 pub use result::{PlannedStep, Synthesis};
 pub use settle::{LINGER_GAP, Settle, settle_time};
 pub(crate) use settle::{slowest_settled, start_points, step_duration_ms};
-pub use symmetry::{plan_period, symmetry_order};
+pub use symmetry::{
+    centrally_symmetric, plan_period, symmetry_centre, symmetry_note, symmetry_order,
+};
 
 /// Everything the search needs, computed once per part and plate.
 #[derive(Debug, Clone)]
@@ -76,6 +80,9 @@ pub struct Problem {
     pub maps: Vec<StepMap>,
     /// Period (deg).
     pub period: f64,
+    /// The plate centre when every mode's field is centrally symmetric about it
+    /// ([`symmetry_centre`]): named when 180° twins stay apart.
+    pub symmetry_centre: Option<[f64; 2]>,
 }
 
 impl Problem {
@@ -87,22 +94,12 @@ impl Problem {
             .modes
             .iter()
             .map(|mode| match mode.node {
-                Node::Line { .. } => match opt.maps {
-                    MapKind::Static => line_map(part, mode, opt.backend),
-                    MapKind::Dynamic => MapCache::global().line_map(
-                        part,
-                        mode,
-                        plate,
-                        period,
-                        opt.backend,
-                        opt.dyn_maps,
-                    ),
-                }
-                .map_err(PlanFailure::Model),
+                Node::Line { .. } => line_map_of(part, mode, plate, period, opt, opt.maps)
+                    .map_err(PlanFailure::Model),
                 _ => Ok(sampled_map(&body, mode, plate, opt.sim_starts, period)),
             })
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(Problem { maps, period })
+        Ok(Problem { maps, period, symmetry_centre: symmetry_centre(plate) })
     }
 
     /// Breadth-first search; returns mode indices and the predicted sets.
@@ -132,57 +129,83 @@ impl Problem {
     }
 }
 
-/// Plans: maps, search, durations, position; with a feed region, by tracking poses from it
-/// ([`feed::plan`], no progress shown). With [`MapKind::Dynamic`] maps and no plan over them,
-/// the static maps (with the dynamic check) are tried before giving up, and the failure
-/// reported is the dynamic maps' one.
+/// Plans: maps, search, durations, position ([`plan_parts`] for one part, its goal
+/// [`PlanOptions::goal_deg`]); with a feed region, by tracking poses from it ([`feed::plan`], no
+/// progress shown). When the maps of [`PlanOptions::maps`] give no plan, the other maps are
+/// tried before giving up ([`fallback`]).
 pub fn plan(part: &Part, plate: &PlateModel, opt: &PlanOptions) -> Result<Synthesis, PlanFailure> {
     if let Some(region) = &opt.feed {
         return feed::plan(part, plate, opt, region, &indicatif::ProgressBar::hidden());
     }
-    let problem = Problem::new(part, plate, opt)?;
-    let plan = plan_with(part, plate, opt, &problem);
-    // Dynamic maps hold the margin to every measured boundary, which can rule out a plan
-    // the static maps find and the dynamic check confirms at its start points (the boundary
-    // moves with the approach, sometimes to within the margin): then that plan is taken
-    // rather than none, so the default finds every plan the static maps find.
-    match plan {
-        Err(e) if falls_back(&e, plate, opt) => {
-            let st = PlanOptions { maps: MapKind::Static, ..*opt };
-            let statics = static_problem(part, plate, opt, &problem)?;
-            plan_with(part, plate, &st, &statics).map_err(|_| e)
-        }
-        other => other,
+    plan_parts(std::slice::from_ref(part), plate, opt, &[opt.goal_deg])
+}
+
+/// The maps tried when those of `opt` give no plan: [`MapKind::Auto`] (static first) tries the
+/// dynamic maps, which can find a plan where the static map's basin boundary is not where a
+/// part arriving from afar meets it; [`MapKind::Dynamic`] tries the static ones (a measured
+/// boundary can move to within the margin of a rest the static plan keeps, and the dynamic
+/// check at its start points confirms that plan); [`MapKind::Static`] nothing.
+pub(crate) fn fallback(opt: &PlanOptions) -> Option<MapKind> {
+    match opt.maps {
+        MapKind::Auto => Some(MapKind::Dynamic),
+        MapKind::Dynamic => Some(MapKind::Static),
+        MapKind::Static => None,
     }
 }
 
-/// Whether a search over dynamic maps that found no plan (none at all, none reaching the goal
-/// orientation or fixing the position) is tried again over static maps.
+/// Whether a search that found no plan (none at all, none reaching the goal orientation or
+/// fixing the position) is tried again over the [`fallback`] maps: only when a straight node
+/// is there to map differently.
 pub(crate) fn falls_back(e: &PlanFailure, plate: &PlateModel, opt: &PlanOptions) -> bool {
     !matches!(e, PlanFailure::Model(_))
-        && opt.maps == MapKind::Dynamic
+        && fallback(opt).is_some()
         && plate.modes.iter().any(|m| matches!(m.node, Node::Line { .. }))
 }
 
-/// `problem` with its straight-node maps replaced by the static ones (the simulated maps of
+/// Of two failures, first over `opt.maps` and then over its [`fallback`], the one reported:
+/// the dynamic maps' (they name the boundaries a part arriving from afar meets, and which
+/// orientation depends on the side it comes from).
+pub(crate) fn reported(first: PlanFailure, second: PlanFailure, opt: &PlanOptions) -> PlanFailure {
+    if opt.maps == MapKind::Dynamic { first } else { second }
+}
+
+/// `problem` with its straight-node maps replaced by those of `kind` (the simulated maps of
 /// curved and grid nodes are kept).
-pub(crate) fn static_problem(
+pub(crate) fn remapped(
     part: &Part,
     plate: &PlateModel,
     opt: &PlanOptions,
     problem: &Problem,
+    kind: MapKind,
 ) -> Result<Problem, PlanFailure> {
     let maps = plate
         .modes
         .iter()
         .zip(&problem.maps)
         .map(|(mode, map)| match mode.node {
-            Node::Line { .. } => line_map(part, mode, opt.backend),
+            Node::Line { .. } => line_map_of(part, mode, plate, problem.period, opt, kind),
             _ => Ok(map.clone()),
         })
         .collect::<Result<Vec<_>, _>>()
         .map_err(PlanFailure::Model)?;
-    Ok(Problem { maps, period: problem.period })
+    Ok(Problem { maps, ..problem.clone() })
+}
+
+/// A straight-node map of `kind` ([`MapKind::Auto`] starts with the static one).
+fn line_map_of(
+    part: &Part,
+    mode: &crate::model::plate::Mode,
+    plate: &PlateModel,
+    period: f64,
+    opt: &PlanOptions,
+    kind: MapKind,
+) -> Result<StepMap, String> {
+    match kind {
+        MapKind::Static | MapKind::Auto => line_map(part, mode, opt.backend),
+        MapKind::Dynamic => {
+            MapCache::global().line_map(part, mode, plate, period, opt.backend, opt.dyn_maps)
+        }
+    }
 }
 
 /// [`plan`] with the maps already built: the search ([`search`]) for the goal of `opt`, then a

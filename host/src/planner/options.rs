@@ -33,8 +33,9 @@ pub struct PlanOptions {
     pub feed: Option<feed::FeedRegion>,
     /// Settings of the feed-region search.
     pub feed_search: feed::FeedSearch,
-    /// Straight-node maps: measured by simulating the approach from both sides
-    /// ([`MapKind::Dynamic`], default) or the static alignment function ([`MapKind::Static`]).
+    /// Straight-node maps: the static alignment function ([`MapKind::Static`]), measured by
+    /// simulating the approach from both sides ([`MapKind::Dynamic`]), or static first and
+    /// dynamic when that gives no plan ([`MapKind::Auto`], default).
     pub maps: MapKind,
     /// Settings of dynamic maps.
     pub dyn_maps: DynSettings,
