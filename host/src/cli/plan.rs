@@ -52,6 +52,39 @@ fn search_bar(hidden: bool) -> indicatif::ProgressBar {
     bar
 }
 
+/// The orientation-set planner's progress bar: drawn only once planning has taken more than a
+/// second (most plans take less), hidden for JSON output (and by indicatif when stderr is no
+/// terminal).
+struct LateBar {
+    start: std::time::Instant,
+    hidden: bool,
+    bar: std::cell::OnceCell<indicatif::ProgressBar>,
+}
+
+impl LateBar {
+    fn new(hidden: bool) -> LateBar {
+        LateBar { start: std::time::Instant::now(), hidden, bar: std::cell::OnceCell::new() }
+    }
+
+    /// The planner's progress callback ([`planner::Progress`]).
+    fn update(&self, what: &str, done: usize, total: usize) {
+        let late = self.start.elapsed() >= std::time::Duration::from_secs(1);
+        if self.hidden || (self.bar.get().is_none() && !late) {
+            return;
+        }
+        let bar = self.bar.get_or_init(|| search_bar(false));
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+        bar.set_message(what.to_string());
+    }
+
+    fn finish(&self) {
+        if let Some(bar) = self.bar.get() {
+            bar.finish_and_clear();
+        }
+    }
+}
+
 /// What `--minimize` makes the plan shortest in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum MinimizeArg {
@@ -268,7 +301,14 @@ impl PlanArgs {
                 bar.finish_and_clear();
                 syn
             }
-            None => planner::plan_parts(parts, plate, &opt, goals),
+            None => {
+                let bar = LateBar::new(self.json);
+                let syn = planner::plan_parts_progress(parts, plate, &opt, goals, &|w, d, n| {
+                    bar.update(w, d, n)
+                });
+                bar.finish();
+                syn
+            }
         }
     }
 }

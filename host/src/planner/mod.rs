@@ -54,7 +54,7 @@ pub mod search;
 mod settle;
 mod symmetry;
 
-pub use goal::{PartPlan, plan_parts, plan_parts_with};
+pub use goal::{PartPlan, plan_parts, plan_parts_progress, plan_parts_with};
 pub use search::Minimize;
 
 pub use dynamic::{DynSettings, MapCache, MapKind};
@@ -85,20 +85,38 @@ pub struct Problem {
     pub symmetry_centre: Option<[f64; 2]>,
 }
 
+/// A progress callback: (what is being done, units done, units in all). The planner calls it
+/// as each mode's map is made; the CLI draws it ([`plan_parts_progress`]).
+pub type Progress<'a> = &'a dyn Fn(&str, usize, usize);
+
 impl Problem {
     /// Builds the maps of every mode.
     pub fn new(part: &Part, plate: &PlateModel, opt: &PlanOptions) -> Result<Problem, PlanFailure> {
+        Problem::with_progress(part, plate, opt, &|_, _, _| {})
+    }
+
+    /// [`Self::new`], calling `progress` after each mode's map.
+    pub fn with_progress(
+        part: &Part,
+        plate: &PlateModel,
+        opt: &PlanOptions,
+        progress: Progress<'_>,
+    ) -> Result<Problem, PlanFailure> {
         let period = plan_period(part, plate);
         let body = Body::with_samples(part, 160);
+        let n = plate.modes.len();
         let maps = plate
             .modes
             .iter()
-            .map(|mode| match mode.node {
+            .enumerate()
+            .inspect(|(k, _)| progress(&format!("{}: step maps", part.name), *k, n))
+            .map(|(_, mode)| match mode.node {
                 Node::Line { .. } => line_map_of(part, mode, plate, period, opt, opt.maps)
                     .map_err(PlanFailure::Model),
                 _ => Ok(sampled_map(&body, mode, plate, opt.sim_starts, period)),
             })
             .collect::<Result<Vec<_>, _>>()?;
+        progress(&format!("{}: search, check, step durations", part.name), n, n);
         Ok(Problem { maps, period, symmetry_centre: symmetry_centre(plate) })
     }
 
