@@ -147,18 +147,19 @@ impl Problem {
     }
 }
 
-/// The margin rule a map's steps obey, stated: `--margin-deg`, plus the sampling allowance of a
-/// simulated map.
+/// The margin rule a map's steps obey, stated: `--margin-deg`, plus the map's sampling
+/// allowance (simulated maps: half the spacing of their start orientations; dynamic maps: the
+/// bisection's resolution), how far a sampled boundary may lie from where it was found.
 fn margin_rule(map: &StepMap, margin: f64) -> String {
     let slack = map.slack;
     let rule = if slack > 1e-9 {
         format!(
-            "{:.2}° (--margin-deg {margin}° plus {slack:.2}°, half the spacing of the map's \
-             simulated start orientations)",
+            "{:.2}° (--margin-deg {margin}° plus {slack:.2}°, how far the map's sampled \
+             boundaries may be off)",
             margin + slack
         )
     } else {
-        format!("{margin}° (--margin-deg)")
+        format!("{margin}° (--margin-deg {margin}°)")
     };
     format!("a step keeps every orientation at least {rule} from its basin boundaries")
 }
