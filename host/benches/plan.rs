@@ -1,6 +1,7 @@
-//! Plan synthesis for a 64-vertex part on a plate with 12 straight-node modes: step maps
-//! (shared fixed-point analysis), breadth-first search, dynamic confirmation and simulated
-//! step durations (`plan`), and maps + search alone (`search`); the dynamic straight-node
+//! Plan synthesis for a 64-vertex part on a plate with 12 straight-node modes
+//! (`benches/data/`): step maps (shared fixed-point analysis), breadth-first search, dynamic
+//! confirmation and simulated step durations (`plan`, the default static maps first; and with
+//! the dynamic maps first), and maps + search alone (`search`); the dynamic straight-node
 //! maps computed from scratch (`planner::dynamic`, 72 orientations, uncached) for one mode and
 //! for all twelve. The plan and search benches reuse the process-wide map cache after their
 //! first run (as a second `plan` call in one process would).
@@ -11,41 +12,21 @@ use std::hint::black_box;
 
 use chladni::model::part::Part;
 use chladni::model::plate::PlateModel;
-use chladni::model::plate_file::PlateFile;
 use chladni::planner::{self, Backend, DynSettings, MapKind, PlanOptions, Problem, plan_period};
 use criterion::{Criterion, criterion_group, criterion_main};
 
-/// An irregular 64-gon (an ellipse with a few harmonics): no symmetry.
-fn part() -> Part {
-    let n = 64;
-    let outline = (0..n)
-        .map(|i| {
-            let a = i as f64 / n as f64 * std::f64::consts::TAU;
-            let r = 1.0 + 0.15 * (3.0 * a).cos() + 0.05 * (2.0 * a + 0.4).sin();
-            [30.0 * r * a.cos() + 5.0, 18.0 * r * a.sin() - 3.0]
-        })
-        .collect();
-    Part::new("64-gon".into(), outline, vec![]).unwrap()
-}
-
-/// Twelve straight nodes every 15°, laws and gains varied.
-fn plate() -> PlateModel {
-    let mut text = String::from("[plate]\nname = \"bench\"\nsize_mm = [300.0, 200.0]\n");
-    for i in 0..12 {
-        let law = if i % 3 == 2 { "linear" } else { "sign" };
-        let gains = if i % 2 == 1 { "gain_left = 1.0\ngain_right = 2.0\n" } else { "" };
-        text += &format!(
-            "[[mode]]\nfreq_hz = {}.0\nfield = \"{law}\"\n{gains}node = {{ kind = \"line\", angle_deg = {}.0, offset_mm = {}.0 }}\n",
-            40 + 10 * i,
-            15 * i,
-            (i - 6) * 5
-        );
-    }
-    PlateModel::from_file(&PlateFile::parse(&text, "bench").unwrap()).unwrap()
+/// The bench's data (also timed as a whole command, docs/plan.md): an irregular 64-gon (an
+/// ellipse with a few harmonics, no symmetry) and twelve straight nodes every 15°, laws and
+/// gains varied.
+fn data() -> (Part, PlateModel) {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/data");
+    let part = Part::load(&dir.join("64-gon.json")).expect("benches/data/64-gon.json");
+    let plate = PlateModel::load(&dir.join("twelve-lines.toml")).expect("twelve-lines.toml");
+    (part, plate)
 }
 
 fn bench(c: &mut Criterion) {
-    let (p, pl) = (part(), plate());
+    let (p, pl) = data();
     let opt = PlanOptions::default();
     let syn = planner::plan(&p, &pl, &opt).expect("the bench plate has a plan");
     eprintln!(
@@ -58,6 +39,10 @@ fn bench(c: &mut Criterion) {
     group.sample_size(10);
     group.bench_function("64-gon, 12 modes: plan (maps, search, durations)", |b| {
         b.iter(|| planner::plan(black_box(&p), black_box(&pl), &opt).unwrap())
+    });
+    let dynamic_first = PlanOptions { maps: MapKind::Dynamic, ..opt };
+    group.bench_function("64-gon, 12 modes: plan, dynamic maps first (--maps dynamic)", |b| {
+        b.iter(|| planner::plan(black_box(&p), black_box(&pl), &dynamic_first).unwrap())
     });
     let quick = PlanOptions { durations: false, ..opt };
     group.bench_function("64-gon, 12 modes: maps + search", |b| {

@@ -264,6 +264,7 @@ fn static_and_dynamic_maps_give_the_same_example_plan() {
         out.stdout
     };
     assert_eq!(run("static"), run("dynamic"));
+    assert_eq!(run("auto"), run("static"));
     let out = chladni(&[
         "plan",
         &ex("parts/key.svg"),
@@ -274,5 +275,5 @@ fn static_and_dynamic_maps_give_the_same_example_plan() {
     ]);
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("static") && err.contains("dynamic"), "{err}");
+    assert!(err.contains("static") && err.contains("dynamic") && err.contains("auto"), "{err}");
 }

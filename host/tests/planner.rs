@@ -141,7 +141,10 @@ fn no_plan_says_which_orientations_stay_apart() {
     let err =
         planner::plan(&part("trapezoid.json"), &plate("four-lines.toml"), &PlanOptions::default())
             .unwrap_err();
-    assert!(err.to_string().contains("from a basin boundary (margin 3°)"), "{err}");
+    let msg = err.to_string();
+    assert!(msg.contains("from a basin boundary)"), "{msg}");
+    assert!(msg.contains("a step keeps every orientation at least 3"), "{msg}");
+    assert!(msg.contains("(--margin-deg 3°"), "{msg}");
 }
 
 #[test]
@@ -241,4 +244,20 @@ node = { kind = "line", angle_deg = 45.0, offset_mm = 0.0 }
     let r = Body::new(&rect).radius;
     let (worst, _) = verify_from(&rect, &plate, &opt, 30.0, r);
     assert!(worst < 5.0, "worst final error {worst}°");
+}
+
+/// A plate whose every mode is centrally symmetric about its centre cannot tell a pose from
+/// its twin turned 180° about the centre: the failure names the symmetry and what breaks it.
+#[test]
+fn a_centrally_symmetric_plate_names_its_symmetry_and_what_breaks_it() {
+    let cross = plate_text(
+        "[[mode]]\nfreq_hz = 60.0\nnode = { kind = \"lines\", lines = [{ angle_deg = 0.0, offset_mm = 0.0 }, { angle_deg = 90.0, offset_mm = 0.0 }] }\n",
+    );
+    let opt = PlanOptions { sim_starts: 36, durations: false, ..Default::default() };
+    let err = planner::plan(&part("triangle.json"), &cross, &opt).unwrap_err();
+    let msg = err.to_string();
+    for want in ["180° twins", "centrally symmetric about the plate centre", "drive_mm", "--feed"]
+    {
+        assert!(msg.contains(want), "{want}: {msg}");
+    }
 }

@@ -54,6 +54,39 @@ fn search_bar(hidden: bool) -> indicatif::ProgressBar {
     bar
 }
 
+/// The orientation-set planner's progress bar: drawn only once planning has taken more than a
+/// second (most plans take less), hidden for JSON output (and by indicatif when stderr is no
+/// terminal).
+struct LateBar {
+    start: std::time::Instant,
+    hidden: bool,
+    bar: std::cell::OnceCell<indicatif::ProgressBar>,
+}
+
+impl LateBar {
+    fn new(hidden: bool) -> LateBar {
+        LateBar { start: std::time::Instant::now(), hidden, bar: std::cell::OnceCell::new() }
+    }
+
+    /// The planner's progress callback ([`planner::Progress`]).
+    fn update(&self, what: &str, done: usize, total: usize) {
+        let late = self.start.elapsed() >= std::time::Duration::from_secs(1);
+        if self.hidden || (self.bar.get().is_none() && !late) {
+            return;
+        }
+        let bar = self.bar.get_or_init(|| search_bar(false));
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+        bar.set_message(what.to_string());
+    }
+
+    fn finish(&self) {
+        if let Some(bar) = self.bar.get() {
+            bar.finish_and_clear();
+        }
+    }
+}
+
 /// What `--minimize` makes the plan shortest in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum MinimizeArg {
@@ -109,9 +142,10 @@ pub struct PlanArgs {
     /// What the plan is shortest in: steps, or time (the sum of the step durations).
     #[arg(long, value_enum, default_value_t = MinimizeArg::Steps)]
     minimize: MinimizeArg,
-    /// Straight-node step maps: simulated approach from both sides of the node (dynamic),
-    /// or the static alignment function checked by simulation afterwards (static).
-    #[arg(long, value_enum, default_value_t = Maps::Dynamic)]
+    /// Straight-node step maps: the static alignment function checked by simulation
+    /// afterwards (static), the simulated approach from both sides of the node (dynamic), or
+    /// static first and dynamic when that gives no plan (auto).
+    #[arg(long, value_enum, default_value_t = Maps::Auto)]
     maps: Maps,
     /// Every part may land on either face: plan for it and its mirror image at once (as a
     /// part file's `"flips": true` does for that part; docs/plan.md, "Both faces").
@@ -122,6 +156,7 @@ pub struct PlanArgs {
 /// `--maps`: which step maps straight-node modes use ([`MapKind`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum Maps {
+    Auto,
     Static,
     Dynamic,
 }
@@ -248,6 +283,7 @@ impl PlanArgs {
             safety: self.safety,
             feed: region,
             maps: match self.maps {
+                Maps::Auto => MapKind::Auto,
                 Maps::Static => MapKind::Static,
                 Maps::Dynamic => MapKind::Dynamic,
             },
@@ -267,7 +303,14 @@ impl PlanArgs {
                 bar.finish_and_clear();
                 syn
             }
-            None => planner::plan_parts(parts, plate, &opt, goals),
+            None => {
+                let bar = LateBar::new(self.json);
+                let syn = planner::plan_parts_progress(parts, plate, &opt, goals, &|w, d, n| {
+                    bar.update(w, d, n)
+                });
+                bar.finish();
+                syn
+            }
         }
     }
 }

@@ -1,8 +1,9 @@
 //! The files a user writes and the tool reads and writes: parts (JSON, SVG), plates (TOML:
 //! material, size and the menu of modes), plans (JSON, the same plan the controller runs);
 //! speed observations (CSV, [`observations`]) and in-place plate edits ([`plate_edit`]);
-//! the field law of a node ([`field`]) and the polygon helpers every room uses ([`geometry`]).
+//! angles on a circle ([`angle`]), the field law of a node ([`field`]) and the polygon helpers every room uses ([`geometry`]).
 
+pub mod angle;
 pub mod feed_region;
 pub mod field;
 pub mod geometry;

@@ -157,10 +157,7 @@ pub fn statistics(trials: &Trials, plan: &PlanFile, tol_deg: f64) -> Stats {
     if let (Some(t), Some(p)) = (plan.final_orientation_deg, plan.period_deg) {
         let errs: Vec<f64> = finals
             .iter()
-            .map(|q| {
-                let d = (q.theta.to_degrees() - t).rem_euclid(p);
-                if d > p / 2.0 { d - p } else { d }
-            })
+            .map(|q| crate::model::angle::signed_diff(q.theta.to_degrees(), t, p))
             .collect();
         // A part lost off an open edge is not oriented, wherever it fell.
         let lost = |i: usize| trials.lost.get(i).copied().unwrap_or(false);

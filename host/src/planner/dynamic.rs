@@ -31,6 +31,7 @@ use std::sync::{Mutex, OnceLock};
 
 use rayon::prelude::*;
 
+use super::cluster::{CLUSTER_DEG, Clusters};
 use super::{Backend, StepMap, cdist, line_map};
 use crate::model::field::Law;
 use crate::model::part::Part;
@@ -40,10 +41,15 @@ use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
 /// Which model gives straight-node step maps ([`super::PlanOptions::maps`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum MapKind {
+    /// The static maps first (checked by simulation), the dynamic ones when those give no
+    /// plan ([`super::fallback`]): the static maps are 10–30× cheaper and a scan of 750
+    /// problems found no plan the dynamic maps find and they miss (docs/plan.md).
+    #[default]
+    Auto,
     /// The paper's alignment function (balance, then rotate), checked afterwards by simulation.
     Static,
-    /// Measured by simulating the approach from both sides of the node (this module).
-    #[default]
+    /// Measured by simulating the approach from both sides of the node (this module); the
+    /// static maps when those give no plan.
     Dynamic,
 }
 
@@ -62,8 +68,6 @@ impl Default for DynSettings {
     }
 }
 
-/// Clustering tolerance of final orientations (deg), as for simulated curved-node maps.
-const CLUSTER_DEG: f64 = 2.0;
 /// A cluster within this of a static rest (deg) takes the exact static value.
 const SNAP_DEG: f64 = 1.0;
 
@@ -256,37 +260,6 @@ fn ray_in_box(p: [f64; 2], d: [f64; 2], lo: [f64; 2], hi: [f64; 2]) -> f64 {
     if t.is_finite() { t.max(0.0) } else { 0.0 }
 }
 
-/// Rests found so far: running means of final orientations (mod the period).
-struct Clusters {
-    reps: Vec<(f64, f64, usize)>, // (first, sum of offsets, count)
-    period: f64,
-}
-
-impl Clusters {
-    fn mean(&self, k: usize) -> f64 {
-        let r = self.reps[k];
-        r.0 + r.1 / r.2 as f64
-    }
-
-    /// The cluster of a final orientation (deg), a new one if none is within tolerance.
-    fn label(&mut self, theta: f64) -> usize {
-        let (p, fc) = (self.period, theta.rem_euclid(self.period));
-        match (0..self.reps.len()).find(|&k| cdist(self.mean(k), fc, p) < CLUSTER_DEG) {
-            Some(k) => {
-                let r = &mut self.reps[k];
-                let d = (fc - r.0 + p / 2.0).rem_euclid(p) - p / 2.0;
-                r.1 += d;
-                r.2 += 1;
-                k
-            }
-            None => {
-                self.reps.push((fc, 0.0, 1));
-                self.reps.len() - 1
-            }
-        }
-    }
-}
-
 /// The dynamic map of a straight-node mode (uncached; see [`MapCache::line_map`]).
 pub fn dynamic_line_map(
     part: &Part,
@@ -313,7 +286,7 @@ pub fn dynamic_line_map(
     let n = set.orientations.max(4);
     let step = 360.0 / n as f64;
     let first = 0.3 * step;
-    let mut clusters = Clusters { reps: Vec::new(), period };
+    let mut clusters = Clusters::new(period, CLUSTER_DEG);
     let starts = approach_starts(&body, mode, plate);
     // The runs are independent: simulated in parallel, gathered in order and clustered
     // sequentially, so the map does not depend on the thread count.
@@ -331,7 +304,7 @@ pub fn dynamic_line_map(
         .collect();
     // Does a run that ended at `f` (None: still moving) belong to outcome `a`?
     let same = |a: Option<usize>, f: Option<f64>| match (a, f) {
-        (Some(a), Some(t)) => cdist(clusters.mean(a), t.rem_euclid(period), period) < CLUSTER_DEG,
+        (Some(a), Some(t)) => clusters.holds(a, t),
         (None, None) => true,
         _ => false,
     };
@@ -356,9 +329,8 @@ pub fn dynamic_line_map(
                 .collect()
         })
         .collect();
-    let rests: Vec<f64> = (0..clusters.reps.len())
-        .map(|k| snap(clusters.mean(k).rem_euclid(period), &statics.stable, period))
-        .collect();
+    let rests: Vec<f64> =
+        clusters.means().into_iter().map(|m| snap(m, &statics.stable, period)).collect();
     let outcomes = Outcomes { first, step, labels, changes };
     let reached: Vec<f64> = {
         let mut ids: Vec<usize> = outcomes.labels.iter().flatten().flatten().copied().collect();

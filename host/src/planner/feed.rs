@@ -477,6 +477,10 @@ fn explain(t: &Tally, rejected: &[String], depth: usize, period: f64) -> String 
     if let Some(first) = rejected.first() {
         msg += &format!("; {} candidate(s) failed the check, e.g. {first}", rejected.len());
     }
+    // From one side of the plate a central symmetry is already broken; a local one is not.
+    if let Some(note) = t.best.as_ref().and_then(|b| super::symmetry_note(None, &b.2, period)) {
+        msg += &format!(". {note}");
+    }
     msg
 }
 

@@ -17,8 +17,8 @@ use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
 use super::position::{self, POSITION_TOL_MM};
 use super::search::{Minimize, Path, Reach, Search, State, Target};
 use super::{
-    PlanFailure, PlanOptions, PlannedStep, Problem, Settle, Synthesis, cdist, confirm_any,
-    on_plate_edge, settle_time, slowest_settled, start_points, step_duration_ms,
+    PlanFailure, PlanOptions, PlannedStep, Problem, Progress, Settle, Synthesis, cdist,
+    confirm_any, on_plate_edge, settle_time, slowest_settled, start_points, step_duration_ms,
 };
 
 /// One part of a plan for several parts: its predictions.
@@ -123,23 +123,38 @@ pub fn plan_parts(
     opt: &PlanOptions,
     goals: &[Option<f64>],
 ) -> Result<Synthesis, PlanFailure> {
-    let problems =
-        parts.iter().map(|p| Problem::new(p, plate, opt)).collect::<Result<Vec<_>, _>>()?;
+    plan_parts_progress(parts, plate, opt, goals, &|_, _, _| {})
+}
+
+/// [`plan_parts`], calling `progress` as the maps are made (and made again for the fallback).
+pub fn plan_parts_progress(
+    parts: &[Part],
+    plate: &PlateModel,
+    opt: &PlanOptions,
+    goals: &[Option<f64>],
+    progress: Progress<'_>,
+) -> Result<Synthesis, PlanFailure> {
+    let problems = parts
+        .iter()
+        .map(|p| Problem::with_progress(p, plate, opt, progress))
+        .collect::<Result<Vec<_>, _>>()?;
     let parts: Vec<&Part> = parts.iter().collect();
     let refs: Vec<&Problem> = problems.iter().collect();
-    match plan_parts_with(&parts, plate, opt, &refs, goals) {
-        // As in [`super::plan`]: the static maps' plan rather than none.
-        Err(e) if super::falls_back(&e, plate, opt) => {
-            let st = PlanOptions { maps: super::MapKind::Static, ..*opt };
-            let statics = parts
+    let first = plan_parts_with(&parts, plate, opt, &refs, goals);
+    match (first, super::fallback(opt)) {
+        (Err(e), Some(kind)) if super::falls_back(&e, plate, opt) => {
+            let other = PlanOptions { maps: kind, ..*opt };
+            progress("dynamic step maps (the static ones gave no plan)", 0, 1);
+            let remapped = parts
                 .iter()
                 .zip(&problems)
-                .map(|(p, pr)| super::static_problem(p, plate, opt, pr))
+                .map(|(p, pr)| super::remapped(p, plate, opt, pr, kind))
                 .collect::<Result<Vec<_>, _>>()?;
-            let refs: Vec<&Problem> = statics.iter().collect();
-            plan_parts_with(&parts, plate, &st, &refs, goals).map_err(|_| e)
+            let refs: Vec<&Problem> = remapped.iter().collect();
+            plan_parts_with(&parts, plate, &other, &refs, goals)
+                .map_err(|second| super::reported(e, second, opt))
         }
-        other => other,
+        (other, _) => other,
     }
 }
 
@@ -315,7 +330,7 @@ fn find(
         pos_mm: opt.goal_pos_mm,
     };
     let reachable: Vec<Vec<f64>> =
-        (0..parts.len()).map(|i| reachable_of(search, &reach, i)).collect();
+        (0..parts.len()).map(|i| reachable_of(search, &reach, i, target.tol_deg)).collect();
     let mut cost = |k: usize, before: Option<&State>| match opt.minimize {
         Minimize::Steps => 1,
         Minimize::Time => durations.step_ms(k, before.map(|s| search.degrees(s)).as_deref()),
@@ -337,12 +352,25 @@ fn find(
     }
 }
 
-/// Part `i`'s reachable final orientations (sorted, deduplicated).
-fn reachable_of(search: &Search<'_>, reach: &Reach, i: usize) -> Vec<f64> {
-    let p = search.unis[i].period;
-    let mut out: Vec<f64> = reach.finals.iter().map(|f| f[i]).collect();
-    out.sort_by(f64::total_cmp);
-    out.dedup_by(|a, b| cdist(*a, *b, p) < 1e-3);
+/// Part `i`'s reachable final orientations (sorted, merged within `tol`).
+fn reachable_of(search: &Search<'_>, reach: &Reach, i: usize, tol: f64) -> Vec<f64> {
+    merged(reach.finals.iter().map(|f| f[i]).collect(), tol, search.unis[i].period)
+}
+
+/// Orientations (deg, mod `p`) sorted, each kept only when it is more than `tol` from the one
+/// kept before it (and the last from the first, around the circle): orientations the goal
+/// test cannot tell apart are one reachable orientation (89.99° and 90.00° are one).
+fn merged(mut v: Vec<f64>, tol: f64, p: f64) -> Vec<f64> {
+    v.sort_by(f64::total_cmp);
+    let mut out: Vec<f64> = Vec::with_capacity(v.len());
+    for x in v {
+        if out.last().is_none_or(|&last| cdist(last, x, p) > tol) {
+            out.push(x);
+        }
+    }
+    if out.len() > 1 && cdist(out[0], out[out.len() - 1], p) <= tol {
+        out.pop();
+    }
     out
 }
 
@@ -361,14 +389,13 @@ fn unmet(
         // The other parts' goals, within the tolerance.
         let others: Vec<Option<f64>> =
             target.deg.iter().enumerate().map(|(j, g)| if j == i { None } else { *g }).collect();
-        let mut reachable: Vec<f64> = reach
+        let reachable: Vec<f64> = reach
             .finals
             .iter()
             .filter(|f| Target { deg: others.clone(), ..target.clone() }.meets(f, &periods))
             .map(|f| f[i])
             .collect();
-        reachable.sort_by(f64::total_cmp);
-        reachable.dedup_by(|a, b| cdist(*a, *b, periods[i]) < 1e-3);
+        let reachable = merged(reachable, target.tol_deg, periods[i]);
         if reachable.iter().any(|&t| cdist(t, goal, periods[i]) <= target.tol_deg) {
             continue;
         }
@@ -430,4 +457,18 @@ fn no_plan(
         })
         .unwrap_or_default();
     PlanFailure::PartsApart { apart, searched: reach.nodes.len() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::merged;
+
+    #[test]
+    fn reachable_orientations_merge_within_the_tolerance() {
+        assert_eq!(merged(vec![90.0, 89.99, 30.0], 3.0, 180.0), [30.0, 89.99]);
+        // Around the circle: 179.5° and 0.5° are 1° apart.
+        assert_eq!(merged(vec![0.5, 179.5, 90.0], 3.0, 180.0), [0.5, 90.0]);
+        assert_eq!(merged(vec![10.0, 14.0], 3.0, 360.0), [10.0, 14.0]);
+        assert!(merged(Vec::new(), 3.0, 360.0).is_empty());
+    }
 }

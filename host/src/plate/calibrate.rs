@@ -202,8 +202,7 @@ fn pose_at(trace: &[(f64, Pose)], t: f64) -> Pose {
 
 /// Signed difference a − b (deg) wrapped to (−p/2, p/2].
 fn wrap(a: f64, b: f64, p: f64) -> f64 {
-    let d = (a - b).rem_euclid(p);
-    if d > p / 2.0 { d - p } else { d }
+    crate::model::angle::signed_diff(a, b, p)
 }
 
 /// Simulates every observation once at μ = 1 (see the module docs).

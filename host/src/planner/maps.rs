@@ -1,0 +1,317 @@
+//! Step maps: each mode's map θ ↦ θ' with its basin boundaries (docs/plan.md, "Step maps"):
+//! the static straight-node map ([`line_map`]) and the simulated map of curved and grid
+//! nodes ([`sampled_map`]); dynamic straight-node maps are [`super::dynamic`].
+
+use rayon::prelude::*;
+
+use chladni_shared::analysis::field::Field;
+use chladni_shared::analysis::fx::Fx;
+use chladni_shared::analysis::geometry::Pt;
+use chladni_shared::analysis::rest::Analyzer;
+use chladni_shared::icd::units::deg_from_bam;
+
+use super::cluster::{CLUSTER_DEG, Clusters};
+use super::dynamic;
+use super::options::Backend;
+use super::symmetry::body_symmetry_order;
+use crate::analysis::reference::{RefField, Reference};
+use crate::model::angle::cdist;
+use crate::model::part::Part;
+use crate::model::plate::{Mode, Node, PlateModel};
+use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
+
+/// One mode's orientation map.
+#[derive(Debug, Clone)]
+pub struct StepMap {
+    /// Stable orientations (degrees, plate frame, [0, 360)).
+    pub stable: Vec<f64>,
+    /// Basin boundaries (degrees, [0, 360)).
+    pub boundaries: Vec<f64>,
+    /// Every orientation is at rest.
+    pub neutral: bool,
+    /// Simulated maps: start orientations (deg) and the rest each reached (deg).
+    pub(super) sampled: Option<Vec<(f64, f64)>>,
+    /// Extra distance to boundaries for sampled maps (half the start spacing).
+    pub(super) slack: f64,
+    /// Simulated grid maps: start points outside the mode's reach (no interior node
+    /// reached; see [`sampled_map`]).
+    pub dead_starts: usize,
+    /// Dynamic straight-node maps ([`dynamic`]): the measured outcome of every start
+    /// orientation from either side of the node; `None` for every other map.
+    pub(super) dynamic: Option<std::sync::Arc<dynamic::DynamicImages>>,
+}
+
+impl StepMap {
+    /// The map of a mode under which every orientation is at rest (e.g. a square, linear field).
+    pub(super) fn neutral() -> Self {
+        StepMap {
+            stable: Vec::new(),
+            boundaries: Vec::new(),
+            neutral: true,
+            sampled: None,
+            slack: 0.0,
+            dead_starts: 0,
+            dynamic: None,
+        }
+    }
+}
+
+impl StepMap {
+    /// Every orientation `theta` (deg) may reach: one for static and simulated maps, all
+    /// the rests a dynamic map measured when the outcome depends on the side the part
+    /// approaches from; `Err(distance)` when `theta` lies within `margin` of a basin boundary
+    /// (distance 0: a simulated run from it did not come to rest).
+    pub fn apply_all(&self, theta: f64, margin: f64) -> Result<Vec<f64>, f64> {
+        match &self.dynamic {
+            Some(d) if !self.neutral => {
+                self.near_boundary(theta, margin)?;
+                d.images(theta).ok_or(0.0)
+            }
+            _ => self.apply(theta, margin).map(|v| vec![v]),
+        }
+    }
+
+    /// `Err(distance)` when `theta` lies within `margin` (plus the map's slack) of a basin
+    /// boundary.
+    pub(crate) fn near_boundary(&self, theta: f64, margin: f64) -> Result<(), f64> {
+        let near =
+            self.boundaries.iter().map(|&b| cdist(theta, b, 360.0)).fold(f64::INFINITY, f64::min);
+        if near < margin + self.slack { Err(near) } else { Ok(()) }
+    }
+
+    /// The orientation reached from `theta` (deg), or `Err(distance)` when `theta` lies
+    /// within `margin` of a basin boundary. A dynamic map's ambiguous orientation (several
+    /// images, see [`Self::apply_all`]) gives `Err(0.0)`.
+    pub fn apply(&self, theta: f64, margin: f64) -> Result<f64, f64> {
+        if self.neutral {
+            return Ok(theta.rem_euclid(360.0));
+        }
+        self.near_boundary(theta, margin)?;
+        if self.dynamic.is_some() {
+            return match self.apply_all(theta, margin)?.as_slice() {
+                [v] => Ok(*v),
+                _ => Err(0.0),
+            };
+        }
+        if let Some(s) = &self.sampled {
+            let best = s
+                .iter()
+                .min_by(|a, b| cdist(a.0, theta, 360.0).total_cmp(&cdist(b.0, theta, 360.0)));
+            return match best {
+                Some(b) if b.1.is_nan() => Err(0.0),
+                Some(b) => Ok(b.1),
+                None => Ok(theta),
+            };
+        }
+        if let Some(&s) = self.stable.iter().find(|&&s| cdist(s, theta, 360.0) < 1e-3) {
+            return Ok(s);
+        }
+        // The stable rest in the same arc between consecutive boundaries.
+        let mut b: Vec<f64> = self.boundaries.clone();
+        b.sort_by(f64::total_cmp);
+        if b.is_empty() {
+            return Ok(self.stable.first().copied().unwrap_or(theta));
+        }
+        let lo = b
+            .iter()
+            .rev()
+            .find(|&&x| x <= theta.rem_euclid(360.0))
+            .copied()
+            .unwrap_or(b[b.len() - 1]);
+        let width = |x: f64| (x - lo).rem_euclid(360.0);
+        let next = b.iter().map(|&x| width(x)).filter(|&w| w > 0.0).fold(360.0, f64::min);
+        Ok(self
+            .stable
+            .iter()
+            .copied()
+            .find(|&s| width(s) > 0.0 && width(s) < next)
+            .unwrap_or(theta))
+    }
+}
+
+/// A straight-node map from the shared fixed-point analysis or the f64 reference.
+pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, String> {
+    let Node::Line { angle_deg, .. } = mode.node else {
+        return Err("not a line node".into());
+    };
+    let to_plate = |d: f64| (d + angle_deg - 90.0).rem_euclid(360.0);
+    let (mut stable, mut boundaries, neutral) = (Vec::new(), Vec::new(), false);
+    match backend {
+        Backend::Fixed => {
+            let rings = part.to_fixed();
+            let slices: Vec<&[Pt]> = rings.iter().map(Vec::as_slice).collect();
+            let kind = mode.law.to_fixed();
+            let field = Field {
+                kind,
+                gain_left: Fx::from_f64(mode.gain_left),
+                gain_right: Fx::from_f64(mode.gain_right),
+            };
+            let an = Analyzer::new(&slices, field)
+                .map_err(|e| format!("{}: cannot analyse: {e:?}", mode.name))?;
+            let a = an.analyze().map_err(|e| format!("{}: analysis failed: {e:?}", mode.name))?;
+            if a.neutral {
+                return Ok(StepMap::neutral());
+            }
+            for r in &a.rests {
+                let d = to_plate(deg_from_bam(r.angle));
+                if r.stable { stable.push(d) } else { boundaries.push(d) }
+            }
+        }
+        Backend::F64 => {
+            let r = reference_for(part, mode);
+            let (rests, neutral) = r.rests();
+            if neutral {
+                return Ok(StepMap::neutral());
+            }
+            for x in rests {
+                let d = to_plate(x.deg);
+                if x.stable { stable.push(d) } else { boundaries.push(d) }
+            }
+        }
+    }
+    Ok(StepMap {
+        stable,
+        boundaries,
+        neutral,
+        sampled: None,
+        slack: 0.0,
+        dead_starts: 0,
+        dynamic: None,
+    })
+}
+
+/// Where simulated maps start the part: the hyperbola's vertex (else the plate centre) and
+/// the four plate corners inset by the part's radius, since a part may meet a curved node
+/// anywhere and the outcome can depend on where.
+pub fn map_starts(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]> {
+    let first = match mode.node {
+        Node::Hyperbola { center_mm, angle_deg, a_mm, .. } => {
+            let (s, c) = angle_deg.to_radians().sin_cos();
+            [center_mm[0] + a_mm * c, center_mm[1] + a_mm * s]
+        }
+        _ => plate.center(),
+    };
+    let [w, h] = plate.size_mm;
+    let r = body.radius.min(w / 2.0).min(h / 2.0);
+    vec![first, [r, r], [w - r, r], [w - r, h - r], [r, h - r]]
+}
+
+/// A map from simulation (any node kind): `n` start orientations at each of [`map_starts`].
+/// Final orientations are clustered (2°, modulo the period); an orientation whose outcome
+/// differs between start points is ambiguous and treated as lying on a basin boundary, and
+/// so is one whose run does not come to rest within 5000 T₀ (T₀: time to travel one radius
+/// at full pull). A part of rotational symmetry order m (dividing `n`) is simulated from the
+/// first n/m start orientations of each point only; the others are those runs turned.
+///
+/// Grid modes only: a start point from which some run ends with the centroid within half the
+/// part's radius of the plate edge reached no interior node (near a clamped edge φ and ∂φ/∂x
+/// vanish, the pull falls off like x³ and parts drift onto the clamp); it lies outside the
+/// mode's reach, is left out of the map and counted in [`StepMap::dead_starts`].
+pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, period: f64) -> StepMap {
+    let field = FieldModel::new(mode, plate);
+    let t0 = body.radius / (mode.speed_mm_s * field.max_gain());
+    let p = SimParams {
+        speed: mode.speed_mm_s,
+        t_limit: 5000.0 * t0,
+        run_to_limit: false,
+        rim: Some(Rim::of(plate)),
+    };
+    // 0.3 of a step off 0° (so also off 45°, 90°, ... for n = 36, 90, 360): a start point on
+    // the node (the plate centre often is) would
+    // otherwise sample the symmetric unstable rests (0°, 90°, ...) exactly and report them as
+    // rests.
+    let thetas: Vec<f64> = (0..n).map(|i| (i as f64 + 0.3) * 360.0 / n as f64).collect();
+    let mut clusters = Clusters::new(period, CLUSTER_DEG);
+    let mut labels: Vec<Vec<Option<usize>>> = Vec::new();
+    let on_edge = |q: Pose| on_plate_edge(body, plate, q);
+    let mut dead_starts = 0;
+    // A part of symmetry order m started at θ + 360°/m is the same body at the same place as
+    // at θ: its run is that run turned by 360°/m (to rounding), so only the first n/m start
+    // orientations of each point are simulated.
+    let m = body_symmetry_order(body) as usize;
+    let m = if m > 1 && n.is_multiple_of(m) { m } else { 1 };
+    let (distinct, turn) = (n / m, std::f64::consts::TAU / m as f64);
+    // Every start point's runs at once, in parallel (no wait for the slowest run of each
+    // point), collected in order: the map does not depend on the thread count.
+    let poses: Vec<Pose> = map_starts(body, mode, plate)
+        .iter()
+        .flat_map(|s| {
+            thetas[..distinct].iter().map(|th| Pose { x: s[0], y: s[1], theta: th.to_radians() })
+        })
+        .collect();
+    let all: Vec<(Pose, bool)> = poses
+        .par_iter()
+        .map(|&q| {
+            let r = sim::run(body, &field, p, q);
+            (r.pose, r.rested)
+        })
+        .collect();
+    for simulated in all.chunks(distinct.max(1)) {
+        // (end pose, rested) for each of the n start orientations.
+        let runs = (0..n).map(|i| {
+            let (q, rested) = simulated[i % distinct];
+            (Pose { theta: q.theta + (i / distinct) as f64 * turn, ..q }, rested)
+        });
+        if matches!(mode.node, Node::Grid(_)) && simulated.iter().any(|r| on_edge(r.0)) {
+            dead_starts += 1;
+            continue;
+        }
+        let mut label = Vec::with_capacity(n);
+        for (end, rested) in runs {
+            if !rested {
+                label.push(None);
+                continue;
+            }
+            label.push(Some(clusters.label(end.theta.to_degrees())));
+        }
+        labels.push(label);
+    }
+    let rep = clusters.means();
+    let combined: Vec<Option<usize>> = (0..n)
+        .map(|i| {
+            let l = labels.first()?[i];
+            labels.iter().all(|ls| ls[i] == l).then_some(l)?
+        })
+        .collect();
+    let mut boundaries = Vec::new();
+    for i in 0..n {
+        let j = (i + 1) % n;
+        if combined[i].is_none() || combined[i] != combined[j] {
+            boundaries.push((thetas[i] + 180.0 / n as f64).rem_euclid(360.0));
+        }
+    }
+    let sampled =
+        thetas.iter().zip(&combined).map(|(&th, l)| (th, l.map_or(f64::NAN, |l| rep[l]))).collect();
+    StepMap {
+        stable: rep,
+        boundaries,
+        neutral: false,
+        sampled: Some(sampled),
+        slack: 180.0 / n as f64,
+        dead_starts,
+        dynamic: None,
+    }
+}
+
+/// Does a part that ended at `q` sit on the plate's edge (centroid within its radius of
+/// it) rather than on an interior node?
+pub(crate) fn on_plate_edge(body: &Body, plate: &PlateModel, q: Pose) -> bool {
+    let [w, h] = plate.size_mm;
+    let edge = body.radius;
+    q.x < edge || q.y < edge || q.x > w - edge || q.y > h - edge
+}
+
+/// The f64 reference analysis of `part` under a straight-node mode's field law and gains.
+fn reference_for(part: &Part, mode: &Mode) -> Reference {
+    Reference::new(
+        part,
+        RefField { law: mode.law, gain_left: mode.gain_left, gain_right: mode.gain_right },
+    )
+}
+
+/// Centroid offset across a straight node at a rest orientation (mm, along x̂ = −n̂ from the
+/// node line), by the f64 balance in the node frame.
+pub(crate) fn balance_offset(part: &Part, mode: &Mode, theta_deg: f64) -> f64 {
+    let Node::Line { angle_deg, .. } = mode.node else { return 0.0 };
+    reference_for(part, mode).balance(theta_deg - angle_deg + 90.0).0
+}
