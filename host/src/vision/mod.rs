@@ -108,6 +108,22 @@ pub enum LocateError {
     },
 }
 
+impl LocateError {
+    /// The error's name in `--json` output.
+    pub fn name(&self) -> &'static str {
+        match self {
+            LocateError::NoParts => "no_parts",
+            LocateError::Size(..) => "bad_size",
+            LocateError::NoPlate(_) => "no_plate",
+            LocateError::Corners(RectifyError::OutsideImage { .. }) => "corners_outside_image",
+            LocateError::Corners(RectifyError::NotConvex(_)) => "corners_not_convex",
+            LocateError::PartTooLarge { .. } => "part_too_large",
+            LocateError::PartTooSmall { .. } => "part_too_small",
+            LocateError::NothingMatches { .. } => "nothing_matches",
+        }
+    }
+}
+
 /// A part kind to look for.
 #[derive(Debug, Clone)]
 pub struct Template {

@@ -10,6 +10,7 @@ use image::{GrayImage, Luma};
 use imageproc::filter::gaussian_blur_f32;
 
 use super::plot::placed;
+use super::{Located, Template};
 use crate::model::geometry::segments_meet;
 use crate::model::part::{Part, inside};
 use crate::plate::photo::rectify::Homography;
@@ -258,4 +259,52 @@ fn partner(
         (o.c[0] - p.c[0]).hypot(o.c[1] - p.c[1]) > radius(parts, o) + radius(parts, &p) + gap_mm
     });
     (on_plate && clear).then_some(p)
+}
+
+/// The tests' and the bench's parts: an L and a right triangle (both chiral: their flipped face is another
+/// shape) and a tab with a hole on its mirror axis (the same shape on both faces).
+pub fn sample_parts() -> Vec<Part> {
+    let hole: Vec<[f64; 2]> = (0..12)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / 12.0;
+            [8.0 + 4.0 * a.cos(), 9.0 + 4.0 * a.sin()]
+        })
+        .collect();
+    vec![
+        Part::new(
+            "ell".into(),
+            vec![[0.0, 0.0], [40.0, 0.0], [40.0, 10.0], [12.0, 10.0], [12.0, 28.0], [0.0, 28.0]],
+            vec![],
+        )
+        .unwrap(),
+        Part::new("tri".into(), vec![[0.0, 0.0], [36.0, 0.0], [0.0, 22.0]], vec![]).unwrap(),
+        Part::new(
+            "tab".into(),
+            vec![[0.0, 0.0], [30.0, 0.0], [30.0, 18.0], [0.0, 18.0]],
+            vec![hole],
+        )
+        .unwrap(),
+    ]
+}
+
+/// Errors (mm, deg) of the located part matching placed part `p`, folding the symmetry
+/// period and a self-mirrored part's flip; `None` when no located part is within 5 mm or its
+/// face is wrong.
+pub fn pose_error(t: &[Template], found: &[Located], p: &Placed) -> Option<(f64, f64)> {
+    let tm = &t[p.part];
+    let (mut theta, mut flipped) = (p.theta_deg, p.flipped);
+    if let (true, Some(turn)) = (flipped, tm.flip_turn_deg) {
+        theta += turn;
+        flipped = false;
+    }
+    let l = found.iter().filter(|l| l.kind == p.part).min_by(|a, b| {
+        let d = |l: &&Located| (l.x_mm - p.c[0]).hypot(l.y_mm - p.c[1]);
+        d(a).total_cmp(&d(b))
+    })?;
+    let dist = (l.x_mm - p.c[0]).hypot(l.y_mm - p.c[1]);
+    if dist > 5.0 || l.flipped != flipped {
+        return None;
+    }
+    let d = (l.theta_deg - theta).rem_euclid(tm.period_deg);
+    Some((dist, d.min(tm.period_deg - d)))
 }
