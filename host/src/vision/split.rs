@@ -59,10 +59,9 @@ pub(super) fn split(ctx: &Ctx, b: &Blob) -> Option<Vec<Located>> {
     let mut k = 2u8;
     while f64::from(k) < 0.5 * largest_r && k < 40 {
         let seeds = pieces(&mask, k, 0.05 * smallest, off);
-        if seeds.len() >= 2 && seeds.len() <= MAX_PIECES {
-            if let Some(found) = fit_pieces(ctx, b, &seeds, i32::from(k) + 4) {
-                return Some(found);
-            }
+        let fits = (2..=MAX_PIECES).contains(&seeds.len());
+        if let Some(found) = fits.then(|| fit_pieces(ctx, b, &seeds, i32::from(k) + 4)).flatten() {
+            return Some(found);
         }
         if seeds.len() > MAX_PIECES {
             return None;

@@ -80,8 +80,11 @@ impl Photo {
     }
 }
 
+/// A placed part's rings (plate frame, mm), centroid and bounding radius.
+type Shape = (Vec<Vec<[f64; 2]>>, [f64; 2], f64);
+
 /// The rings of every placed part (plate frame, mm) and each part's bounding circle.
-fn shapes(s: &Photo) -> Vec<(Vec<Vec<[f64; 2]>>, [f64; 2], f64)> {
+fn shapes(s: &Photo) -> Vec<Shape> {
     s.placed
         .iter()
         .map(|p| {
@@ -96,7 +99,7 @@ fn shapes(s: &Photo) -> Vec<(Vec<Vec<[f64; 2]>>, [f64; 2], f64)> {
 }
 
 /// What lies at plate point `q`: 0 plate, 1 part, 2 off the plate.
-fn class(s: &Photo, shapes: &[(Vec<Vec<[f64; 2]>>, [f64; 2], f64)], q: [f64; 2]) -> usize {
+fn class(s: &Photo, shapes: &[Shape], q: [f64; 2]) -> usize {
     if !(q[0] >= 0.0 && q[1] >= 0.0 && q[0] <= s.size_mm[0] && q[1] <= s.size_mm[1]) {
         return 2;
     }
