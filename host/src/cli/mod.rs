@@ -14,6 +14,7 @@ mod demo;
 mod device;
 mod emulator;
 mod flash;
+mod locate;
 mod parse;
 mod part;
 mod physics;
@@ -114,6 +115,8 @@ enum Command {
     Emulator(emulator::EmulatorArgs),
     /// Write the controller firmware to the board through a debug probe.
     Flash(flash::FlashArgs),
+    /// The parts in a photo of the plate: poses, faces, match scores (docs/plate.md).
+    Locate(locate::LocateArgs),
     /// Plate modes from theory, node lines from Chladni photos.
     #[command(subcommand)]
     Plate(plate::PlateCommand),
@@ -137,6 +140,7 @@ impl Cli {
             Command::Device(cmd) => cmd.run(),
             Command::Emulator(args) => args.run(),
             Command::Flash(args) => args.run(),
+            Command::Locate(args) => args.run(),
             Command::Plate(cmd) => cmd.run(),
             Command::Physics(cmd) => cmd.run(),
             Command::Plan(args) => args.run(),

@@ -105,15 +105,7 @@ pub fn warp(img: &GrayImage, h_out_to_in: &Homography, w: u32, h: u32, fill: u8)
 /// corners, i.e. plate (0, 0), (W, 0), (W, H), (0, H)). The result is as many pixels wide and
 /// high as the longer of the plate's opposite edges in the photo.
 pub fn rectify(img: &GrayImage, corners: [[f64; 2]; 4]) -> Result<GrayImage, RectifyError> {
-    let (iw, ih) = (img.width(), img.height());
-    for (index, &[x, y]) in corners.iter().enumerate() {
-        if !(x >= -1.0 && y >= -1.0 && x <= iw as f64 + 1.0 && y <= ih as f64 + 1.0) {
-            return Err(RectifyError::OutsideImage { index, x, y, w: iw, h: ih });
-        }
-    }
-    if !convex(&corners) {
-        return Err(RectifyError::NotConvex(corners));
-    }
+    check_corners(img.width(), img.height(), &corners)?;
     let len = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
     let [bl, br, tr, tl] = corners;
     let w = len(bl, br).max(len(tl, tr)).round().max(2.0);
@@ -125,6 +117,20 @@ pub fn rectify(img: &GrayImage, corners: [[f64; 2]; 4]) -> Result<GrayImage, Rec
     grey.sort_unstable();
     let fill = grey.get(grey.len() / 2).copied().unwrap_or(0);
     Ok(warp(img, &hom, w as u32, h as u32, fill))
+}
+
+/// Corners usable for a `w`×`h` px photo: each inside it (within a pixel) and the four a
+/// convex quadrilateral in the given order.
+pub fn check_corners(w: u32, h: u32, corners: &[[f64; 2]; 4]) -> Result<(), RectifyError> {
+    for (index, &[x, y]) in corners.iter().enumerate() {
+        if !(x >= -1.0 && y >= -1.0 && x <= w as f64 + 1.0 && y <= h as f64 + 1.0) {
+            return Err(RectifyError::OutsideImage { index, x, y, w, h });
+        }
+    }
+    if !convex(corners) {
+        return Err(RectifyError::NotConvex(*corners));
+    }
+    Ok(())
 }
 
 /// Consecutive edges all turn the same way (and none is degenerate).
