@@ -9,7 +9,7 @@ use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
-use super::{PlotError, check_extension, text, write_figure};
+use super::{Figure, PlotError, check_extension, text, write_chart};
 
 /// What to draw.
 #[derive(Debug, Clone)]
@@ -33,23 +33,23 @@ pub struct PlotData {
 /// Writes the plot; the format follows the extension (`.png` or `.svg`, checked first).
 pub fn write(path: &Path, data: &PlotData) -> Result<(), PlotError> {
     check_extension("--plot", path, &EXTENSIONS)?;
-    let svg = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("svg"));
-    let size = (1200, 420);
-    write_figure(path, |tmp| {
-        if svg {
-            let root = SVGBackend::new(tmp, size).into_drawing_area();
-            draw(&root, data)?;
-            root.present().map_err(text)
-        } else {
-            let root = BitMapBackend::new(tmp, size).into_drawing_area();
-            draw(&root, data)?;
-            root.present().map_err(text)
-        }
-    })
+    write_chart(path, data)
 }
 
 /// The file types [`write`] can draw.
-pub const EXTENSIONS: [&str; 2] = ["png", "svg"];
+pub const EXTENSIONS: [&str; 2] = super::FIGURE_EXTENSIONS;
+
+impl Figure for PlotData {
+    fn size(&self) -> (u32, u32) {
+        (1200, 420)
+    }
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>
+    where
+        DB::ErrorType: 'static,
+    {
+        draw(root, self)
+    }
+}
 
 fn err<E: std::fmt::Display>(e: E) -> String {
     text(e)
