@@ -13,6 +13,7 @@
 //! - [`cell`]: the controller served to a cell: one link owner for Modbus TCP and HTTP.
 //! - [`output`]: output files written atomically, never over one of the command's inputs.
 //! - [`rng`]: the one seeded pseudo-random generator.
+//! - [`shapes`]: the JSON and CSV shapes of the data the commands print for research.
 #![forbid(unsafe_code)]
 
 pub mod analysis;
@@ -26,3 +27,4 @@ pub mod planner;
 pub mod plate;
 pub mod plot;
 pub mod rng;
+pub mod shapes;
