@@ -7,6 +7,8 @@ use std::path::Path;
 
 use serde::Serialize;
 
+use crate::motion::body::Pose;
+use crate::motion::montecarlo::{Report, Trials};
 use crate::output::{OutputError, write_with};
 
 /// One sample of a rest analysis: the turn function t(θ) (normalised so that max |t| = 1 over
@@ -57,10 +59,64 @@ pub struct TrialPoses {
 /// integrator's output times.
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct TraceLine {
+    /// The part's name.
+    pub part: String,
     /// Trial number, from 1.
     pub trial: usize,
     /// Samples `[t (s), step (from 1), x (mm), y (mm), θ (deg, unwrapped)]`.
     pub samples: Vec<[f64; 5]>,
+}
+
+/// `simulate --poses`: every trial's start, each step's end and its end, trials from 1.
+pub fn trial_poses(trials: &Trials) -> Vec<TrialPoses> {
+    let pose = |p: &Pose| PoseJson::from_mm_rad(p.x, p.y, p.theta);
+    (trials.starts.iter().zip(&trials.finals).enumerate())
+        .map(|(i, (start, end))| TrialPoses {
+            trial: i + 1,
+            start: pose(start),
+            steps: trials
+                .examples
+                .get(i)
+                .map_or(Vec::new(), |p| p.iter().skip(1).map(pose).collect()),
+            end: pose(end),
+        })
+        .collect()
+}
+
+/// `simulate --traces`: one line per kept trace, step numbers from 1, θ unwrapped (a turn
+/// through 360° reads 361°, not 1°).
+pub fn trace_lines(trials: &Trials, part: &str) -> Vec<TraceLine> {
+    (trials.traces.iter().enumerate())
+        .map(|(i, trace)| {
+            let mut theta: Vec<f64> = Vec::with_capacity(trace.len());
+            for (_, p) in trace {
+                let d = p.theta.to_degrees();
+                theta.push(match theta.last() {
+                    Some(&prev) => prev + ((d - prev + 180.0).rem_euclid(360.0) - 180.0),
+                    None => d,
+                });
+            }
+            let samples = (trace.iter().zip(theta))
+                .map(|(&(t, p), th)| {
+                    let step = trials.step_ends.iter().take_while(|&&e| e < t).count() + 1;
+                    let step = step.min(trials.step_ends.len().max(1));
+                    [t, step as f64, p.x, p.y, th]
+                })
+                .collect();
+            TraceLine { part: part.to_string(), trial: i + 1, samples }
+        })
+        .collect()
+}
+
+/// One part's `simulate --json` report, with the trials' poses under `--poses`.
+#[derive(Debug, Clone, Serialize)]
+pub struct SimulateReport {
+    /// The statistics.
+    #[serde(flatten)]
+    pub report: Report,
+    /// Every trial's poses (`--poses`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub poses: Option<Vec<TrialPoses>>,
 }
 
 /// Writes `rows` as CSV with a header row (the field names) to `path`, atomically.

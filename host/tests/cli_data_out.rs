@@ -96,3 +96,61 @@ fn analyze_plot_as_svg_is_xml_with_its_three_panels() {
     let polylines = doc.descendants().filter(|n| n.has_tag_name("polyline")).count();
     assert!(polylines >= 2, "t(θ) and a(θ) curves: {polylines}");
 }
+
+#[test]
+fn simulate_poses_and_traces_agree_with_the_statistics() {
+    let traces = tmp("traces.jsonl");
+    let args = [
+        "simulate",
+        &repo("examples/parts/triangle.json"),
+        "--plate",
+        &repo("examples/plates/four-lines.toml"),
+        "--plan",
+        &repo("examples/plans/triangle-four-lines.json"),
+        "--trials",
+        "12",
+        "--json",
+        "--poses",
+        "--traces",
+        traces.to_str().unwrap(),
+    ];
+    let v = json(&chladni(&args));
+    let poses = v["poses"].as_array().unwrap();
+    assert_eq!(poses.len(), 12, "every trial, not the first few");
+    let target = v["final_orientation_deg"].as_f64().unwrap();
+    let tol = v["tolerance_deg"].as_f64().unwrap();
+    let within = |a: f64| ((a - target + 540.0).rem_euclid(360.0) - 180.0).abs() <= tol;
+    let hits = poses.iter().filter(|p| within(p["end"]["theta_deg"].as_f64().unwrap())).count();
+    assert_eq!(hits as f64 / 12.0, v["success_rate"].as_f64().unwrap());
+    let lines: Vec<serde_json::Value> = std::fs::read_to_string(&traces)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 12);
+    for (k, (p, line)) in poses.iter().zip(&lines).enumerate() {
+        assert_eq!(p["trial"].as_u64(), Some(k as u64 + 1));
+        assert_eq!(line["trial"].as_u64(), Some(k as u64 + 1));
+        assert_eq!(p["steps"].as_array().unwrap().len(), 2, "two steps in the plan");
+        assert_eq!(p["steps"][1], p["end"]);
+        let s = line["samples"].as_array().unwrap();
+        let (first, last) = (&s[0], &s[s.len() - 1]);
+        assert_eq!(first[1].as_f64(), Some(1.0), "steps numbered from 1");
+        assert_eq!(last[1].as_f64(), Some(2.0));
+        assert!((first[2].as_f64().unwrap() - p["start"]["x_mm"].as_f64().unwrap()).abs() < 1e-9);
+        assert!((last[2].as_f64().unwrap() - p["end"]["x_mm"].as_f64().unwrap()).abs() < 1e-9);
+        assert!((last[3].as_f64().unwrap() - p["end"]["y_mm"].as_f64().unwrap()).abs() < 1e-9);
+        let th = last[4].as_f64().unwrap().rem_euclid(360.0);
+        let end = p["end"]["theta_deg"].as_f64().unwrap();
+        assert!(((th - end + 540.0).rem_euclid(360.0) - 180.0).abs() < 1e-6, "{th} vs {end}");
+        // θ unwrapped: no jump larger than a turn step between samples.
+        for w in s.windows(2) {
+            assert!((w[1][4].as_f64().unwrap() - w[0][4].as_f64().unwrap()).abs() < 180.0);
+        }
+    }
+    // --poses needs --json.
+    let out = chladni(&args[..args.len() - 3]);
+    assert!(out.status.success());
+    let out = chladni(&[&args[..8], &["--poses"]].concat());
+    assert_eq!(out.status.code(), Some(2));
+}

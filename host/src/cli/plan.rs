@@ -1,5 +1,6 @@
 //! `chladni plan PART --plate P` and `chladni simulate PART --plate P --plan PLAN`.
 
+use chladni::shapes::{self, SimulateReport, TraceLine};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -443,6 +444,13 @@ pub struct SimulateArgs {
     /// (its mirror image), reported per face; the plan must have been made for both faces.
     #[arg(long)]
     both_faces: bool,
+    /// With --json: every trial's start pose, its pose after each step and its end pose
+    /// (`poses`: trials and steps numbered from 1).
+    #[arg(long, requires = "json")]
+    poses: bool,
+    /// Write every trial's trajectory, one JSON object per line (.jsonl).
+    #[arg(long, value_name = "FILE.jsonl")]
+    traces: Option<PathBuf>,
 }
 
 /// One part's `chladni simulate --json` entry in a plan for several parts (or faces).
@@ -453,7 +461,7 @@ struct PartReport<'a> {
     face: Option<Face>,
     part: &'a str,
     #[serde(flatten)]
-    report: Report,
+    report: SimulateReport,
 }
 
 /// The trials and seed of each face: a part dropped on both faces lands face up in the
@@ -477,6 +485,7 @@ impl SimulateArgs {
             self.part.iter().map(|p| ("part", p.as_path())).collect();
         inputs.extend([("plate", self.plate.as_path()), ("plan", self.plan.as_path())]);
         check_plot("--plot", &self.plot, &["png"], &inputs)?;
+        check_plot("--traces", &self.traces, &["jsonl"], &inputs)?;
         if let Some(path) = &self.plot {
             check_output("--plot", &plan_plot::trials_plan_path(path), &inputs)?;
             if self.part.len() > 1 {
@@ -518,6 +527,7 @@ impl SimulateArgs {
         let fields: Vec<FieldModel> =
             plate.modes.iter().map(|m| FieldModel::new(m, &plate)).collect();
         let mut reports = Vec::new();
+        let mut traces = Vec::new();
         for ((part, view), &(trials, seed)) in parts.iter().zip(&views).zip(&runs) {
             let body = Body::new(part);
             let setup = Setup {
@@ -532,7 +542,8 @@ impl SimulateArgs {
             if !self.json {
                 self.print(part, steps.len(), &stats, (trials, seed));
             }
-            reports.push(Report::new(&stats, view, trials, seed, self.tol_deg));
+            let report = Report::new(&stats, view, trials, seed, self.tol_deg);
+            self.keep_data(&mut reports, &mut traces, (report, part, &sims));
             if let Some(path) = &self.plot {
                 let target = view.final_orientation_deg.zip(view.period_deg);
                 let fig = plan_plot::trials_figures(path, part, &setup, &sims, target)
@@ -542,6 +553,7 @@ impl SimulateArgs {
                 }
             }
         }
+        self.write_traces(&traces)?;
         if self.json {
             self.print_json(&faces, reports)?;
         }
@@ -550,7 +562,7 @@ impl SimulateArgs {
 
     /// `--json`: one part, the report; several (or both faces), `{"parts": [{"part": name,
     /// "face"?: "up" | "flipped", ...report}]}`.
-    fn print_json(&self, faces: &Faces, reports: Vec<Report>) -> anyhow::Result<()> {
+    fn print_json(&self, faces: &Faces, reports: Vec<SimulateReport>) -> anyhow::Result<()> {
         if faces.parts.len() == 1
             && let Some(r) = reports.first()
         {
@@ -573,9 +585,35 @@ impl SimulateArgs {
         } else {
             indicatif::ProgressBar::hidden()
         };
-        let trials = montecarlo::run_trials(setup, trials, seed, || bar.inc(1));
+        let keep = montecarlo::Keep { poses: self.poses, traces: self.traces.is_some() };
+        let trials = montecarlo::run_trials_keeping(setup, trials, seed, keep, || bar.inc(1));
         bar.finish_and_clear();
         trials
+    }
+
+    /// The report with `--poses`, and the part's `--traces` lines.
+    fn keep_data(
+        &self,
+        reports: &mut Vec<SimulateReport>,
+        traces: &mut Vec<TraceLine>,
+        (report, part, sims): (Report, &Part, &Trials),
+    ) {
+        let poses = self.poses.then(|| shapes::trial_poses(sims));
+        reports.push(SimulateReport { report, poses });
+        if self.traces.is_some() {
+            traces.extend(shapes::trace_lines(sims, &part.name));
+        }
+    }
+
+    /// `--traces FILE.jsonl`: every trial's trajectory, one line each.
+    fn write_traces(&self, lines: &[TraceLine]) -> anyhow::Result<()> {
+        if let Some(path) = &self.traces {
+            shapes::write_jsonl(path, lines).map_err(super::output_error)?;
+            if !self.json {
+                println!("traces     {} ({} trials)", path.display(), lines.len());
+            }
+        }
+        Ok(())
     }
 
     /// The plan as each part sees it (its own predictions): a plan for several parts needs

@@ -403,24 +403,28 @@ pub fn trials_figures(
     target: Option<(f64, f64)>,
 ) -> Result<PathBuf, PlotError> {
     let modes: Vec<usize> = setup.steps.iter().map(|s| s.mode).collect();
+    // The first few trials (the run may have kept every trial's trace for --traces).
+    let shown = &trials.traces[..trials.traces.len().min(crate::motion::montecarlo::TRACED_TRIALS)];
+    let examples =
+        &trials.examples[..trials.examples.len().min(crate::motion::montecarlo::EXAMPLE_TRIALS)];
     let title = format!(
         "{} on {}: simulated plan ({} trials shown)",
         part.name,
         setup.plate.name,
-        trials.traces.len()
+        shown.len()
     );
     let fig = TracesFigure {
         title: &title,
         body: setup.body,
         plate: setup.plate,
         modes: &modes,
-        traces: &trials.traces,
+        traces: shown,
         step_ends: &trials.step_ends,
         target,
     };
     traces_figure(path, &fig)?;
     let fig = trials_plan_path(path);
     let title = format!("{}: plan step by step", part.name);
-    plan_figure(&fig, &title, setup.body, setup.plate, &modes, &trials.examples)?;
+    plan_figure(&fig, &title, setup.body, setup.plate, &modes, examples)?;
     Ok(fig)
 }
