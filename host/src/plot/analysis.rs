@@ -157,11 +157,25 @@ where
         .map_err(err)?;
     turn.draw_series(LineSeries::new(data.turn.iter().copied(), BLUE.stroke_width(2)))
         .map_err(err)?;
-    turn.draw_series(data.rests.iter().map(|&(d, stable)| {
+    // Stable and unstable rests as two series, so the legend names each marker.
+    for (stable, name) in [(true, "stable rest"), (false, "unstable rest")] {
         let c = if stable { STABLE } else { UNSTABLE };
-        Circle::new((d, 0.0), 5, if stable { c.filled() } else { c.stroke_width(2) })
-    }))
-    .map_err(err)?;
+        let style = if stable { c.filled() } else { c.stroke_width(2) };
+        let rests = data.rests.iter().filter(move |r| r.1 == stable);
+        turn.draw_series(rests.map(move |&(d, _)| Circle::new((d, 0.0), 5, style)))
+            .map_err(err)?
+            .label(name)
+            .legend(move |(x, y)| Circle::new((x + 8, y), 5, style));
+    }
+    if !data.rests.is_empty() {
+        turn.configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 11))
+            .position(SeriesLabelPosition::LowerLeft)
+            .draw()
+            .map_err(err)?;
+    }
     if data.neutral {
         turn.draw_series(std::iter::once(Text::new(
             "neutral: every orientation is at rest",
