@@ -451,6 +451,10 @@ pub struct SimulateArgs {
     /// Write every trial's trajectory, one JSON object per line (.jsonl).
     #[arg(long, value_name = "FILE.jsonl")]
     traces: Option<PathBuf>,
+    /// Animate the first trials through the plan (GIF): plate, each step's node, the parts,
+    /// a clock and the step.
+    #[arg(long, value_name = "FILE.gif")]
+    animate: Option<PathBuf>,
 }
 
 /// One part's `chladni simulate --json` entry in a plan for several parts (or faces).
@@ -486,6 +490,7 @@ impl SimulateArgs {
         inputs.extend([("plate", self.plate.as_path()), ("plan", self.plan.as_path())]);
         check_plot("--plot", &self.plot, &["png"], &inputs)?;
         check_plot("--traces", &self.traces, &["jsonl"], &inputs)?;
+        check_plot("--animate", &self.animate, &["gif"], &inputs)?;
         if let Some(path) = &self.plot {
             check_output("--plot", &plan_plot::trials_plan_path(path), &inputs)?;
             if self.part.len() > 1 {
@@ -505,6 +510,7 @@ impl SimulateArgs {
                 faces.parts.len()
             )));
         }
+        self.check_animate(faces.parts.len())?;
         if self.trials < 2 && faces.of.iter().any(|o| o.face.is_some()) {
             return Err(bad("--trials 1: both faces need at least 2 trials (half each)".into()));
         }
@@ -552,6 +558,7 @@ impl SimulateArgs {
                     println!("plots      {} {}", path.display(), fig.display());
                 }
             }
+            self.write_animation(part, &setup, &sims)?;
         }
         self.write_traces(&traces)?;
         if self.json {
@@ -603,6 +610,28 @@ impl SimulateArgs {
         if self.traces.is_some() {
             traces.extend(shapes::trace_lines(sims, &part.name));
         }
+    }
+
+    /// `--animate` draws one part on one face (`n`: the parts or faces to simulate).
+    fn check_animate(&self, n: usize) -> anyhow::Result<()> {
+        if self.animate.is_some() && n > 1 {
+            return Err(bad(format!(
+                "--animate draws one part on one face; {n} parts or faces to simulate"
+            )));
+        }
+        Ok(())
+    }
+
+    /// `--animate FILE.gif`: the first trials moving through the plan.
+    fn write_animation(&self, part: &Part, setup: &Setup<'_>, sims: &Trials) -> anyhow::Result<()> {
+        if let Some(path) = &self.animate {
+            let frames = chladni::plot::animate::trials_animation(path, part, setup, sims)
+                .map_err(plot_error)?;
+            if !self.json {
+                println!("animation  {} ({frames} frames)", path.display());
+            }
+        }
+        Ok(())
     }
 
     /// `--traces FILE.jsonl`: every trial's trajectory, one line each.

@@ -1,5 +1,6 @@
 //! Figures: rest analysis (part, turn and alignment functions), plans and motion traces,
-//! Chladni figures of plate modes, the particle on a string, and the Bode plot of a sweep.
+//! Chladni figures of plate modes, the particle on a string, the Bode plot of a sweep, and the
+//! animation of a simulated plan (GIF, [`animate`]).
 //!
 //! One font for every figure: Ubuntu Light, shipped inside the binary by the
 //! `epaint_default_fonts` crate and rendered by plotters' `ab_glyph` backend, registered once
@@ -17,6 +18,7 @@ use plotters::prelude::{BitMapBackend, DrawingArea, DrawingBackend, IntoDrawingA
 use plotters::style::FontStyle;
 
 pub mod analysis;
+pub mod animate;
 pub mod bode;
 pub mod plan;
 pub mod plate;

@@ -78,7 +78,8 @@ pub fn node_polylines(mode: &Mode, plate: &PlateModel) -> Vec<Vec<(f64, f64)>> {
     }
 }
 
-fn draw_part<DB: DrawingBackend>(
+/// Draws the part at `pose`: its outline filled with `fill`, holes white, edges black.
+pub(crate) fn draw_part<DB: DrawingBackend>(
     chart: &mut ChartContext<
         '_,
         DB,
@@ -103,6 +104,9 @@ where
     }
     Ok(())
 }
+
+/// The node of the running step in the plan figure and the animation.
+pub(crate) const NODE_COLOR: RGBColor = RGBColor(200, 60, 40);
 
 /// One example start: the pose before each step and after the last.
 pub type Example = Vec<Pose>;
@@ -164,7 +168,7 @@ fn draw_plan(
                 chart
                     .draw_series(std::iter::once(PathElement::new(
                         line,
-                        RGBColor(200, 60, 40).stroke_width(2),
+                        NODE_COLOR.stroke_width(2),
                     )))
                     .map_err(err)?;
             }
@@ -205,7 +209,8 @@ pub struct TracesFigure<'a> {
     pub target: Option<(f64, f64)>,
 }
 
-const PALETTE: [RGBColor; 6] = [
+/// The trials' colours (figures and the animation).
+pub(crate) const PALETTE: [RGBColor; 6] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
