@@ -15,7 +15,7 @@ use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};
 use plotters::prelude::*;
 
-use super::plan::{NODE_COLOR, PALETTE, Trace, draw_part, node_polylines};
+use super::plan::{PALETTE, Trace, draw_part, node_polylines};
 use super::{PlotError, text, write_figure};
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
@@ -29,6 +29,8 @@ pub const WIDTH: u32 = 480;
 /// Time each frame is shown (ms), and the last one.
 const FRAME_MS: u32 = 100;
 const LAST_FRAME_MS: u32 = 2000;
+/// The node's colour: none of the trials' [`PALETTE`] (whose red is the plan figure's node).
+const NODE_COLOR: RGBColor = RGBColor(0, 139, 139);
 /// Height of the caption band above the plate (pixels).
 const CAPTION_PX: u32 = 44;
 
@@ -146,7 +148,7 @@ where
         let n = samples_until(tr, t);
         let covered: Vec<(f64, f64)> = tr[..n].iter().map(|(_, p)| (p.x, p.y)).collect();
         chart
-            .draw_series(std::iter::once(PathElement::new(covered, col.mix(0.6).stroke_width(1))))
+            .draw_series(std::iter::once(PathElement::new(covered, col.mix(0.7).stroke_width(2))))
             .map_err(text)?;
         let pose: Pose = tr[n - 1].1;
         draw_part(&mut chart, anim.body, pose, col)?;
