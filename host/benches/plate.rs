@@ -52,8 +52,8 @@ fn bench(c: &mut Criterion) {
     });
 
     let sp = StringParams::default();
-    c.bench_function("string: averaged force at one x (8 particles × 10 s)", |b| {
-        b.iter(|| string::average_force(black_box(&sp), 1.2, 10.0, 8))
+    c.bench_function("string: averaged drift at one x (8 particles × 10 s)", |b| {
+        b.iter(|| string::average_drift(black_box(&sp), 1.2, 10.0, 8))
     });
 }
 

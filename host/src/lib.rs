@@ -14,6 +14,7 @@
 //! - [`output`]: output files written atomically, never over one of the command's inputs.
 //! - [`rng`]: the one seeded pseudo-random generator.
 //! - [`vision`]: parts in a photo of the plate: poses, faces, clusters (`chladni locate`).
+//! - [`shapes`]: the JSON and CSV shapes of the data the commands print for research.
 #![forbid(unsafe_code)]
 
 pub mod analysis;
@@ -28,3 +29,4 @@ pub mod plate;
 pub mod plot;
 pub mod rng;
 pub mod vision;
+pub mod shapes;

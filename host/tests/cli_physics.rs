@@ -45,3 +45,53 @@ fn json_reports_the_threshold_and_the_stop_position() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(v["bouncing"]["stop_x"].is_null(), "{}", v["bouncing"]);
 }
+
+#[test]
+fn json_samples_are_as_many_as_asked_and_agree_with_the_text() {
+    let args = ["--e", "0.9", "--json", "--samples", "7"];
+    let out = string("60", &args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let tr = &v["trajectory"];
+    let s = tr["samples"].as_array().unwrap();
+    assert_eq!(s.len(), 7, "{tr}");
+    assert_eq!(s[0][0].as_f64(), Some(0.0));
+    assert_eq!(s[0][1].as_f64(), tr["x0"].as_f64());
+    assert_eq!(s[6][0].as_f64(), Some(60.0));
+    assert_eq!(s[6][1].as_f64(), tr["x_end"].as_f64());
+    assert!(s.windows(2).all(|w| w[0][0].as_f64() < w[1][0].as_f64()), "{tr}");
+    // The drift profile and its fit: the paper's sign (c > 0, towards the nodes), and the same
+    // c as the text report prints.
+    assert_eq!(v["drift"].as_array().unwrap().len(), 16);
+    let c = v["fit"]["c"].as_f64().unwrap();
+    assert!(c > 0.0, "{}", v["fit"]);
+    let text = String::from_utf8_lossy(&string("60", &["--e", "0.9"]).stdout).to_string();
+    assert!(text.contains(&format!("c = {c:.2e} m/s")), "{c:.2e} in {text}");
+    let bad = string("10", &["--e", "0.9", "--samples", "1"]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&bad.stderr).contains("--samples must be in 2..=100000, got 1")
+    );
+}
+
+#[test]
+fn the_figure_is_also_written_as_svg() {
+    let dir = std::env::temp_dir().join(format!("chladni-physics-svg-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let svg = dir.join("string.svg");
+    let out = string("20", &["--e", "0.9", "--plot", svg.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = std::fs::read_to_string(&svg).unwrap();
+    let doc = roxmltree::Document::parse(&text).unwrap();
+    assert_eq!(doc.root_element().tag_name().name(), "svg");
+    let texts: Vec<String> = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("text"))
+        .filter_map(|n| n.text().map(|t| t.trim().to_string()))
+        .collect();
+    for want in ["time (s)", "drift v (mm/s)", "x(t)", "fit −c sin 2x"] {
+        assert!(texts.iter().any(|t| t == want), "{want} not in {texts:?}");
+    }
+    assert!(doc.descendants().any(|n| n.has_tag_name("polyline")), "no curves");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

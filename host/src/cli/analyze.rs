@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use chladni::model::field::{Law, LawError, MAX_WAVELENGTH_MM};
 use chladni::model::part::Part;
 use chladni::plot::analysis::{self, PlotData};
+use chladni::shapes::{TurnSample, write_csv};
 use chladni_shared::analysis::field::Field;
 use chladni_shared::analysis::fx::{Bam, Fx};
 use chladni_shared::analysis::rest::{Analysis, AnalysisError, Analyzer};
@@ -13,7 +14,7 @@ use chladni_shared::icd::units::{bam_from_deg, deg_from_bam};
 use clap::Args;
 use serde::Serialize;
 
-use super::parse::f64_where;
+use super::parse::{f64_where, usize_in};
 use super::part::PartArgs;
 use super::{InputError, check_plot, plot_error};
 
@@ -41,7 +42,17 @@ pub struct AnalyzeArgs {
     /// Draw the part at rest, t(θ) and a(θ) to this file (.png or .svg).
     #[arg(long, value_name = "FILE")]
     plot: Option<PathBuf>,
+    /// With --json: add N samples of t(θ) and a(θ), θ evenly over [0°, 360°], as `samples`.
+    #[arg(long, value_name = "N", value_parser = usize_in("samples", 2, 1_000_000))]
+    samples: Option<usize>,
+    /// Write the samples of t(θ) and a(θ) as CSV (theta_deg,turn,alignment_deg; N from
+    /// --samples, else 721: every 0.5°).
+    #[arg(long, value_name = "FILE")]
+    csv: Option<PathBuf>,
 }
+
+/// Samples of t(θ) and a(θ) written by `--csv` unless `--samples` says how many.
+const CSV_SAMPLES: usize = 721;
 
 /// Binary angle → degrees in [0, 360), rounded to 1e-6° for display.
 fn deg(a: Bam) -> f64 {
@@ -56,6 +67,8 @@ struct Report<'a> {
     neutral: bool,
     part: &'a str,
     period_deg: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    samples: Option<Vec<TurnSample>>,
     stable_deg: Vec<f64>,
     unstable_deg: Vec<f64>,
 }
@@ -94,6 +107,12 @@ impl AnalyzeArgs {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
         let field = self.field()?;
         check_plot("--plot", &self.plot, &analysis::EXTENSIONS, &[("part", self.part.path())])?;
+        check_plot("--csv", &self.csv, &["csv"], &[("part", self.part.path())])?;
+        if self.samples.is_some() && !self.json && self.csv.is_none() {
+            return Err(
+                bad("--samples goes with --json or --csv (it adds samples to them)".into()),
+            );
+        }
         let part = self.part.load()?;
         let rings = part.to_fixed();
         let slices: Vec<&[chladni_shared::analysis::geometry::Pt]> =
@@ -123,12 +142,20 @@ impl AnalyzeArgs {
                 neutral: analysis.neutral,
                 part: &part.name,
                 period_deg: period,
+                samples: self.samples.map(|n| turn_samples(&an, &analysis, n)),
                 stable_deg: stable,
                 unstable_deg: unstable,
             };
             println!("{}", serde_json::to_string(&report)?);
         } else {
             self.print_table(&part, &an, &analysis, period);
+        }
+        if let Some(path) = &self.csv {
+            let rows = turn_samples(&an, &analysis, self.samples.unwrap_or(CSV_SAMPLES));
+            write_csv(path, &rows).map_err(super::output_error)?;
+            if !self.json {
+                println!("csv        {} ({} samples)", path.display(), rows.len());
+            }
         }
         if let Some(path) = &self.plot {
             let data = plot_data(&part, &an, &analysis, self.field.name(), &self.describe_field());
@@ -183,25 +210,36 @@ fn radius_mm(part: &Part) -> f64 {
     part.rings().flatten().map(|p| (p[0] - cx).hypot(p[1] - cy)).fold(0.0, f64::max)
 }
 
+/// `n` (≥ 2) samples of t(θ) (normalised to max |t| = 1, 0 for a neutral part) and a(θ), θ
+/// evenly from 0° to 360°: the one sampling behind `--samples`, `--csv` and the plot. The
+/// scale is the largest |t| over these samples and every 0.5°, so it does not depend on n.
+fn turn_samples(an: &Analyzer<'_>, a: &Analysis, n: usize) -> Vec<TurnSample> {
+    let raw = |n: usize| {
+        let mut guess = Fx::ZERO;
+        (0..n)
+            .map(|i| {
+                let d = i as f64 * 360.0 / (n - 1) as f64;
+                let b = an.balance(bam_from_deg(d), guess);
+                guess = b.offset;
+                let alignment_deg = deg(a.align(bam_from_deg(d), b.turn.signum()));
+                TurnSample { theta_deg: d, turn: Fx::to_f64(b.turn), alignment_deg }
+            })
+            .collect::<Vec<_>>()
+    };
+    let peak = |s: &[TurnSample]| s.iter().fold(0.0f64, |m, p| m.max(p.turn.abs()));
+    let mut out = raw(n.max(2));
+    let max = peak(&out).max(if n == 721 { 0.0 } else { peak(&raw(721)) });
+    for p in &mut out {
+        p.turn = if max > 0.0 && !a.neutral { p.turn / max } else { 0.0 };
+    }
+    out
+}
+
 /// Samples t and a every 0.5° and poses the part at its first stable rest.
 fn plot_data(part: &Part, an: &Analyzer<'_>, a: &Analysis, field: &str, desc: &str) -> PlotData {
-    let n = 720;
-    let mut turn = Vec::with_capacity(n + 1);
-    let mut align = Vec::with_capacity(n + 1);
-    let mut guess = Fx::ZERO;
-    for i in 0..=n {
-        let d = i as f64 * 360.0 / n as f64;
-        let b = an.balance(bam_from_deg(d), guess);
-        guess = b.offset;
-        turn.push((d, Fx::to_f64(b.turn)));
-        align.push((d, deg(a.align(bam_from_deg(d), b.turn.signum()))));
-    }
-    let max = turn.iter().fold(0.0f64, |m, p| m.max(p.1.abs()));
-    if max > 0.0 && !a.neutral {
-        turn.iter_mut().for_each(|p| p.1 /= max);
-    } else {
-        turn.iter_mut().for_each(|p| p.1 = 0.0);
-    }
+    let samples = turn_samples(an, a, 721);
+    let turn = samples.iter().map(|s| (s.theta_deg, s.turn)).collect();
+    let align = samples.iter().map(|s| (s.theta_deg, s.alignment_deg)).collect();
     let pose = a.rests.iter().find(|r| r.stable).map_or(0, |r| r.angle);
     let s = offset_mm(an, an.balance(pose, Fx::ZERO).offset);
     let c = an.centroid_mm();

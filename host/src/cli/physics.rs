@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::parse::{f64_where, non_negative, positive, unit_interval};
+use super::parse::{f64_where, non_negative, positive, unit_interval, usize_in};
 use super::{InputError, check_plot, plot_error};
 use chladni::motion::string::{self, Experiment, StringParams};
 use chladni::plot::string::string_figure;
@@ -59,9 +59,14 @@ pub struct StringArgs {
     #[arg(long, default_value_t = 10.0,
           value_parser = f64_where("average", "in (0, 1e4]", |v| v > 0.0 && v <= 1e4))]
     average: f64,
-    /// Write a PNG: x(t) and the averaged force with its −c·sin 2x fit.
+    /// Write a figure (PNG or SVG, by the extension): x(t) and the averaged drift with its
+    /// −c·sin 2x fit.
     #[arg(long, value_name = "FILE")]
     plot: Option<PathBuf>,
+    /// Trajectory samples `[t, x]` in the `--json` report (first and last included).
+    #[arg(long, default_value_t = string::JSON_SAMPLES,
+          value_parser = usize_in("samples", 2, 100_000))]
+    samples: usize,
     /// Print JSON.
     #[arg(long)]
     json: bool,
@@ -69,7 +74,7 @@ pub struct StringArgs {
 
 impl StringArgs {
     fn run(&self) -> anyhow::Result<ExitCode> {
-        check_plot("--plot", &self.plot, &["png"], &[])?;
+        check_plot("--plot", &self.plot, &["png", "svg"], &[])?;
         let p = StringParams {
             amplitude: self.amplitude,
             freq_hz: self.freq_hz,
@@ -86,13 +91,14 @@ impl StringArgs {
             ProgressStyle::with_template("simulating {bar:30} {pos}/{len}")
                 .unwrap_or(ProgressStyle::default_bar()),
         );
-        let ex = string::experiment(&p, self.x0, drop, self.duration, self.average, || bar.inc(1));
+        let run = (self.duration, self.samples - 1);
+        let ex = string::experiment(&p, self.x0, drop, run, self.average, || bar.inc(1));
         bar.finish_and_clear();
         if let Some(path) = &self.plot {
             string_figure(path, &ex).map_err(plot_error)?;
         }
         if self.json {
-            println!("{}", serde_json::to_string(&ex.report())?);
+            println!("{}", serde_json::to_string(&ex.report(self.samples))?);
         } else {
             print_experiment(&ex);
         }
@@ -121,7 +127,7 @@ fn print_experiment(ex: &Experiment) {
         100.0 * stats.above_fraction()
     );
     println!(
-        "averaged force ≈ −c·sin 2x: c = {:.4} m/s², R² = {:.3}, c/(e A² ω) = {:.3}",
+        "averaged drift ≈ −c·sin 2x: c = {:.2e} m/s (> 0: towards the nodes), R² = {:.3}, c/(e A² ω) = {:.3}",
         ex.fit.c, ex.fit.r2, ex.fit.per_e_a2_omega
     );
     let threshold = ex.threshold;

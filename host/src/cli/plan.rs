@@ -1,5 +1,6 @@
 //! `chladni plan PART --plate P` and `chladni simulate PART --plate P --plan PLAN`.
 
+use chladni::shapes::{self, SimulateReport, TraceLine};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -511,6 +512,17 @@ pub struct SimulateArgs {
     /// oriented parts per minute of plan time.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1000))]
     copies: Option<u32>,
+    /// With --json: every trial's start pose, its pose after each step and its end pose
+    /// (`poses`: trials and steps numbered from 1).
+    #[arg(long, requires = "json")]
+    poses: bool,
+    /// Write every trial's trajectory, one JSON object per line (.jsonl).
+    #[arg(long, value_name = "FILE.jsonl")]
+    traces: Option<PathBuf>,
+    /// Animate the first trials through the plan (GIF): plate, each step's node, the parts,
+    /// a clock and the step.
+    #[arg(long, value_name = "FILE.gif")]
+    animate: Option<PathBuf>,
 }
 
 /// One part's `chladni simulate --json` entry in a plan for several parts (or faces).
@@ -521,7 +533,7 @@ struct PartReport<'a> {
     face: Option<Face>,
     part: &'a str,
     #[serde(flatten)]
-    report: Report,
+    report: SimulateReport,
 }
 
 /// The trials and seed of each face: a part dropped on both faces lands face up in the
@@ -545,6 +557,8 @@ impl SimulateArgs {
             self.part.iter().map(|p| ("part", p.as_path())).collect();
         inputs.extend([("plate", self.plate.as_path()), ("plan", self.plan.as_path())]);
         check_plot("--plot", &self.plot, &["png"], &inputs)?;
+        check_plot("--traces", &self.traces, &["jsonl"], &inputs)?;
+        check_plot("--animate", &self.animate, &["gif"], &inputs)?;
         if let Some(path) = &self.plot {
             check_output("--plot", &plan_plot::trials_plan_path(path), &inputs)?;
             if self.part.len() > 1 {
@@ -564,6 +578,7 @@ impl SimulateArgs {
                 faces.parts.len()
             )));
         }
+        self.check_animate(faces.parts.len())?;
         if self.trials < 2 && faces.of.iter().any(|o| o.face.is_some()) {
             return Err(bad("--trials 1: both faces need at least 2 trials (half each)".into()));
         }
@@ -592,6 +607,7 @@ impl SimulateArgs {
         }
         let mut together = self.together(parts, &faces, &sim)?;
         let mut reports = Vec::new();
+        let mut traces = Vec::new();
         for (k, ((part, view), &(trials, seed))) in parts.iter().zip(&views).zip(&runs).enumerate()
         {
             let body = Body::new(part);
@@ -610,7 +626,8 @@ impl SimulateArgs {
             if !self.json {
                 self.print(part, steps.len(), &stats, (trials, seed));
             }
-            reports.push(Report::new(&stats, view, trials, seed, self.tol_deg));
+            let report = Report::new(&stats, view, trials, seed, self.tol_deg);
+            self.keep_data(&mut reports, &mut traces, (report, part, &sims));
             if let Some(path) = &self.plot {
                 let target = view.final_orientation_deg.zip(view.period_deg);
                 let fig = plan_plot::trials_figures(path, part, &setup, &sims, target)
@@ -619,7 +636,9 @@ impl SimulateArgs {
                     println!("plots      {} {}", path.display(), fig.display());
                 }
             }
+            self.write_animation(part, &setup, &sims)?;
         }
+        self.write_traces(&traces)?;
         if self.json {
             self.print_json(&faces, reports)?;
         }
@@ -628,7 +647,7 @@ impl SimulateArgs {
 
     /// `--json`: one part, the report; several (or both faces), `{"parts": [{"part": name,
     /// "face"?: "up" | "flipped", ...report}]}`.
-    fn print_json(&self, faces: &Faces, reports: Vec<Report>) -> anyhow::Result<()> {
+    fn print_json(&self, faces: &Faces, reports: Vec<SimulateReport>) -> anyhow::Result<()> {
         if faces.parts.len() == 1
             && let Some(r) = reports.first()
         {
@@ -651,9 +670,57 @@ impl SimulateArgs {
         } else {
             indicatif::ProgressBar::hidden()
         };
-        let trials = montecarlo::run_trials(setup, trials, seed, || bar.inc(1));
+        let keep = montecarlo::Keep { poses: self.poses, traces: self.traces.is_some() };
+        let trials = montecarlo::run_trials_keeping(setup, trials, seed, keep, || bar.inc(1));
         bar.finish_and_clear();
         trials
+    }
+
+    /// The report with `--poses`, and the part's `--traces` lines.
+    fn keep_data(
+        &self,
+        reports: &mut Vec<SimulateReport>,
+        traces: &mut Vec<TraceLine>,
+        (report, part, sims): (Report, &Part, &Trials),
+    ) {
+        let poses = self.poses.then(|| shapes::trial_poses(sims));
+        reports.push(SimulateReport { report, poses });
+        if self.traces.is_some() {
+            traces.extend(shapes::trace_lines(sims, &part.name));
+        }
+    }
+
+    /// `--animate` draws one part on one face (`n`: the parts or faces to simulate).
+    fn check_animate(&self, n: usize) -> anyhow::Result<()> {
+        if self.animate.is_some() && n > 1 {
+            return Err(bad(format!(
+                "--animate draws one part on one face; {n} parts or faces to simulate"
+            )));
+        }
+        Ok(())
+    }
+
+    /// `--animate FILE.gif`: the first trials moving through the plan.
+    fn write_animation(&self, part: &Part, setup: &Setup<'_>, sims: &Trials) -> anyhow::Result<()> {
+        if let Some(path) = &self.animate {
+            let frames = chladni::plot::animate::trials_animation(path, part, setup, sims)
+                .map_err(plot_error)?;
+            if !self.json {
+                println!("animation  {} ({frames} frames)", path.display());
+            }
+        }
+        Ok(())
+    }
+
+    /// `--traces FILE.jsonl`: every trial's trajectory, one line each.
+    fn write_traces(&self, lines: &[TraceLine]) -> anyhow::Result<()> {
+        if let Some(path) = &self.traces {
+            shapes::write_jsonl(path, lines).map_err(super::output_error)?;
+            if !self.json {
+                println!("traces     {} ({} trials)", path.display(), lines.len());
+            }
+        }
+        Ok(())
     }
 
     /// The plan as each part sees it (its own predictions): a plan for several parts needs

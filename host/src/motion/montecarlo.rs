@@ -67,9 +67,30 @@ pub struct Trials {
     pub lost: Vec<bool>,
 }
 
+/// What [`run_trials_keeping`] keeps of every trial beyond the first few.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Keep {
+    /// The poses before each step and at the end (`Trials::examples`), of every trial.
+    pub poses: bool,
+    /// The full trace (`Trials::traces`), of every trial.
+    pub traces: bool,
+}
+
 /// Runs `trials` random starts drawn from `seed` through the plan; `progress` is called
 /// after each trial.
-pub fn run_trials(setup: &Setup<'_>, trials: u32, seed: u64, mut progress: impl FnMut()) -> Trials {
+pub fn run_trials(setup: &Setup<'_>, trials: u32, seed: u64, progress: impl FnMut()) -> Trials {
+    run_trials_keeping(setup, trials, seed, Keep::default(), progress)
+}
+
+/// [`run_trials`], keeping what `keep` asks for of every trial (the same trials: the start
+/// poses come from `seed` alone).
+pub fn run_trials_keeping(
+    setup: &Setup<'_>,
+    trials: u32,
+    seed: u64,
+    keep: Keep,
+    mut progress: impl FnMut(),
+) -> Trials {
     let mut rng = Rng::seeded(seed);
     let mut out = Trials {
         starts: Vec::with_capacity(trials as usize),
@@ -84,11 +105,11 @@ pub fn run_trials(setup: &Setup<'_>, trials: u32, seed: u64, mut progress: impl 
         let end = *poses.last().unwrap_or(&start);
         out.lost.push(Rim::of(setup.plate).lost(end));
         out.finals.push(end);
-        if i < TRACED_TRIALS {
+        if i < TRACED_TRIALS || keep.traces {
             out.traces.push(trace);
             out.step_ends = ends;
         }
-        if i < EXAMPLE_TRIALS {
+        if i < EXAMPLE_TRIALS || keep.poses {
             out.examples.push(poses);
         }
         progress();

@@ -9,7 +9,7 @@ use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
-use super::{PlotError, check_extension, text, write_figure};
+use super::{Figure, PlotError, check_extension, text, write_chart};
 
 /// What to draw.
 #[derive(Debug, Clone)]
@@ -33,23 +33,23 @@ pub struct PlotData {
 /// Writes the plot; the format follows the extension (`.png` or `.svg`, checked first).
 pub fn write(path: &Path, data: &PlotData) -> Result<(), PlotError> {
     check_extension("--plot", path, &EXTENSIONS)?;
-    let svg = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("svg"));
-    let size = (1200, 420);
-    write_figure(path, |tmp| {
-        if svg {
-            let root = SVGBackend::new(tmp, size).into_drawing_area();
-            draw(&root, data)?;
-            root.present().map_err(text)
-        } else {
-            let root = BitMapBackend::new(tmp, size).into_drawing_area();
-            draw(&root, data)?;
-            root.present().map_err(text)
-        }
-    })
+    write_chart(path, data)
 }
 
 /// The file types [`write`] can draw.
-pub const EXTENSIONS: [&str; 2] = ["png", "svg"];
+pub const EXTENSIONS: [&str; 2] = super::FIGURE_EXTENSIONS;
+
+impl Figure for PlotData {
+    fn size(&self) -> (u32, u32) {
+        (1200, 420)
+    }
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>
+    where
+        DB::ErrorType: 'static,
+    {
+        draw(root, self)
+    }
+}
 
 fn err<E: std::fmt::Display>(e: E) -> String {
     text(e)
@@ -157,11 +157,25 @@ where
         .map_err(err)?;
     turn.draw_series(LineSeries::new(data.turn.iter().copied(), BLUE.stroke_width(2)))
         .map_err(err)?;
-    turn.draw_series(data.rests.iter().map(|&(d, stable)| {
+    // Stable and unstable rests as two series, so the legend names each marker.
+    for (stable, name) in [(true, "stable rest"), (false, "unstable rest")] {
         let c = if stable { STABLE } else { UNSTABLE };
-        Circle::new((d, 0.0), 5, if stable { c.filled() } else { c.stroke_width(2) })
-    }))
-    .map_err(err)?;
+        let style = if stable { c.filled() } else { c.stroke_width(2) };
+        let rests = data.rests.iter().filter(move |r| r.1 == stable);
+        turn.draw_series(rests.map(move |&(d, _)| Circle::new((d, 0.0), 5, style)))
+            .map_err(err)?
+            .label(name)
+            .legend(move |(x, y)| Circle::new((x + 8, y), 5, style));
+    }
+    if !data.rests.is_empty() {
+        turn.configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 11))
+            .position(SeriesLabelPosition::LowerLeft)
+            .draw()
+            .map_err(err)?;
+    }
     if data.neutral {
         turn.draw_series(std::iter::once(Text::new(
             "neutral: every orientation is at rest",

@@ -1,18 +1,24 @@
 //! Figures: rest analysis (part, turn and alignment functions), plans and motion traces,
-//! Chladni figures of plate modes, the particle on a string, and the Bode plot of a sweep.
+//! Chladni figures of plate modes, the particle on a string, the Bode plot of a sweep, and the
+//! animation of a simulated plan (GIF, [`animate`]).
 //!
 //! One font for every figure: Ubuntu Light, shipped inside the binary by the
 //! `epaint_default_fonts` crate and rendered by plotters' `ab_glyph` backend, registered once
 //! as "sans-serif" by [`ensure_font`] (so plotting needs no system fonts or fontconfig). One
 //! error type, [`PlotError`]. Every figure is written atomically through
-//! [`crate::output::write_with`].
+//! [`crate::output::write_with`]. One choice of backend, [`write_chart`]: the file's extension
+//! picks plotters' SVG backend (`.svg`) or its bitmap backend (`.png`), so every figure that
+//! implements [`Figure`] is drawn by the same code in both formats.
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
+use plotters::coord::Shift;
+use plotters::prelude::{BitMapBackend, DrawingArea, DrawingBackend, IntoDrawingArea, SVGBackend};
 use plotters::style::FontStyle;
 
 pub mod analysis;
+pub mod animate;
 pub mod bode;
 pub mod plan;
 pub mod plate;
@@ -92,6 +98,49 @@ pub(crate) fn write_figure<E: std::fmt::Display>(
     })
 }
 
+/// The file types every [`Figure`] can be written as.
+pub const FIGURE_EXTENSIONS: [&str; 2] = ["png", "svg"];
+
+/// A figure drawn by the same code on any plotters backend (see [`write_chart`]).
+pub(crate) trait Figure {
+    /// Width and height (pixels; SVG user units).
+    fn size(&self) -> (u32, u32);
+    /// Draws the whole figure on `root`.
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>
+    where
+        DB::ErrorType: 'static;
+}
+
+/// Writes `figure` to `path` atomically: SVG when the extension is `.svg`, PNG otherwise
+/// (callers check the extension with [`check_extension`] against [`FIGURE_EXTENSIONS`]).
+pub(crate) fn write_chart(path: &Path, figure: &impl Figure) -> Result<(), PlotError> {
+    let svg = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("svg"));
+    let size = figure.size();
+    write_figure(path, |tmp| {
+        if svg {
+            let root = SVGBackend::new(tmp, size).into_drawing_area();
+            figure.draw(&root)?;
+            root.present().map_err(text)
+        } else {
+            let root = BitMapBackend::new(tmp, size).into_drawing_area();
+            figure.draw(&root)?;
+            root.present().map_err(text)
+        }
+    })
+}
+
+/// A tick label with as many decimals as the axis span `scale` needs, never "-0.0".
+pub(crate) fn tick(v: f64, scale: f64) -> String {
+    let decimals =
+        if scale >= 10.0 { 0 } else { (1.0 - scale.abs().max(1e-12).log10().floor()) as usize };
+    let s = format!("{:.*}", decimals.min(9), v);
+    if s.trim_start_matches('-').chars().all(|c| c == '0' || c == '.') {
+        s.trim_start_matches('-').to_string()
+    } else {
+        s
+    }
+}
+
 /// A drawing error as text (plotters' error types are generic over the backend).
 pub(crate) fn text<E: std::fmt::Display>(e: E) -> String {
     e.to_string()
@@ -108,5 +157,12 @@ mod tests {
         assert!(e.is_bad_input());
         assert_eq!(e.to_string(), "--plot file must end in .png or .svg: x.gif");
         assert!(check_extension("--plot", Path::new("noext"), &["png"]).is_err());
+    }
+
+    #[test]
+    fn ticks_never_read_minus_zero() {
+        assert_eq!(tick(-0.0001, 1.0), "0.0");
+        assert_eq!(tick(-0.5, 1.0), "-0.5");
+        assert_eq!(tick(12.0, 100.0), "12");
     }
 }

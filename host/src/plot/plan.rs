@@ -78,7 +78,8 @@ pub fn node_polylines(mode: &Mode, plate: &PlateModel) -> Vec<Vec<(f64, f64)>> {
     }
 }
 
-fn draw_part<DB: DrawingBackend>(
+/// Draws the part at `pose`: its outline filled with `fill`, holes white, edges black.
+pub(crate) fn draw_part<DB: DrawingBackend>(
     chart: &mut ChartContext<
         '_,
         DB,
@@ -103,6 +104,9 @@ where
     }
     Ok(())
 }
+
+/// The node of the running step in the plan figure and the animation.
+pub(crate) const NODE_COLOR: RGBColor = RGBColor(200, 60, 40);
 
 /// One example start: the pose before each step and after the last.
 pub type Example = Vec<Pose>;
@@ -164,7 +168,7 @@ fn draw_plan(
                 chart
                     .draw_series(std::iter::once(PathElement::new(
                         line,
-                        RGBColor(200, 60, 40).stroke_width(2),
+                        NODE_COLOR.stroke_width(2),
                     )))
                     .map_err(err)?;
             }
@@ -205,7 +209,8 @@ pub struct TracesFigure<'a> {
     pub target: Option<(f64, f64)>,
 }
 
-const PALETTE: [RGBColor; 6] = [
+/// The trials' colours (figures and the animation).
+pub(crate) const PALETTE: [RGBColor; 6] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -242,23 +247,32 @@ where
     let mut chart = ChartBuilder::on(left)
         .caption("part motion (white: start, dark: end of plan)", ("sans-serif", 14))
         .margin(10)
-        .x_label_area_size(30)
-        .y_label_area_size(40)
+        .margin_right(24)
+        .x_label_area_size(34)
+        .y_label_area_size(56)
         .build_cartesian_2d(0.0..w, 0.0..h)
         .map_err(err)?;
     chart
         .configure_mesh()
         .x_desc("x (mm)")
         .y_desc("y (mm)")
+        .x_label_formatter(&|v| super::tick(*v, w))
+        .y_label_formatter(&|v| super::tick(*v, h))
         .light_line_style(WHITE)
         .draw()
         .map_err(err)?;
+    // Nodes in their own colours (not the traces'), dashed, one legend entry per step.
     for (k, &m) in modes.iter().enumerate() {
-        for line in node_polylines(&plate.modes[m], plate) {
-            let c = palette[k % palette.len()].mix(0.35);
-            chart
-                .draw_series(std::iter::once(PathElement::new(line, c.stroke_width(3))))
+        let c = NODE_PALETTE[k % NODE_PALETTE.len()];
+        for (j, line) in node_polylines(&plate.modes[m], plate).into_iter().enumerate() {
+            let s = chart
+                .draw_series(DashedLineSeries::new(line, 8, 5, c.stroke_width(2)))
                 .map_err(err)?;
+            if j == 0 {
+                s.label(format!("node, step {}", k + 1)).legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 18, y)], c.stroke_width(2))
+                });
+            }
         }
     }
     for (i, tr) in traces.iter().enumerate() {
@@ -287,7 +301,35 @@ where
         draw_part(&mut chart, body, tr[0].1, WHITE)?;
         draw_part(&mut chart, body, tr[n - 1].1, col)?;
     }
-    Ok(())
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 12))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(err)
+}
+
+/// Node colours: dark and saturated, none of them in [`PALETTE`] (the traces' colours).
+const NODE_PALETTE: [RGBColor; 4] =
+    [RGBColor(0, 0, 0), RGBColor(0, 139, 139), RGBColor(199, 21, 133), RGBColor(128, 128, 0)];
+
+/// θ(t) of a trace in degrees, unwrapped (no 360° → 0° jumps), shifted by whole turns so that
+/// it ends in [0°, 360°).
+fn unwrapped_deg(tr: &Trace) -> Vec<(f64, f64)> {
+    let mut out: Vec<(f64, f64)> = Vec::with_capacity(tr.len());
+    for &(t, p) in tr {
+        let d = p.theta.to_degrees();
+        let d = match out.last() {
+            Some(&(_, prev)) => prev + ((d - prev + 180.0).rem_euclid(360.0) - 180.0),
+            None => d,
+        };
+        out.push((t, d));
+    }
+    let shift = out.last().map_or(0.0, |&(_, d)| d.rem_euclid(360.0) - d);
+    out.iter_mut().for_each(|p| p.1 += shift);
+    out
 }
 
 /// Right panel of the traces figure: θ(t) with step boundaries and the target orientation.
@@ -301,59 +343,74 @@ where
     let TracesFigure { traces, step_ends, target, .. } = *fig;
     let palette = PALETTE;
     let t_end = step_ends.last().copied().unwrap_or(1.0).max(1e-6);
+    let curves: Vec<Vec<(f64, f64)>> = traces.iter().map(unwrapped_deg).collect();
+    let (lo, hi) = curves
+        .iter()
+        .flatten()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| (l.min(p.1), h.max(p.1)));
+    let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 360.0) };
+    let pad = ((hi - lo) * 0.05).max(5.0);
+    let (lo, hi) = (lo - pad, hi + pad);
     let mut th = ChartBuilder::on(right)
-        .caption("orientation θ(t)", ("sans-serif", 14))
+        .caption("orientation θ(t), unwrapped", ("sans-serif", 14))
         .margin(10)
-        .x_label_area_size(30)
-        .y_label_area_size(45)
-        .build_cartesian_2d(0.0..t_end, 0.0..360.0)
+        .margin_right(24)
+        .x_label_area_size(34)
+        .y_label_area_size(56)
+        .build_cartesian_2d(0.0..t_end, lo..hi)
         .map_err(err)?;
     th.configure_mesh()
         .x_desc("t (s)")
         .y_desc("θ (deg)")
+        .x_label_formatter(&|v| super::tick(*v, t_end))
+        .y_label_formatter(&|v| super::tick(*v, hi - lo))
         .y_labels(9)
         .light_line_style(WHITE)
         .draw()
         .map_err(err)?;
     for &t in &step_ends[..step_ends.len().saturating_sub(1)] {
         th.draw_series(std::iter::once(PathElement::new(
-            vec![(t, 0.0), (t, 360.0)],
+            vec![(t, lo), (t, hi)],
             RGBColor(160, 160, 160),
         )))
         .map_err(err)?;
     }
     if let Some((target, period)) = target {
-        let mut v = target.rem_euclid(period);
-        while v < 360.0 {
-            th.draw_series(std::iter::once(PathElement::new(
-                vec![(0.0, v), (t_end, v)],
-                BLACK.mix(0.4),
-            )))
-            .map_err(err)?;
+        let mut v = target + ((lo - target) / period).ceil() * period;
+        let mut first = true;
+        while v <= hi {
+            let s = th
+                .draw_series(DashedLineSeries::new(
+                    [(0.0, v), (t_end, v)],
+                    8,
+                    5,
+                    BLACK.stroke_width(1),
+                ))
+                .map_err(err)?;
+            if first {
+                s.label("predicted θ").legend(|(x, y)| {
+                    PathElement::new([(x, y), (x + 18, y)], BLACK.stroke_width(1))
+                });
+                first = false;
+            }
             v += period;
         }
     }
-    for (i, tr) in traces.iter().enumerate() {
+    for (i, curve) in curves.into_iter().enumerate() {
         let col = palette[i % palette.len()];
-        // Break the line where θ wraps.
-        let mut piece: Vec<(f64, f64)> = Vec::new();
-        for &(t, p) in tr {
-            let d = p.theta.to_degrees().rem_euclid(360.0);
-            if let Some(&(_, pd)) = piece.last()
-                && (d - pd).abs() > 180.0
-            {
-                th.draw_series(std::iter::once(PathElement::new(
-                    std::mem::take(&mut piece),
-                    col.stroke_width(2),
-                )))
-                .map_err(err)?;
-            }
-            piece.push((t, d));
+        let s = th.draw_series(LineSeries::new(curve, col.stroke_width(2))).map_err(err)?;
+        if i == 0 {
+            s.label("trials")
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], col.stroke_width(2)));
         }
-        th.draw_series(std::iter::once(PathElement::new(piece, col.stroke_width(2))))
-            .map_err(err)?;
     }
-    Ok(())
+    th.configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 12))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(err)
 }
 
 /// The step-by-step figure of a synthesised plan (`chladni plan --plot`, `chladni demo`):
@@ -403,24 +460,46 @@ pub fn trials_figures(
     target: Option<(f64, f64)>,
 ) -> Result<PathBuf, PlotError> {
     let modes: Vec<usize> = setup.steps.iter().map(|s| s.mode).collect();
+    // The first few trials (the run may have kept every trial's trace for --traces).
+    let shown = &trials.traces[..trials.traces.len().min(crate::motion::montecarlo::TRACED_TRIALS)];
+    let examples =
+        &trials.examples[..trials.examples.len().min(crate::motion::montecarlo::EXAMPLE_TRIALS)];
     let title = format!(
         "{} on {}: simulated plan ({} trials shown)",
         part.name,
         setup.plate.name,
-        trials.traces.len()
+        shown.len()
     );
     let fig = TracesFigure {
         title: &title,
         body: setup.body,
         plate: setup.plate,
         modes: &modes,
-        traces: &trials.traces,
+        traces: shown,
         step_ends: &trials.step_ends,
         target,
     };
     traces_figure(path, &fig)?;
     let fig = trials_plan_path(path);
     let title = format!("{}: plan step by step", part.name);
-    plan_figure(&fig, &title, setup.body, setup.plate, &modes, &trials.examples)?;
+    plan_figure(&fig, &title, setup.body, setup.plate, &modes, examples)?;
     Ok(fig)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn theta_is_unwrapped_through_a_full_turn_and_ends_in_one_turn() {
+        // 350° → 370° (stored as 10°) → 380°: no jump, and shifted so the end is 20°.
+        let tr: Trace = [350.0f64, 5.0, 10.0, 20.0]
+            .iter()
+            .enumerate()
+            .map(|(i, d)| (i as f64, Pose { x: 0.0, y: 0.0, theta: d.to_radians() }))
+            .collect();
+        let u = unwrapped_deg(&tr);
+        let d: Vec<f64> = u.iter().map(|p| (p.1 * 1e6).round() / 1e6).collect();
+        assert_eq!(d, vec![-10.0, 5.0, 10.0, 20.0]);
+    }
 }

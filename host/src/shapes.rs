@@ -1,0 +1,163 @@
+//! The data the commands hand to researchers, one home for their shapes: JSON objects and CSV
+//! rows that `analyze --samples/--csv`, `simulate --poses/--traces` and the string model print.
+//! Keys are snake_case with their unit in the name (`_deg`, `_mm`, `_s`); steps are numbered
+//! from 1, as `plan` prints them. Every file is written atomically ([`crate::output`]).
+
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::motion::body::Pose;
+use crate::motion::montecarlo::{Report, Trials};
+use crate::output::{OutputError, write_with};
+
+/// One sample of a rest analysis: the turn function t(θ) (normalised so that max |t| = 1 over
+/// the samples; 0 everywhere for a neutral part) and the alignment function a(θ), the stable
+/// orientation a part starting at θ turns to.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
+pub struct TurnSample {
+    /// Orientation θ (degrees, [0, 360]).
+    pub theta_deg: f64,
+    /// t(θ) / max |t|: > 0 turns counter-clockwise.
+    pub turn: f64,
+    /// a(θ) (degrees, [0, 360)).
+    pub alignment_deg: f64,
+}
+
+/// A pose in the plate's frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
+pub struct PoseJson {
+    /// Centroid x (mm).
+    pub x_mm: f64,
+    /// Centroid y (mm).
+    pub y_mm: f64,
+    /// Orientation (degrees, [0, 360)).
+    pub theta_deg: f64,
+}
+
+impl PoseJson {
+    /// From (x mm, y mm, θ radians).
+    pub fn from_mm_rad(x: f64, y: f64, theta_rad: f64) -> Self {
+        PoseJson { x_mm: x, y_mm: y, theta_deg: theta_rad.to_degrees().rem_euclid(360.0) }
+    }
+}
+
+/// One Monte Carlo trial of `simulate --poses`: where it started and where each step left it.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+pub struct TrialPoses {
+    /// Trial number, from 1.
+    pub trial: usize,
+    /// The start pose.
+    pub start: PoseJson,
+    /// The pose at the end of each step (`steps[k]` ends step k + 1).
+    pub steps: Vec<PoseJson>,
+    /// The pose after the last step.
+    pub end: PoseJson,
+}
+
+/// One line of `simulate --traces F.jsonl`: one trial's trajectory, sampled at the
+/// integrator's output times.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+pub struct TraceLine {
+    /// The part's name.
+    pub part: String,
+    /// Trial number, from 1.
+    pub trial: usize,
+    /// Samples `[t (s), step (from 1), x (mm), y (mm), θ (deg, unwrapped)]`.
+    pub samples: Vec<[f64; 5]>,
+}
+
+/// `simulate --poses`: every trial's start, each step's end and its end, trials from 1.
+pub fn trial_poses(trials: &Trials) -> Vec<TrialPoses> {
+    let pose = |p: &Pose| PoseJson::from_mm_rad(p.x, p.y, p.theta);
+    (trials.starts.iter().zip(&trials.finals).enumerate())
+        .map(|(i, (start, end))| TrialPoses {
+            trial: i + 1,
+            start: pose(start),
+            steps: trials
+                .examples
+                .get(i)
+                .map_or(Vec::new(), |p| p.iter().skip(1).map(pose).collect()),
+            end: pose(end),
+        })
+        .collect()
+}
+
+/// `simulate --traces`: one line per kept trace, step numbers from 1, θ unwrapped (a turn
+/// through 360° reads 361°, not 1°).
+pub fn trace_lines(trials: &Trials, part: &str) -> Vec<TraceLine> {
+    (trials.traces.iter().enumerate())
+        .map(|(i, trace)| {
+            let mut theta: Vec<f64> = Vec::with_capacity(trace.len());
+            for (_, p) in trace {
+                let d = p.theta.to_degrees();
+                theta.push(match theta.last() {
+                    Some(&prev) => prev + ((d - prev + 180.0).rem_euclid(360.0) - 180.0),
+                    None => d,
+                });
+            }
+            let samples = (trace.iter().zip(theta))
+                .map(|(&(t, p), th)| {
+                    let step = trials.step_ends.iter().take_while(|&&e| e < t).count() + 1;
+                    let step = step.min(trials.step_ends.len().max(1));
+                    [t, step as f64, p.x, p.y, th]
+                })
+                .collect();
+            TraceLine { part: part.to_string(), trial: i + 1, samples }
+        })
+        .collect()
+}
+
+/// One part's `simulate --json` report, with the trials' poses under `--poses`.
+#[derive(Debug, Clone, Serialize)]
+pub struct SimulateReport {
+    /// The statistics.
+    #[serde(flatten)]
+    pub report: Report,
+    /// Every trial's poses (`--poses`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub poses: Option<Vec<TrialPoses>>,
+}
+
+/// Writes `rows` as CSV with a header row (the field names) to `path`, atomically.
+pub fn write_csv<T: Serialize>(path: &Path, rows: &[T]) -> Result<(), OutputError> {
+    write_with(path, |tmp| -> Result<(), String> {
+        let mut w = csv::Writer::from_path(tmp).map_err(|e| e.to_string())?;
+        for r in rows {
+            w.serialize(r).map_err(|e| e.to_string())?;
+        }
+        w.flush().map_err(|e| e.to_string())
+    })
+}
+
+/// Writes one JSON object per line to `path`, atomically.
+pub fn write_jsonl<T: Serialize>(path: &Path, lines: &[T]) -> Result<(), OutputError> {
+    write_with(path, |tmp| -> Result<(), String> {
+        let mut text = String::new();
+        for l in lines {
+            text += &serde_json::to_string(l).map_err(|e| e.to_string())?;
+            text.push('\n');
+        }
+        std::fs::write(tmp, text).map_err(|e| e.to_string())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_has_a_header_and_one_row_per_sample() {
+        let d = std::env::temp_dir().join(format!("chladni-shapes-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        let f = d.join("s.csv");
+        let rows = [
+            TurnSample { theta_deg: 0.0, turn: 0.5, alignment_deg: 90.0 },
+            TurnSample { theta_deg: 1.0, turn: -0.25, alignment_deg: 90.0 },
+        ];
+        write_csv(&f, &rows).unwrap();
+        let text = std::fs::read_to_string(&f).unwrap();
+        assert_eq!(text, "theta_deg,turn,alignment_deg\n0.0,0.5,90.0\n1.0,-0.25,90.0\n");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+}
