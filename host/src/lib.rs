@@ -28,5 +28,5 @@ pub mod planner;
 pub mod plate;
 pub mod plot;
 pub mod rng;
-pub mod vision;
 pub mod shapes;
+pub mod vision;

@@ -92,7 +92,7 @@ pub fn trace_lines(trials: &Trials, part: &str) -> Vec<TraceLine> {
             for (_, p) in trace {
                 let d = p.theta.to_degrees();
                 theta.push(match theta.last() {
-                    Some(&prev) => prev + ((d - prev + 180.0).rem_euclid(360.0) - 180.0),
+                    Some(&prev) => prev + crate::model::angle::signed_diff(d, prev, 360.0),
                     None => d,
                 });
             }
