@@ -96,7 +96,9 @@ impl LocateArgs {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
         self.locate().map_err(|f| {
             if self.json {
-                println!("{}", json!({"error": f.kind, "message": format!("{:#}", f.error)}));
+                super::print_failure_value(
+                    json!({"error": f.kind, "message": format!("{:#}", f.error)}),
+                );
             }
             f.error
         })

@@ -322,7 +322,7 @@ fn unwrapped_deg(tr: &Trace) -> Vec<(f64, f64)> {
     for &(t, p) in tr {
         let d = p.theta.to_degrees();
         let d = match out.last() {
-            Some(&(_, prev)) => prev + ((d - prev + 180.0).rem_euclid(360.0) - 180.0),
+            Some(&(_, prev)) => prev + crate::model::angle::signed_diff(d, prev, 360.0),
             None => d,
         };
         out.push((t, d));

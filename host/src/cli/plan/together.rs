@@ -64,7 +64,7 @@ impl SimulateArgs {
                 "error": "cannot_place", "parts": e.parts, "placed": e.placed,
                 "attempts": e.attempts, "message": e.to_string(),
             });
-            println!("{v}");
+            crate::cli::print_failure_value(v);
         }
         bad(e.to_string())
     }
