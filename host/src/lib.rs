@@ -2,7 +2,7 @@
 //!
 //! Everything the `chladni` command does, as a library the CLI and the end-to-end tests share.
 //! The CLI (`src/cli/`) only parses arguments, calls this library and renders the result.
-//! - [`model`]: the files: parts (JSON, SVG), plates and their modes (TOML), plans (JSON).
+//! - [`model`]: the files: parts (JSON, SVG, DXF), plates and their modes (TOML), plans (JSON).
 //! - [`analysis`]: rest analysis of a part at a straight node (the f64 reference).
 //! - [`motion`]: quasi-static part motion under a mode's field; the particle on a string.
 //! - [`plate`]: the plate mode solver, node lines, node fields, Chladni photos.
@@ -10,6 +10,8 @@
 //!   plans by tracking simulated poses, [`planner::feed`]).
 //! - [`plot`]: figures of analyses, plans, traces and plate modes.
 //! - [`controller`]: the link client, the QEMU emulator, firmware builds.
+//! - [`demo`]: `chladni demo`, the main job end to end (plan, figures, Monte Carlo, the
+//!   plan stored and run on the controller under telemetry, a summary).
 //! - [`cell`]: the controller served to a cell: one link owner for Modbus TCP and HTTP.
 //! - [`output`]: output files written atomically, never over one of the command's inputs.
 //! - [`rng`]: the one seeded pseudo-random generator.
