@@ -168,13 +168,7 @@ where
             .legend(move |(x, y)| Circle::new((x + 8, y), 5, style));
     }
     if !data.rests.is_empty() {
-        turn.configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 11))
-            .position(SeriesLabelPosition::LowerLeft)
-            .draw()
-            .map_err(err)?;
+        super::draw_legend(&mut turn, 11, SeriesLabelPosition::LowerLeft)?;
     }
     if data.neutral {
         turn.draw_series(std::iter::once(Text::new(

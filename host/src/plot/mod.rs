@@ -141,6 +141,28 @@ pub(crate) fn tick(v: f64, scale: f64) -> String {
     }
 }
 
+/// The figures' one legend style: a light box with a black border, `font_px` sans-serif,
+/// placed at `at`.
+pub(crate) fn draw_legend<'a, DB, CT>(
+    chart: &mut plotters::chart::ChartContext<'a, DB, CT>,
+    font_px: u32,
+    at: plotters::chart::SeriesLabelPosition,
+) -> Result<(), String>
+where
+    DB: DrawingBackend + 'a,
+    CT: plotters::coord::CoordTranslate,
+{
+    use plotters::style::{BLACK, Color, WHITE};
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", font_px))
+        .position(at)
+        .draw()
+        .map_err(text)
+}
+
 /// A drawing error as text (plotters' error types are generic over the backend).
 pub(crate) fn text<E: std::fmt::Display>(e: E) -> String {
     e.to_string()

@@ -301,14 +301,7 @@ where
         draw_part(&mut chart, body, tr[0].1, WHITE)?;
         draw_part(&mut chart, body, tr[n - 1].1, col)?;
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 12))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(err)
+    super::draw_legend(&mut chart, 12, SeriesLabelPosition::UpperRight)
 }
 
 /// Node colours: dark and saturated, none of them in [`PALETTE`] (the traces' colours).
@@ -404,13 +397,7 @@ where
                 .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], col.stroke_width(2)));
         }
     }
-    th.configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 12))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(err)
+    super::draw_legend(&mut th, 12, SeriesLabelPosition::UpperRight)
 }
 
 /// The step-by-step figure of a synthesised plan (`chladni plan --plot`, `chladni demo`):

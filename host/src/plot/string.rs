@@ -104,13 +104,7 @@ where
                 .legend(|(x, y)| PathElement::new([(x, y), (x + 16, y)], STOP.stroke_width(1)));
         }
     }
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 11))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(text)
+    super::draw_legend(&mut c, 11, SeriesLabelPosition::UpperRight)
 }
 
 fn draw_drift<DB: DrawingBackend>(
@@ -155,11 +149,5 @@ where
     .map_err(text)?
     .label("fit −c sin 2x")
     .legend(|(x, y)| PathElement::new([(x, y), (x + 16, y)], BLACK.stroke_width(2)));
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 11))
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(text)
+    super::draw_legend(&mut c, 11, SeriesLabelPosition::UpperLeft)
 }
