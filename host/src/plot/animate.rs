@@ -15,12 +15,12 @@ use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};
 use plotters::prelude::*;
 
-use super::plan::{PALETTE, Trace, draw_part, node_polylines};
+use super::plan::{PALETTE, Trace, TracesFigure, draw_part, node_polylines};
 use super::{PlotError, text, write_figure};
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
 use crate::motion::montecarlo::{Setup, TRACED_TRIALS, Trials};
-use crate::motion::sim::{Body, Pose};
+use crate::motion::sim::Pose;
 
 /// The most frames an animation has (keeps the file small: the README's is well under 1 MB).
 pub const MAX_FRAMES: usize = 120;
@@ -33,23 +33,6 @@ const LAST_FRAME_MS: u32 = 2000;
 const NODE_COLOR: RGBColor = RGBColor(0, 139, 139);
 /// Height of the caption band above the plate (pixels).
 const CAPTION_PX: u32 = 44;
-
-/// What [`animation`] draws.
-#[derive(Debug, Clone, Copy)]
-pub struct Animation<'a> {
-    /// The part's name (first caption line).
-    pub name: &'a str,
-    /// The part.
-    pub body: &'a Body,
-    /// The plate.
-    pub plate: &'a PlateModel,
-    /// The mode of each step.
-    pub modes: &'a [usize],
-    /// The trials' traces, (t, pose) over the whole plan.
-    pub traces: &'a [Trace],
-    /// End time of each step (s).
-    pub step_ends: &'a [f64],
-}
 
 /// Frame size (pixels) for a plate: [`WIDTH`] wide, the plate's aspect below the caption.
 pub fn frame_size(plate: &PlateModel) -> (u32, u32) {
@@ -74,9 +57,10 @@ fn samples_until(trace: &Trace, t: f64) -> usize {
     trace.partition_point(|&(ts, _)| ts <= t).max(1).min(trace.len())
 }
 
-/// Writes the animation of `anim` to `path` (GIF, atomically) with at most [`MAX_FRAMES`]
+/// Writes the animation of `anim` (the traces figure's data; its title is the first caption
+/// line, its target unused) to `path` (GIF, atomically) with at most [`MAX_FRAMES`]
 /// frames; returns the number of frames written.
-pub fn animation(path: &Path, anim: &Animation<'_>, frames: usize) -> Result<usize, PlotError> {
+pub fn animation(path: &Path, anim: &TracesFigure<'_>, frames: usize) -> Result<usize, PlotError> {
     let t_end = anim.step_ends.last().copied().unwrap_or(0.0).max(0.0);
     let times = instants(t_end, frames.clamp(2, MAX_FRAMES));
     // One node drawing per step, computed once (a grid mode's contour is not cheap).
@@ -109,7 +93,7 @@ pub fn animation(path: &Path, anim: &Animation<'_>, frames: usize) -> Result<usi
 /// trial's path so far and its part at time `t`.
 fn draw_frame<DB: DrawingBackend>(
     root: &DrawingArea<DB, plotters::coord::Shift>,
-    anim: &Animation<'_>,
+    anim: &TracesFigure<'_>,
     nodes: &[Vec<Vec<(f64, f64)>>],
     t: f64,
 ) -> Result<(), String>
@@ -126,7 +110,7 @@ where
         None => "no steps".to_string(),
     };
     let style = ("sans-serif", 15).into_font().color(&BLACK);
-    root.draw_text(&format!("{} on {}", anim.name, anim.plate.name), &style, (8, 4))
+    root.draw_text(&format!("{} on {}", anim.title, anim.plate.name), &style, (8, 4))
         .map_err(text)?;
     root.draw_text(&caption, &style, (8, 24)).map_err(text)?;
     let clock = format!("t = {t:6.1} s");
@@ -166,13 +150,14 @@ pub fn trials_animation(
 ) -> Result<usize, PlotError> {
     let modes: Vec<usize> = setup.steps.iter().map(|s| s.mode).collect();
     let shown = &trials.traces[..trials.traces.len().min(TRACED_TRIALS)];
-    let anim = Animation {
-        name: &part.name,
+    let anim = TracesFigure {
+        title: &part.name,
         body: setup.body,
         plate: setup.plate,
         modes: &modes,
         traces: shown,
         step_ends: &trials.step_ends,
+        target: None,
     };
     animation(path, &anim, MAX_FRAMES)
 }
