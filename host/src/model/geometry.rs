@@ -1,7 +1,20 @@
 //! Polygon and polyline helpers in f64 mm, shared by parts, the analysis, the planner, the
 //! simulator and the plots: signed area, area centroid of a set of rings, point in ring,
-//! orientation and segment tests, bounding boxes. A ring is a closed polygon given by its
+//! orientation and segment tests, the nearest point on a segment, bounding boxes. A ring is a closed polygon given by its
 //! vertices (the closing edge from the last vertex back to the first is implied).
+
+/// Nearest point to `p` on the segment `a`–`b` and its distance (a point if `a == b`).
+pub fn segment_foot(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> ([f64; 2], f64) {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 {
+        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let f = [a[0] + t * dx, a[1] + t * dy];
+    (f, (p[0] - f[0]).hypot(p[1] - f[1]))
+}
 
 /// Signed area (counter-clockwise positive, mm²).
 pub fn signed_area(ring: &[[f64; 2]]) -> f64 {

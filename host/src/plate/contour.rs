@@ -131,18 +131,7 @@ pub fn total_length(lines: &[Polyline]) -> f64 {
         .sum()
 }
 
-/// Nearest point to `p` on the segment `a`–`b` and its distance (a point if `a == b`).
-pub fn segment_foot(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> ([f64; 2], f64) {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    let len2 = dx * dx + dy * dy;
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let f = [a[0] + t * dx, a[1] + t * dy];
-    (f, (p[0] - f[0]).hypot(p[1] - f[1]))
-}
+pub use crate::model::geometry::segment_foot;
 
 /// Distance from `p` to the nearest of `lines` (∞ if there are none); a one-point polyline
 /// counts as that point.

@@ -177,7 +177,8 @@ fn xy(p: Point) -> [f64; 2] {
 /// Appends the cubic's points after its start: chords where the control points lie within
 /// `tol` of the chord (the curve lies in their hull, so within `tol` of it too).
 fn cubic(b: [[f64; 2]; 4], tol: f64, depth: u32, out: &mut Vec<[f64; 2]>) {
-    let flat = dist_to_chord(b[1], b[0], b[3]).max(dist_to_chord(b[2], b[0], b[3])) <= tol;
+    let dist_to_chord = |p| crate::model::geometry::segment_foot(p, b[0], b[3]).1;
+    let flat = dist_to_chord(b[1]).max(dist_to_chord(b[2])) <= tol;
     if flat || depth >= MAX_DEPTH {
         out.push(b[3]);
         return;
@@ -188,18 +189,6 @@ fn cubic(b: [[f64; 2]; 4], tol: f64, depth: u32, out: &mut Vec<[f64; 2]>) {
     let m = mid(p012, p123);
     cubic([b[0], p01, p012, m], tol, depth + 1, out);
     cubic([m, p123, p23, b[3]], tol, depth + 1, out);
-}
-
-/// Distance of `p` from the segment `a`–`b`.
-fn dist_to_chord(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    let len2 = dx * dx + dy * dy;
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
 }
 
 /// Drops repeated vertices (within `eps`), including a closing one equal to the start.
