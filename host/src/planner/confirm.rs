@@ -3,7 +3,7 @@
 
 use crate::model::angle::cdist;
 use crate::model::plate::{Mode, PlateModel};
-use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
+use crate::motion::sim::{self, Body, FieldModel, Pose};
 
 /// Does the simulation take orientation `u` to `v` (mod `period`, within 1°) under a straight
 /// node, approaching from either side, from beyond the part's radius and from half-way across?
@@ -25,12 +25,7 @@ pub fn confirm_any(
     let ctr = plate.center();
     let xi0 = xhat[0] * ctr[0] + xhat[1] * ctr[1] - c;
     let base = [ctr[0] - xi0 * xhat[0], ctr[1] - xi0 * xhat[1]];
-    let p = SimParams {
-        speed: mode.speed_mm_s,
-        t_limit: 3600.0,
-        run_to_limit: false,
-        rim: Some(Rim::of(plate)),
-    };
+    let p = super::settle::settle_params(mode, plate);
     let r = body.radius;
     [-(r + 5.0), -0.5 * r, 0.5 * r, r + 5.0].iter().all(|&xi| {
         let start =

@@ -12,7 +12,7 @@ use std::collections::HashMap;
 
 use crate::model::part::Part;
 use crate::model::plate::{Node, PlateModel};
-use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
+use crate::motion::sim::{self, Body, FieldModel, Pose};
 
 use super::position::{self, POSITION_TOL_MM};
 use super::search::{Minimize, Path, Reach, Search, State, Target};
@@ -70,12 +70,7 @@ impl Durations<'_> {
         self.memo.entry(key).or_insert_with(|| {
             let mode = &plate.modes[k];
             let field = FieldModel::new(mode, plate);
-            let p = SimParams {
-                speed: mode.speed_mm_s,
-                t_limit: 3600.0,
-                run_to_limit: false,
-                rim: Some(Rim::of(plate)),
-            };
+            let p = super::settle::settle_params(mode, plate);
             let grid = matches!(mode.node, Node::Grid(_));
             start_points(body, mode, plate)
                 .into_iter()

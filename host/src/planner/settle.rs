@@ -46,17 +46,23 @@ pub struct Settle {
     pub ends_on_edge: Vec<[f64; 2]>,
 }
 
+/// How the planner runs a part to rest under one mode: at the mode's speed, inside the
+/// plate's rim, until at rest (at most an hour of plate time).
+pub(crate) fn settle_params(mode: &Mode, plate: &PlateModel) -> SimParams {
+    SimParams {
+        speed: mode.speed_mm_s,
+        t_limit: 3600.0,
+        run_to_limit: false,
+        rim: Some(Rim::of(plate)),
+    }
+}
+
 /// Simulated settle time of a step from the given orientations (deg), from the start points
 /// of [`start_points`]: the slowest start, except lingering ones and those that end on the
 /// plate edge (see [`Settle`]).
 pub fn settle_time(body: &Body, mode: &Mode, plate: &PlateModel, orientations: &[f64]) -> Settle {
     let field = FieldModel::new(mode, plate);
-    let p = SimParams {
-        speed: mode.speed_mm_s,
-        t_limit: 3600.0,
-        run_to_limit: false,
-        rim: Some(Rim::of(plate)),
-    };
+    let p = settle_params(mode, plate);
     let mut times = Vec::new();
     let points = start_points(body, mode, plate);
     let mut ends_on_edge = Vec::new();
