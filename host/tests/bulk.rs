@@ -6,26 +6,19 @@
 //! points sampled along each part's boundary must not lie deeper than a tolerance inside
 //! the other part's area.
 
-use std::process::{Command, Output};
+use std::process::Output;
 
 use chladni::model::geometry::inside;
 use chladni::motion::bulk::{self, Drop};
 use chladni::motion::shape::Pieces;
 use chladni::motion::sim::{Body, FieldModel, Pose, plan_steps};
 
-#[path = "support/examples.rs"]
-mod examples;
+mod support;
+use support::cli::{chladni, ex};
+use support::examples;
 
 /// Overlap allowed at the end (mm): the contact solve's separation leaves less.
 const TOL_MM: f64 = 0.05;
-
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn ex(path: &str) -> String {
-    examples::root().join("examples").join(path).display().to_string()
-}
 
 fn copies(n: &str, seed: &str, extra: &[&str]) -> Output {
     let (part, plate, plan) = (
