@@ -8,6 +8,7 @@ pub mod feed_region;
 pub mod field;
 pub mod geometry;
 pub mod modes_file;
+pub mod grid;
 pub mod observations;
 pub mod part;
 pub mod plan_file;

@@ -6,9 +6,9 @@
 //! sweep, which have a frequency but no node yet ([`measured_mode`]: the plate file then
 //! refuses to load until the node is filled in). Schema in docs/plate.md.
 
+use crate::model::grid::Grid;
 use crate::model::plate::SAME_FREQ_HZ;
 use crate::model::plate_file::{LineEntry, ModeEntry, NodeEntry, PlateFile, PlateTable};
-use crate::plate::solver::Grid;
 
 /// Rounds to `digits` decimals so files stay small and diff well.
 fn round(v: f64, digits: i32) -> f64 {
@@ -170,7 +170,14 @@ pub fn grid_of(entry: &ModeEntry, size_mm: [f64; 2]) -> Option<Grid> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plate::solver;
+
+    /// A sampled mode shape without the solver (model is below plate): (1, 1) cosines, its
+    /// largest sample +1 as the solver normalises.
+    fn cosine_grid(nx: usize, ny: usize, size_mm: [f64; 2]) -> Grid {
+        let c = |k: usize, n: usize| (std::f64::consts::PI * k as f64 / (n - 1) as f64).cos();
+        let values = (0..ny).flat_map(|j| (0..nx).map(move |i| c(i, nx) * c(j, ny))).collect();
+        Grid { nx, ny, size_mm, values }
+    }
 
     #[test]
     fn written_modes_parse_back_as_a_plate_file_with_grids() {
@@ -178,13 +185,8 @@ mod tests {
                     youngs_modulus_gpa = 70.0\ndensity_kg_m3 = 2700.0\npoisson = 0.33\nboundary = \"cantilever\"\n";
         let file = PlateFile::parse(text, "t").unwrap();
         let plate = file.plate.mechanics().unwrap();
-        let sol = solver::solve(&plate, 2, 8);
-        let grid = sol.sample(1, 31, 21);
-        let out = render(
-            &file.plate,
-            vec![grid_mode("mode 2", sol.modes[1].freq_hz, sol.modes[1].lambda, &grid)],
-        )
-        .unwrap();
+        let grid = cosine_grid(31, 21, plate.size_mm);
+        let out = render(&file.plate, vec![grid_mode("mode 2", 61.25, 3.47, &grid)]).unwrap();
         let back = PlateFile::parse(&out, "out").unwrap();
         assert_eq!(back.plate.mechanics().unwrap(), plate);
         assert_eq!(back.mode.len(), 1);

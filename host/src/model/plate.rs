@@ -27,9 +27,9 @@ use std::path::Path;
 
 use crate::model::field::LawError;
 pub use crate::model::field::{LINEAR_SCALE_MM, Law};
+use crate::model::grid::Grid;
 use crate::model::plan_file::check_drive_freq;
 use crate::model::plate_file::{LineEntry, ModeEntry, NodeEntry, PlateFile, PlateFileError};
-use crate::plate::solver::Grid;
 
 /// Entries whose frequencies differ by less than this (Hz) are one mode (the drive's
 /// resolution is 1 mHz).

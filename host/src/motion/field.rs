@@ -22,9 +22,9 @@ use crate::model::plate::{Law, Mode, Node, PlateModel};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
+use crate::model::grid::Grid;
 use crate::motion::body::{Body, Pose};
 use crate::motion::potential::{Bicubic, kinked_outline_wrench};
-use crate::plate::solver::Grid;
 
 /// Longest outline piece of the hyperbola's outline rule, as a fraction of the part's
 /// radius (4 Gauss points per piece). Its error against pieces of R/50 is below 5·10⁻⁵ of

@@ -162,9 +162,9 @@ fn settle_time(trace: &[(f64, Pose)], end: Pose, v_move: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::grid::Grid;
     use crate::model::plate::Node;
     use crate::motion::testkit::{mode, plate, rect};
-    use crate::plate::solver::Grid;
 
     #[test]
     fn a_symmetric_part_turned_by_its_symmetry_runs_the_same() {

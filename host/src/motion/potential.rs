@@ -15,7 +15,7 @@
 //! of its node but has a kink on it (sign law, unequal gains): [`kinked_outline_wrench`] cuts
 //! the edges there and integrates the pieces the same way.
 
-use crate::plate::solver::Grid;
+use crate::model::grid::Grid;
 
 /// 7-point Gauss–Legendre nodes on [0, 1] and weights (summing to 1): exact for degree 13.
 const GL7: [(f64, f64); 7] = [

@@ -15,6 +15,7 @@
 
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 
+pub use crate::model::grid::Grid;
 use crate::model::plate_file::{Boundary, Plate};
 
 /// Polynomial degree count per direction used by default (`N × N` trial functions).
@@ -339,34 +340,6 @@ pub const GRID_X_POINTS: std::ops::RangeInclusive<usize> = 3..=401;
 pub fn grid_dims(nx: usize, size: [f64; 2]) -> (usize, usize) {
     let ny = (((nx - 1) as f64) * size[1] / size[0]).round() as usize + 1;
     (nx, ny.max(2))
-}
-
-/// A mode shape sampled on a regular grid covering the plate.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Grid {
-    /// Samples along x.
-    pub nx: usize,
-    /// Samples along y.
-    pub ny: usize,
-    /// Plate size (mm).
-    pub size_mm: [f64; 2],
-    /// `values[j·nx + i] = φ(x_i, y_j)`, `x_i = i·W/(nx−1)`, `y_j = j·H/(ny−1)`;
-    /// normalised so that max |φ| = 1 and the largest-magnitude sample is positive.
-    pub values: Vec<f64>,
-}
-
-impl Grid {
-    /// Sample value at grid point (i, j).
-    pub fn at(&self, i: usize, j: usize) -> f64 {
-        self.values[j * self.nx + i]
-    }
-    /// Plate coordinates (mm) of grid point (i, j).
-    pub fn point(&self, i: usize, j: usize) -> [f64; 2] {
-        [
-            i as f64 * self.size_mm[0] / (self.nx - 1) as f64,
-            j as f64 * self.size_mm[1] / (self.ny - 1) as f64,
-        ]
-    }
 }
 
 /// `w(p) = Σ q_ij p_i(ξ) p_j(η)` of Ritz coefficients `q` (`terms` per direction) at plate
