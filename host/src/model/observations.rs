@@ -18,8 +18,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::model::part::Part;
-use crate::motion::sim::Pose;
-use crate::plate::calibrate::{Measured, Observation};
+use crate::model::pose::Pose;
 
 /// The header, column by column.
 pub const COLUMNS: [&str; 8] =
@@ -27,6 +26,41 @@ pub const COLUMNS: [&str; 8] =
 
 /// Most rows read (a stopwatch session has tens).
 pub const MAX_ROWS: usize = 100_000;
+
+/// What was measured in one observation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Measured {
+    /// Seconds from switching the mode on until the part reached the node (see the module
+    /// docs for the definition).
+    TimeToNode {
+        /// Seconds.
+        t_s: f64,
+    },
+    /// The pose `t_s` seconds after switching the mode on (orientation optional).
+    PoseAfter {
+        /// Seconds.
+        t_s: f64,
+        /// Centroid x (mm).
+        x_mm: f64,
+        /// Centroid y (mm).
+        y_mm: f64,
+        /// Orientation (deg), when observed.
+        theta_deg: Option<f64>,
+    },
+}
+
+/// One observation: a part dropped at a start pose, and what was measured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observation {
+    /// Where it was written (a CSV line, 1-based), for messages.
+    pub line: usize,
+    /// Index of the part in the fit's part list.
+    pub part: usize,
+    /// Start pose (centroid mm, θ rad).
+    pub start: Pose,
+    /// The measurement.
+    pub measured: Measured,
+}
 
 /// What is wrong with an observations file.
 #[derive(Debug, thiserror::Error)]

@@ -9,16 +9,7 @@ use crate::model::part::Part;
 /// Target number of interior sample points for numerical force integration.
 pub const BODY_SAMPLES: usize = 400;
 
-/// A pose: centroid (x, y) in mm, orientation θ in radians.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Pose {
-    /// Centroid x (mm).
-    pub x: f64,
-    /// Centroid y (mm).
-    pub y: f64,
-    /// Orientation (rad).
-    pub theta: f64,
-}
+pub use crate::model::pose::Pose;
 
 /// A part prepared for simulation: rings about the centroid, area, polar moment, samples.
 #[derive(Debug, Clone)]

@@ -20,6 +20,7 @@
 
 use serde::Serialize;
 
+pub use crate::model::observations::{Measured, Observation};
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
 use crate::motion::contact::Rim;
@@ -31,41 +32,6 @@ pub const SPEED_RANGE: std::ops::RangeInclusive<f64> = 1e-3..=1e5;
 
 /// Default of `within_mm`: how close to its rest the centroid counts as on the node (mm).
 pub const DEFAULT_WITHIN_MM: f64 = 1.0;
-
-/// What was measured in one observation.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Measured {
-    /// Seconds from switching the mode on until the part reached the node (see the module
-    /// docs for the definition).
-    TimeToNode {
-        /// Seconds.
-        t_s: f64,
-    },
-    /// The pose `t_s` seconds after switching the mode on (orientation optional).
-    PoseAfter {
-        /// Seconds.
-        t_s: f64,
-        /// Centroid x (mm).
-        x_mm: f64,
-        /// Centroid y (mm).
-        y_mm: f64,
-        /// Orientation (deg), when observed.
-        theta_deg: Option<f64>,
-    },
-}
-
-/// One observation: a part dropped at a start pose, and what was measured.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Observation {
-    /// Where it was written (a CSV line, 1-based), for messages.
-    pub line: usize,
-    /// Index of the part in the fit's part list.
-    pub part: usize,
-    /// Start pose (centroid mm, θ rad).
-    pub start: Pose,
-    /// The measurement.
-    pub measured: Measured,
-}
 
 /// A part to calibrate with: prepared once, its symmetry period for orientation residuals.
 #[derive(Debug, Clone)]
