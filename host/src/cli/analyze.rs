@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use chladni::model::field::{Law, LawError, MAX_WAVELENGTH_MM};
+use chladni::model::field::{LawError, MAX_WAVELENGTH_MM};
 use chladni::model::part::Part;
 use chladni::plot::analysis::{self, PlotData};
 use chladni::shapes::{TurnSample, write_csv};
@@ -14,7 +14,7 @@ use chladni_shared::icd::units::{bam_from_deg, deg_from_bam};
 use clap::Args;
 use serde::Serialize;
 
-use super::parse::{f64_where, usize_in};
+use super::parse::{FieldArg, f64_where, usize_in};
 use super::part::PartArgs;
 use super::{InputError, check_plot, plot_error};
 
@@ -25,7 +25,7 @@ pub struct AnalyzeArgs {
     part: PartArgs,
     /// Field law.
     #[arg(long, value_enum)]
-    field: Law,
+    field: FieldArg,
     /// Sine field: distance from the node to the next antinode (mm).
     #[arg(long, value_name = "MM",
           value_parser = f64_where("wavelength", "in (0, 1e7] mm", |w| w > 0.0 && w <= MAX_WAVELENGTH_MM))]

@@ -1,7 +1,9 @@
 //! Value parsers for the options: each refuses a value outside its range with a message that
 //! names the option and the value; clap then exits with code 2 (bad input).
 
+use chladni::model::field::Law;
 use chladni_shared::icd::units::{MilliHz, MmPerS2, Q15};
+use clap::builder::PossibleValue;
 
 /// A value parser for an `f64` option `--NAME` accepted when `ok`; refused with
 /// "--NAME must be WHAT, got VALUE".
@@ -75,6 +77,38 @@ pub fn drive_accel(s: &str) -> Result<u32, String> {
     let v: f64 =
         s.trim().parse().map_err(|_| format!("--accel must be a number in m/s², got {s}"))?;
     MmPerS2::from_mps2(v).map(|a| a.0).map_err(|e| format!("--accel: {e}"))
+}
+
+/// `--field sign|linear|sine`: the model's field law as a clap value (the model knows no clap).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FieldArg(pub Law);
+
+impl std::ops::Deref for FieldArg {
+    type Target = Law;
+    fn deref(&self) -> &Law {
+        &self.0
+    }
+}
+
+/// The sine variant carries a placeholder wavelength (NaN) until [`Law::with_wavelength`] gives
+/// it the real one.
+impl clap::ValueEnum for FieldArg {
+    fn value_variants<'a>() -> &'a [Self] {
+        &[
+            FieldArg(Law::Sign),
+            FieldArg(Law::Linear),
+            FieldArg(Law::Sine { wavelength_mm: f64::NAN }),
+        ]
+    }
+
+    fn to_possible_value(&self) -> Option<PossibleValue> {
+        let help = match self.0 {
+            Law::Sign => "Constant force towards the node (paper eq. 5)",
+            Law::Linear => "Force proportional to the distance from the node (paper §5.2)",
+            Law::Sine { .. } => "sin(π d / w): needs --wavelength",
+        };
+        Some(PossibleValue::new(self.0.name()).help(help))
+    }
 }
 
 #[cfg(test)]

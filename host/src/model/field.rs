@@ -4,7 +4,6 @@
 
 use chladni_shared::analysis::field::FieldKind;
 use chladni_shared::analysis::fx::Fx;
-use clap::builder::PossibleValue;
 
 /// The linear field's length scale: its pull equals the gain this far from the node.
 pub const LINEAR_SCALE_MM: f64 = 10.0;
@@ -91,23 +90,6 @@ impl Law {
                 FieldKind::Sine { wavelength: Fx::from_f64(wavelength_mm) }
             }
         }
-    }
-}
-
-/// `--field sign|linear|sine`: the sine variant carries a placeholder wavelength (NaN) until
-/// [`Law::with_wavelength`] gives it the real one.
-impl clap::ValueEnum for Law {
-    fn value_variants<'a>() -> &'a [Self] {
-        &[Law::Sign, Law::Linear, Law::Sine { wavelength_mm: f64::NAN }]
-    }
-
-    fn to_possible_value(&self) -> Option<PossibleValue> {
-        let help = match self {
-            Law::Sign => "Constant force towards the node (paper eq. 5)",
-            Law::Linear => "Force proportional to the distance from the node (paper §5.2)",
-            Law::Sine { .. } => "sin(π d / w): needs --wavelength",
-        };
-        Some(PossibleValue::new(self.name()).help(help))
     }
 }
 
