@@ -1,5 +1,6 @@
 //! The data the commands hand to researchers, one home for their shapes: JSON objects and CSV
-//! rows that `analyze --samples/--csv`, `simulate --poses/--traces` and the string model print.
+//! rows that `analyze --samples/--csv`, `simulate --poses/--traces` and the string model print,
+//! and the `--json` object of a failed plan ([`plan_failure_json`]).
 //! Keys are snake_case with their unit in the name (`_deg`, `_mm`, `_s`); steps are numbered
 //! from 1, as `plan` prints them. Every file is written atomically ([`crate::output`]).
 
@@ -7,9 +8,11 @@ use std::path::Path;
 
 use serde::Serialize;
 
+use crate::model::plan_file::r4;
 use crate::motion::body::Pose;
 use crate::motion::montecarlo::{Report, Trials};
 use crate::output::{OutputError, write_with};
+use crate::planner::PlanFailure;
 
 /// One sample of a rest analysis: the turn function t(θ) (normalised so that max |t| = 1 over
 /// the samples; 0 everywhere for a neutral part) and the alignment function a(θ), the stable
@@ -140,6 +143,40 @@ pub fn write_jsonl<T: Serialize>(path: &Path, lines: &[T]) -> Result<(), OutputE
         }
         std::fs::write(tmp, text).map_err(|e| e.to_string())
     })
+}
+
+/// The `--json` object of a failed plan (`chladni plan --json`): `error` (the failure's name),
+/// `message`, and the failure's data (an unreachable goal: `reachable_deg` and `nearest_deg`).
+pub fn plan_failure_json(e: &PlanFailure) -> serde_json::Value {
+    use serde_json::json;
+    let mut v = match e {
+        PlanFailure::NoPlan(_) => json!({"error": "no_plan"}),
+        PlanFailure::Model(_) => json!({"error": "model"}),
+        PlanFailure::GoalUnreachable {
+            part,
+            goal_deg,
+            period_deg,
+            tol_deg,
+            max_steps,
+            reachable_deg,
+            nearest_deg,
+        } => json!({"error": "goal_unreachable", "part": part, "goal_deg": goal_deg,
+            "period_deg": period_deg, "tolerance_deg": tol_deg, "max_steps": max_steps,
+            "reachable_deg": reachable_deg.iter().map(|&d| r4(d)).collect::<Vec<_>>(),
+            "nearest_deg": nearest_deg.map(r4)}),
+        PlanFailure::PositionNotFixed { part, max_steps, tol_mm } => json!({
+            "error": "position_not_fixed", "part": part, "max_steps": max_steps,
+            "tolerance_mm": tol_mm}),
+        PlanFailure::PositionNotConfirmed { part, predicted_mm, worst_mm } => json!({
+            "error": "position_not_confirmed", "part": part, "predicted_mm": predicted_mm,
+            "worst_mm": worst_mm}),
+        PlanFailure::PartsApart { apart, searched } => json!({
+            "error": "parts_apart", "searched": searched,
+            "apart": apart.iter().map(|(n, d, p)| json!({"part": n, "orientations_deg": d,
+                "period_deg": p})).collect::<Vec<_>>()}),
+    };
+    v["message"] = json!(e.to_string());
+    v
 }
 
 #[cfg(test)]

@@ -234,7 +234,7 @@ impl PlanArgs {
             Ok(syn) => syn,
             Err(e) => {
                 if self.json {
-                    println!("{}", failure_json(&e));
+                    println!("{}", shapes::plan_failure_json(&e));
                 }
                 eprintln!("error: {e}");
                 return Ok(ExitCode::from(1));
@@ -342,45 +342,6 @@ fn note_self_mirrored(faces: &Faces) {
              as the face up turned, so one face is planned and simulated"
         );
     }
-}
-
-/// Rounds to 10⁻⁴ (as the plan file's orientations).
-fn r4(v: f64) -> f64 {
-    (v * 1e4).round() / 1e4
-}
-
-/// The `--json` object of a failed plan: `error` (the failure's name), `message`, and the
-/// failure's data (an unreachable goal: `reachable_deg` and `nearest_deg`).
-fn failure_json(e: &PlanFailure) -> serde_json::Value {
-    use serde_json::json;
-    let mut v = match e {
-        PlanFailure::NoPlan(_) => json!({"error": "no_plan"}),
-        PlanFailure::Model(_) => json!({"error": "model"}),
-        PlanFailure::GoalUnreachable {
-            part,
-            goal_deg,
-            period_deg,
-            tol_deg,
-            max_steps,
-            reachable_deg,
-            nearest_deg,
-        } => json!({"error": "goal_unreachable", "part": part, "goal_deg": goal_deg,
-            "period_deg": period_deg, "tolerance_deg": tol_deg, "max_steps": max_steps,
-            "reachable_deg": reachable_deg.iter().map(|&d| r4(d)).collect::<Vec<_>>(),
-            "nearest_deg": nearest_deg.map(r4)}),
-        PlanFailure::PositionNotFixed { part, max_steps, tol_mm } => json!({
-            "error": "position_not_fixed", "part": part, "max_steps": max_steps,
-            "tolerance_mm": tol_mm}),
-        PlanFailure::PositionNotConfirmed { part, predicted_mm, worst_mm } => json!({
-            "error": "position_not_confirmed", "part": part, "predicted_mm": predicted_mm,
-            "worst_mm": worst_mm}),
-        PlanFailure::PartsApart { apart, searched } => json!({
-            "error": "parts_apart", "searched": searched,
-            "apart": apart.iter().map(|(n, d, p)| json!({"part": n, "orientations_deg": d,
-                "period_deg": p})).collect::<Vec<_>>()}),
-    };
-    v["message"] = json!(e.to_string());
-    v
 }
 
 /// The plan as a table: one line per step, the feed check, the final pose.

@@ -26,6 +26,12 @@ pub fn freq_mhz(hz: f64) -> Option<u32> {
     (mhz.is_finite() && mhz >= 0.5 && mhz < u32::MAX as f64).then(|| round_half_away(mhz) as u32)
 }
 
+/// Rounds to 10⁻⁴: the plan file's resolution for orientations (degrees), also used for the
+/// orientations of a failed plan's JSON.
+pub fn r4(v: f64) -> f64 {
+    (v * 1e4).round() / 1e4
+}
+
 /// The one check of a drive frequency (Hz) against the controller's limits: the shared
 /// conversion, [`MilliHz::from_hz`], and its one message.
 pub fn check_drive_freq(hz: f64) -> Result<u32, FrequencyError> {

@@ -4,7 +4,7 @@ use super::feed;
 use super::goal::PartPlan;
 use super::input::plan_name;
 use super::settle::Settle;
-use crate::model::plan_file::{PartPrediction, PlanFile, StepJson};
+use crate::model::plan_file::{PartPrediction, PlanFile, StepJson, r4};
 use crate::model::plate::PlateModel;
 use crate::motion::sim;
 
@@ -107,9 +107,4 @@ impl Synthesis {
         }
         file
     }
-}
-
-/// Rounds to 10⁻⁴ (the plan file's resolution for orientations).
-fn r4(v: f64) -> f64 {
-    (v * 1e4).round() / 1e4
 }
