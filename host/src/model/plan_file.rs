@@ -15,16 +15,8 @@
 //! The planner writes open-loop steps only.
 
 use chladni_shared::icd::plan::{DeviceLimits, Level, MAX_NAME, MAX_STEPS, Plan, PlanError, Step};
-use chladni_shared::icd::units::{FrequencyError, MilliHz, MmPerS2, Q15, round_half_away};
+use chladni_shared::icd::units::{FrequencyError, MilliHz, MmPerS2, Q15};
 use serde::{Deserialize, Serialize};
-
-/// Hz → mHz, rounded to nearest: `None` unless finite and within 1..=u32::MAX mHz once
-/// rounded (≥ 0.5 mHz). A plan file's steps are converted with it and then validated against
-/// the limits of the device that runs them ([`Plan::validate`]).
-pub fn freq_mhz(hz: f64) -> Option<u32> {
-    let mhz = hz * 1000.0;
-    (mhz.is_finite() && mhz >= 0.5 && mhz < u32::MAX as f64).then(|| round_half_away(mhz) as u32)
-}
 
 /// Rounds to 10⁻⁴: the plan file's resolution for orientations (degrees), also used for the
 /// orientations of a failed plan's JSON.
@@ -276,7 +268,7 @@ impl PlanFile {
         }
         let mut steps = heapless::Vec::new();
         for (i, s) in self.steps.iter().enumerate() {
-            let Some(freq_mhz) = freq_mhz(s.freq_hz) else {
+            let Some(MilliHz(freq_mhz)) = MilliHz::rounded(s.freq_hz) else {
                 return Err(PlanFileError::Frequency { step: i, value: s.freq_hz });
             };
             let step = Step {

@@ -96,7 +96,7 @@ impl MilliHz {
     /// `hz` rounded to the nearest millihertz, within the range of `limits`.
     pub fn from_hz_within(hz: f64, limits: &DeviceLimits) -> Result<MilliHz, FrequencyError> {
         let (min, max) = (limits.min_freq_mhz, limits.max_freq_mhz);
-        let mhz = round_half_away(hz * 1000.0);
+        let mhz = round_mhz(hz);
         if !hz.is_finite() || mhz < min as i64 || mhz > max as i64 {
             return Err(FrequencyError::outside(hz, limits));
         }
@@ -105,11 +105,25 @@ impl MilliHz {
 
     /// The frequency in Hz.
     pub fn to_hz(self) -> f64 {
+    /// `hz` rounded to the nearest millihertz when that is representable (finite, at least
+    /// 1 mHz once rounded, below `u32::MAX` mHz), no device range checked: a plan file's steps
+    /// are converted with it and validated against the limits of the device that runs them.
+    pub fn rounded(hz: f64) -> Option<MilliHz> {
+        let mhz = hz * 1000.0;
+        (mhz.is_finite() && mhz >= 0.5 && mhz < u32::MAX as f64)
+            .then(|| MilliHz(round_mhz(hz) as u32))
+    }
+
         self.0 as f64 / 1000.0
     }
 }
 
 // ---- Amplitude ----
+
+/// The one Hz → mHz rounding: to nearest, half away from zero.
+fn round_mhz(hz: f64) -> i64 {
+    round_half_away(hz * 1000.0)
+}
 
 /// A drive amplitude in Q15 (32767 = the DAC's full scale), as plans and the link carry it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
