@@ -23,6 +23,7 @@ use std::time::Duration;
 use chladni_shared::icd::link::{DriveError, Refusal, StatusReport};
 use chladni_shared::icd::sense::{FaultCause, SensorFault};
 use chladni_shared::icd::store::PLAN_SLOTS;
+use chladni_shared::icd::units::whole_ms_from_samples;
 use tokio::net::TcpListener;
 use tokio::sync::Semaphore;
 use tokio_modbus::{ExceptionCode, Request, Response};
@@ -224,7 +225,7 @@ const fn words(value: u32) -> [u16; 2] {
 
 /// Time left in the plan, whole ms (saturating at `u32::MAX`).
 fn remaining_ms(report: &StatusReport) -> u32 {
-    let ms = u128::from(report.remaining_samples) * 1000 / u128::from(report.sample_rate.max(1));
+    let ms = whole_ms_from_samples(report.remaining_samples, report.sample_rate);
     u32::try_from(ms).unwrap_or(u32::MAX)
 }
 

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use chladni::demo::{self, DemoConfig, DemoError, DemoStep, Prepared, Summary};
 use chladni_shared::icd::link::Telemetry;
-use chladni_shared::icd::units::{MilliHz, MmPerS2};
+use chladni_shared::icd::units::{MilliHz, MmPerS2, ms_from_samples};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
@@ -353,7 +353,7 @@ fn timing_line(r: &demo::RunReport) -> String {
         r.planned_ms,
         r.difference_samples,
         if r.difference_samples == 0 { "sample-exact" } else { "NOT sample-exact" },
-        r.final_ramp_samples as f64 * 1000.0 / f64::from(r.sample_rate.max(1)),
+        ms_from_samples(r.final_ramp_samples, r.sample_rate),
         r.wall_s
     )
 }

@@ -6,7 +6,7 @@ use chladni_shared::icd::link::{StatusReport, Telemetry};
 use chladni_shared::icd::plan::Level;
 use chladni_shared::icd::sense::Fault;
 use chladni_shared::icd::store::PlanSummary;
-use chladni_shared::icd::units::{MilliDeg, MilliHz, MmPerS2, Q15};
+use chladni_shared::icd::units::{MilliDeg, MilliHz, MmPerS2, Q15, s_from_samples};
 use serde::Serialize;
 
 /// The `status --json` object: the keys of protocol v1's status; `fault`, `plan`,
@@ -52,7 +52,7 @@ pub struct FaultJson {
 impl FaultJson {
     pub fn of(f: &Fault, sample_rate: u32) -> Self {
         FaultJson {
-            at_s: f.at_sample as f64 / f64::from(sample_rate.max(1)),
+            at_s: s_from_samples(f.at_sample, sample_rate),
             cause: f.cause.name(),
             unit: f.cause.unit(),
             value: f.value,

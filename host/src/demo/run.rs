@@ -17,6 +17,7 @@ use chladni_shared::icd::link::{DriveState, RunNumber, StatusReport, Telemetry};
 use chladni_shared::icd::plan::Plan;
 use chladni_shared::icd::sense::Fault;
 use chladni_shared::icd::store::PlanRef;
+use chladni_shared::icd::units::ms_from_samples;
 use serde::Serialize;
 
 use super::DemoError;
@@ -181,7 +182,7 @@ pub fn timing(plan: &Plan, run: RunNumber, outcome: &RunOutcome, clock: StartClo
         RunOutcome::Done(_) if ours => elapsed.saturating_sub(final_ramp_samples),
         _ => elapsed,
     };
-    let ms = |samples: u64| samples as f64 * 1000.0 / f64::from(rate);
+    let ms = |samples: u64| ms_from_samples(samples, rate);
     RunReport {
         run: run.0,
         outcome: outcome.name(),

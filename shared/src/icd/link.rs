@@ -701,12 +701,12 @@ impl StatusReport {
 
     /// `elapsed_samples` in milliseconds.
     pub fn elapsed_ms(&self) -> f64 {
-        self.elapsed_samples as f64 * 1000.0 / self.sample_rate as f64
+        crate::icd::units::ms_from_samples(self.elapsed_samples, self.sample_rate)
     }
 
     /// `remaining_samples` in milliseconds.
     pub fn remaining_ms(&self) -> f64 {
-        self.remaining_samples as f64 * 1000.0 / self.sample_rate as f64
+        crate::icd::units::ms_from_samples(self.remaining_samples, self.sample_rate)
     }
 }
 

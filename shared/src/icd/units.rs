@@ -10,6 +10,8 @@
 //!   ([`DeviceLimits::check_setpoint`], the configuration's validation).
 //! - [`MilliDb`]: a level ratio, dB ↔ millidecibels (`u32`, the control bands), one error
 //!   ([`DbError`]); [`MilliDeg`]: a phase, millidegrees (`i32`) → degrees.
+//! - Time on the drive's sample clock: samples → ms or s at a sample rate
+//!   ([`ms_from_samples`], [`s_from_samples`], [`whole_ms_from_samples`]).
 //! - [`Fx`] ↔ `f64` ([`Fx::from_f64`], [`Fx::to_f64`]) and binary angles ↔ degrees or radians
 //!   ([`bam_from_deg`], [`deg_from_bam`], [`bam_from_rad`], [`rad_from_bam`]).
 //!
@@ -103,8 +105,6 @@ impl MilliHz {
         Ok(MilliHz(mhz as u32))
     }
 
-    /// The frequency in Hz.
-    pub fn to_hz(self) -> f64 {
     /// `hz` rounded to the nearest millihertz when that is representable (finite, at least
     /// 1 mHz once rounded, below `u32::MAX` mHz), no device range checked: a plan file's steps
     /// are converted with it and validated against the limits of the device that runs them.
@@ -114,16 +114,18 @@ impl MilliHz {
             .then(|| MilliHz(round_mhz(hz) as u32))
     }
 
+    /// The frequency in Hz.
+    pub fn to_hz(self) -> f64 {
         self.0 as f64 / 1000.0
     }
 }
-
-// ---- Amplitude ----
 
 /// The one Hz → mHz rounding: to nearest, half away from zero.
 fn round_mhz(hz: f64) -> i64 {
     round_half_away(hz * 1000.0)
 }
+
+// ---- Amplitude ----
 
 /// A drive amplitude in Q15 (32767 = the DAC's full scale), as plans and the link carry it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -255,6 +257,26 @@ impl MilliDeg {
     pub fn to_deg(self) -> f64 {
         self.0 as f64 / 1000.0
     }
+}
+
+// ---- Time on the sample clock ----
+
+/// `samples` of the drive's sample clock at `sample_rate` (Hz) in milliseconds (a rate of 0, a
+/// status never filled in, counts as 1 Hz rather than dividing by zero).
+pub fn ms_from_samples(samples: u64, sample_rate: u32) -> f64 {
+    samples as f64 * 1000.0 / f64::from(sample_rate.max(1))
+}
+
+/// `samples` at `sample_rate` (Hz) in seconds (a rate of 0 counts as 1 Hz).
+pub fn s_from_samples(samples: u64, sample_rate: u32) -> f64 {
+    samples as f64 / f64::from(sample_rate.max(1))
+}
+
+/// `samples` at `sample_rate` (Hz) in whole milliseconds, rounded down, saturating at
+/// `u64::MAX` (a rate of 0 counts as 1 Hz): exact integer arithmetic, for registers.
+pub fn whole_ms_from_samples(samples: u64, sample_rate: u32) -> u64 {
+    let ms = u128::from(samples) * 1000 / u128::from(sample_rate.max(1));
+    u64::try_from(ms).unwrap_or(u64::MAX)
 }
 
 // ---- Fixed point and binary angles ----
