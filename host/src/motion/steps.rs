@@ -2,7 +2,7 @@
 //! a whole plan run from one start pose.
 
 use crate::model::plan_file::{PlanFile, PlanFileError, StepLevel};
-use crate::model::plate::PlateModel;
+use crate::model::plate::{PlateModel, SAME_FREQ_HZ};
 use crate::motion::body::{Body, Pose};
 use crate::motion::contact::Rim;
 use crate::motion::field::FieldModel;
@@ -75,8 +75,11 @@ pub fn plan_steps(file: &PlanFile, plate: &PlateModel) -> Result<Vec<SimStep>, P
                 return Err(PlanStepsError::ClosedLoop { step: i + 1, accel_mps2 });
             }
         };
-        let k = plate.modes.iter().position(|m| (m.freq_hz - s.freq_hz).abs() < 1e-3).ok_or_else(
-            || NoModeAt {
+        let k = plate
+            .modes
+            .iter()
+            .position(|m| (m.freq_hz - s.freq_hz).abs() < SAME_FREQ_HZ)
+            .ok_or_else(|| NoModeAt {
                 step: i + 1,
                 freq_hz: s.freq_hz,
                 modes: plate
@@ -85,8 +88,7 @@ pub fn plan_steps(file: &PlanFile, plate: &PlateModel) -> Result<Vec<SimStep>, P
                     .map(|m| format!("{} Hz", m.freq_hz))
                     .collect::<Vec<_>>()
                     .join(", "),
-            },
-        )?;
+            })?;
         steps.push(SimStep::new(k, s.duration_ms, amplitude / plate.modes[k].amplitude));
     }
     Ok((0..file.repeat).flat_map(|_| steps.iter().copied()).collect())
