@@ -14,18 +14,7 @@ use crate::motion::montecarlo::{Report, Trials};
 use crate::output::{OutputError, write_with};
 use crate::planner::PlanFailure;
 
-/// One sample of a rest analysis: the turn function t(θ) (normalised so that max |t| = 1 over
-/// the samples; 0 everywhere for a neutral part) and the alignment function a(θ), the stable
-/// orientation a part starting at θ turns to.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
-pub struct TurnSample {
-    /// Orientation θ (degrees, [0, 360]).
-    pub theta_deg: f64,
-    /// t(θ) / max |t|: > 0 turns counter-clockwise.
-    pub turn: f64,
-    /// a(θ) (degrees, [0, 360)).
-    pub alignment_deg: f64,
-}
+pub use crate::analysis::samples::TurnSample;
 
 /// A pose in the plate's frame.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]

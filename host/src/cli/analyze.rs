@@ -3,14 +3,14 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use chladni::analysis::samples::{TurnSample, deg, offset_mm, turn_samples};
 use chladni::model::field::{LawError, MAX_WAVELENGTH_MM};
 use chladni::model::part::Part;
 use chladni::plot::analysis::{self, PlotData};
-use chladni::shapes::{TurnSample, write_csv};
+use chladni::shapes::write_csv;
 use chladni_shared::analysis::field::Field;
-use chladni_shared::analysis::fx::{Bam, Fx};
+use chladni_shared::analysis::fx::Fx;
 use chladni_shared::analysis::rest::{Analysis, AnalysisError, Analyzer};
-use chladni_shared::icd::units::{bam_from_deg, deg_from_bam};
 use clap::Args;
 use serde::Serialize;
 
@@ -53,12 +53,6 @@ pub struct AnalyzeArgs {
 
 /// Samples of t(θ) and a(θ) written by `--csv` unless `--samples` says how many.
 const CSV_SAMPLES: usize = 721;
-
-/// Binary angle → degrees in [0, 360), rounded to 1e-6° for display.
-fn deg(a: Bam) -> f64 {
-    let d = (deg_from_bam(a) * 1e6).round() / 1e6;
-    if d >= 360.0 { 0.0 } else { d }
-}
 
 /// The `--json` object (keys in alphabetical order, as printed).
 #[derive(Debug, Serialize)]
@@ -158,7 +152,14 @@ impl AnalyzeArgs {
             }
         }
         if let Some(path) = &self.plot {
-            let data = plot_data(&part, &an, &analysis, self.field.name(), &self.describe_field());
+            let (field, desc) = (self.field.name(), self.describe_field());
+            let title = format!(
+                "{} — {} field{}",
+                part.name,
+                field,
+                desc.strip_prefix(field).unwrap_or("")
+            );
+            let data = PlotData::of(&part, &an, &analysis, title);
             analysis::write(path, &data).map_err(plot_error)?;
             if !self.json {
                 println!("plot       {}", path.display());
@@ -201,68 +202,7 @@ impl AnalyzeArgs {
     }
 }
 
-fn offset_mm(an: &Analyzer<'_>, s: Fx) -> f64 {
-    Fx::to_f64(s) * (-an.shift() as f64).exp2()
-}
-
 fn radius_mm(part: &Part) -> f64 {
     let [cx, cy] = part.centroid();
     part.rings().flatten().map(|p| (p[0] - cx).hypot(p[1] - cy)).fold(0.0, f64::max)
-}
-
-/// `n` (≥ 2) samples of t(θ) (normalised to max |t| = 1, 0 for a neutral part) and a(θ), θ
-/// evenly from 0° to 360°: the one sampling behind `--samples`, `--csv` and the plot. The
-/// scale is the largest |t| over these samples and every 0.5°, so it does not depend on n.
-fn turn_samples(an: &Analyzer<'_>, a: &Analysis, n: usize) -> Vec<TurnSample> {
-    let raw = |n: usize| {
-        let mut guess = Fx::ZERO;
-        (0..n)
-            .map(|i| {
-                let d = i as f64 * 360.0 / (n - 1) as f64;
-                let b = an.balance(bam_from_deg(d), guess);
-                guess = b.offset;
-                let alignment_deg = deg(a.align(bam_from_deg(d), b.turn.signum()));
-                TurnSample { theta_deg: d, turn: Fx::to_f64(b.turn), alignment_deg }
-            })
-            .collect::<Vec<_>>()
-    };
-    let peak = |s: &[TurnSample]| s.iter().fold(0.0f64, |m, p| m.max(p.turn.abs()));
-    let mut out = raw(n.max(2));
-    let max = peak(&out).max(if n == 721 { 0.0 } else { peak(&raw(721)) });
-    for p in &mut out {
-        p.turn = if max > 0.0 && !a.neutral { p.turn / max } else { 0.0 };
-    }
-    out
-}
-
-/// Samples t and a every 0.5° and poses the part at its first stable rest.
-fn plot_data(part: &Part, an: &Analyzer<'_>, a: &Analysis, field: &str, desc: &str) -> PlotData {
-    let samples = turn_samples(an, a, 721);
-    let turn = samples.iter().map(|s| (s.theta_deg, s.turn)).collect();
-    let align = samples.iter().map(|s| (s.theta_deg, s.alignment_deg)).collect();
-    let pose = a.rests.iter().find(|r| r.stable).map_or(0, |r| r.angle);
-    let s = offset_mm(an, an.balance(pose, Fx::ZERO).offset);
-    let c = an.centroid_mm();
-    let (cx, cy) = (Fx::to_f64(c.x), Fx::to_f64(c.y));
-    let (sn, cs) = (deg(pose)).to_radians().sin_cos();
-    let rest_pose = part
-        .rings()
-        .map(|r| {
-            r.iter()
-                .map(|p| {
-                    let (x, y) = (p[0] - cx, p[1] - cy);
-                    [cs * x - sn * y + s, sn * x + cs * y]
-                })
-                .collect()
-        })
-        .collect();
-    PlotData {
-        title: format!("{} — {} field{}", part.name, field, desc.strip_prefix(field).unwrap_or("")),
-        rest_pose,
-        rest_pose_deg: deg(pose),
-        turn,
-        align,
-        rests: a.rests.iter().map(|r| (deg(r.angle), r.stable)).collect(),
-        neutral: a.neutral,
-    }
 }

@@ -9,7 +9,11 @@ use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
+use chladni_shared::analysis::rest::{Analysis, Analyzer};
+
 use super::{Figure, PlotError, check_extension, text, write_chart};
+use crate::analysis::samples;
+use crate::model::part::Part;
 
 /// What to draw.
 #[derive(Debug, Clone)]
@@ -28,6 +32,24 @@ pub struct PlotData {
     pub rests: Vec<(f64, bool)>,
     /// Every orientation is at rest.
     pub neutral: bool,
+}
+
+impl PlotData {
+    /// The figure of a rest analysis: t(θ) and a(θ) every 0.5° and the part posed at its first
+    /// stable rest ([`crate::analysis::samples`]), under `title`.
+    pub fn of(part: &Part, an: &Analyzer<'_>, a: &Analysis, title: String) -> PlotData {
+        let samples = samples::turn_samples(an, a, 721);
+        let (rest_pose, rest_pose_deg) = samples::rest_pose(part, an, a);
+        PlotData {
+            title,
+            rest_pose,
+            rest_pose_deg,
+            turn: samples.iter().map(|s| (s.theta_deg, s.turn)).collect(),
+            align: samples.iter().map(|s| (s.theta_deg, s.alignment_deg)).collect(),
+            rests: a.rests.iter().map(|r| (samples::deg(r.angle), r.stable)).collect(),
+            neutral: a.neutral,
+        }
+    }
 }
 
 /// Writes the plot; the format follows the extension (`.png` or `.svg`, checked first).
