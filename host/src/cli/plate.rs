@@ -11,11 +11,11 @@ use serde_json::json;
 use super::parse::usize_in;
 use super::{InputError, check_output, output_error, plot_error};
 use chladni::model::modes_file;
-use chladni::model::plate_file::{Boundary, ModeEntry, Plate, PlateFile, PlateTable};
+use chladni::model::plate_file::{ModeEntry, Plate, PlateFile, PlateTable};
 use chladni::output::write_atomic;
 use chladni::plate::contour::{line_count, node_lines, total_length};
 use chladni::plate::photo::job::{PhotoGrid, PhotoRequest};
-use chladni::plate::{drive, photo, solver, suggest};
+use chladni::plate::{drive, photo, rocking, solver, suggest};
 use chladni::plot::plate as plot;
 use serde::Serialize;
 
@@ -41,9 +41,6 @@ impl PlateCommand {
         }
     }
 }
-
-/// The forced rocking's default drive frequency (Hz): the paper's setup 2 ran at 10 Hz.
-const DEFAULT_ROCKING_HZ: f64 = 10.0;
 
 #[derive(Debug, Args)]
 pub struct ModesArgs {
@@ -100,7 +97,8 @@ impl ModesArgs {
         if let Some(dir) = &self.plot {
             plot_modes(dir, &plate, &shown)?;
         }
-        let rocking = self.rocking_mode(&plate, sol)?;
+        let rocking = rocking::rocking_mode(&plate, sol, self.rocking_hz)
+            .map_err(|e| InputError(e.to_string()))?;
         if let Some(out) = &self.write_modes {
             let (nx, ny) = solver::grid_dims(self.grid, plate.size_mm);
             let entries = rocking
@@ -231,51 +229,11 @@ impl ModesArgs {
         if rocking {
             println!(
                 "forced: rigid rocking about the hinge at {} Hz, node = the hinge line x = {:.1} mm (linear field){}",
-                self.rocking_hz.unwrap_or(DEFAULT_ROCKING_HZ),
+                self.rocking_hz.unwrap_or(rocking::DEFAULT_ROCKING_HZ),
                 plate.hinge_x_mm,
                 if self.write_modes.is_some() { ", written as the first mode" } else { "" }
             );
         }
-    }
-
-    /// The hinged-rod plate's forced rocking as a `[[mode]]` entry: below the first elastic
-    /// mode the rod turns the plate rigidly about the hinge, w ∝ (x − hinge_x), so the node is
-    /// the hinge line and the pull grows linearly with the distance from it (the `linear`
-    /// field law, docs/motion.md). `None` for other boundaries.
-    fn rocking_mode(
-        &self,
-        plate: &Plate,
-        sol: &solver::ModalSolution,
-    ) -> Result<Option<ModeEntry>, InputError> {
-        if plate.boundary != Boundary::HingedRod {
-            return match self.rocking_hz {
-                Some(hz) => Err(InputError(format!(
-                    "--rocking-hz {hz}: only hinged-rod plates rock about a hinge; this plate is \
-                     {} (boundary = \"{}\"): leave the option out",
-                    plate.name,
-                    plate.boundary.key()
-                ))),
-                None => Ok(None),
-            };
-        }
-        let rocking_hz = self.rocking_hz.unwrap_or(DEFAULT_ROCKING_HZ);
-        let first = sol.modes.first().map_or(f64::INFINITY, |m| m.freq_hz);
-        // Half the first resonance keeps the elastic response small against the rigid
-        // rocking (dynamic amplification of mode 1 ≤ 1/(1 − 0.5²) ≈ 1.33).
-        let limit = (0.5 * first).min(2000.0);
-        if !(rocking_hz.is_finite() && (1.0..=limit).contains(&rocking_hz)) {
-            return Err(InputError(format!(
-                "--rocking-hz must be in [1, {limit:.1}] Hz (half the first elastic mode at {first:.1} Hz, so the plate rocks rigidly), got {rocking_hz}"
-            )));
-        }
-        let mut m = modes_file::line_mode(
-            "rocking (forced)",
-            Some(rocking_hz),
-            90.0,
-            plate.hinge_x_mm - plate.size_mm[0] / 2.0,
-        );
-        m.field = Some("linear".into());
-        Ok(Some(m))
     }
 }
 
