@@ -25,8 +25,9 @@ use clap::{Args, Subcommand};
 
 use super::InputError;
 use super::parse::{drive_accel, drive_amplitude, drive_freq};
+use chladni::controller::config_keys::{ConfigKey, ConfigValueError, config_key, config_refusal};
 use render::{PlanJson, print_json};
-use values::{ConfigKey, config_key, config_refusal, plan_name, plan_target, slot};
+use values::{plan_name, plan_target, slot};
 
 /// Where the controller is.
 #[derive(Debug, Args)]
@@ -380,10 +381,11 @@ impl ConfigCommand {
             }
             ConfigCommand::Set { port, key, value, json } => {
                 // The value alone is checked before connecting (bad input exits 2 at once).
-                key.set(&mut DeviceConfig::default(), value)?;
+                let refused = |e: ConfigValueError| InputError(e.to_string());
+                key.set(&mut DeviceConfig::default(), value).map_err(refused)?;
                 let mut client = port.open("config set")?;
                 let mut config = client.config()?;
-                key.set(&mut config, value)?;
+                key.set(&mut config, value).map_err(refused)?;
                 config.validate().map_err(|e| {
                     InputError(format!("{} {value} refused: {}", key.name(), config_refusal(&e)))
                 })?;

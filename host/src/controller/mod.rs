@@ -3,6 +3,7 @@
 //! socket), building firmware images, and flashing the board (probe-rs).
 
 pub mod client;
+pub mod config_keys;
 pub mod emulator;
 pub mod firmware;
 pub mod flash;

@@ -11,7 +11,7 @@ use serde::Serialize;
 
 pub use chladni::controller::json::{FaultJson, PlanJson, PlansJson, StatusJson, TelemetryJson};
 
-use super::values::{CONFIG_KEYS, ConfigKey, ConfigValue};
+use chladni::controller::config_keys::{CONFIG_KEYS, ConfigKey, ConfigValue};
 
 /// Prints one JSON value on one line.
 pub fn print_json(value: &impl Serialize) -> anyhow::Result<()> {
