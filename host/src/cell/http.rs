@@ -50,7 +50,7 @@ use super::net::{self, Caps};
 use super::ratelog;
 use super::{Cell, CellError, CellStatus};
 use crate::controller::client::DeviceError;
-use crate::controller::json::{PlanJson, PlansJson};
+use crate::controller::json::{PlanJson, PlansJson, RunNumberJson};
 
 /// The shortest gap between two status events of one `/api/events` stream: the owner polls
 /// every 100 ms, and a browser needs no more to draw a live plot.
@@ -289,12 +289,6 @@ async fn plans(State(cell): State<Cell>) -> Result<Response, ApiError> {
     Ok(json(StatusCode::OK, &plans))
 }
 
-/// The answer of stop and clear-fault: the controller's run number of the command.
-#[derive(Debug, Serialize)]
-struct Accepted {
-    run: u32,
-}
-
 async fn run(State(cell): State<Cell>, body: Bytes) -> Result<Response, ApiError> {
     let request = RunRequest::parse(&body)?;
     let started = cell.run(request.slot, request.repeat).await?;
@@ -303,12 +297,12 @@ async fn run(State(cell): State<Cell>, body: Bytes) -> Result<Response, ApiError
 
 async fn stop(State(cell): State<Cell>, body: Bytes) -> Result<Response, ApiError> {
     empty_object(&body)?;
-    Ok(json(StatusCode::OK, &Accepted { run: cell.stop().await? }))
+    Ok(json(StatusCode::OK, &RunNumberJson { run: cell.stop().await? }))
 }
 
 async fn clear_fault(State(cell): State<Cell>, body: Bytes) -> Result<Response, ApiError> {
     empty_object(&body)?;
-    Ok(json(StatusCode::OK, &Accepted { run: cell.clear_fault().await? }))
+    Ok(json(StatusCode::OK, &RunNumberJson { run: cell.clear_fault().await? }))
 }
 
 /// Stop and clear-fault take no arguments: an empty body or `{}`.

@@ -1,8 +1,9 @@
-//! The JSON shapes of the controller's status, telemetry and stored plans, as `chladni device
-//! --json` prints them and `chladni serve` answers them (keys in alphabetical order; documented
-//! in docs/drive.md). One home, so the CLI and the cell's HTTP API never disagree.
+//! The JSON shapes of the controller's answers: info, pings, status, telemetry, stored plans,
+//! drive, runs and the `{run}` of stop and clear-fault, as `chladni device --json` prints them
+//! and `chladni serve` answers them (keys in alphabetical order; documented in docs/device.md).
+//! One home, so the CLI and the cell's HTTP API never disagree.
 
-use chladni_shared::icd::link::{StatusReport, Telemetry};
+use chladni_shared::icd::link::{DeviceInfo, RunNumber, StatusReport, Telemetry};
 use chladni_shared::icd::plan::Level;
 use chladni_shared::icd::sense::Fault;
 use chladni_shared::icd::store::PlanSummary;
@@ -144,4 +145,84 @@ impl From<&PlanSummary> for PlanJson {
 pub struct PlansJson {
     pub free_bytes: u32,
     pub plans: Vec<PlanJson>,
+}
+
+/// The `info --json` object.
+#[derive(Debug, Clone, Serialize)]
+pub struct InfoJson {
+    pub board: &'static str,
+    /// The build id as 8 hex digits.
+    pub build_id: String,
+    pub firmware_version: String,
+    pub protocol_version: u16,
+}
+
+impl From<&DeviceInfo> for InfoJson {
+    fn from(info: &DeviceInfo) -> Self {
+        InfoJson {
+            board: info.board.name(),
+            build_id: format!("{:08x}", info.build_id),
+            firmware_version: info.firmware_version.to_string(),
+            protocol_version: info.protocol_version,
+        }
+    }
+}
+
+/// The `ping --json` object: how many round trips, the longest and the mean (ms).
+#[derive(Debug, Clone, Serialize)]
+pub struct PingsJson {
+    pub count: usize,
+    pub max_ms: f64,
+    pub mean_ms: f64,
+}
+
+impl PingsJson {
+    /// Of round-trip times in ms.
+    pub fn of(rtts: &[f64]) -> Self {
+        let mean_ms = rtts.iter().sum::<f64>() / rtts.len().max(1) as f64;
+        let max_ms = rtts.iter().cloned().fold(0.0, f64::max);
+        PingsJson { count: rtts.len(), max_ms, mean_ms }
+    }
+}
+
+/// The `drive --json` object: the frequency, the level (the one not given null) and the run
+/// number the controller gave the command.
+#[derive(Debug, Clone, Serialize)]
+pub struct DriveJson {
+    pub accel_mps2: Option<f64>,
+    pub amplitude: Option<f64>,
+    pub freq_hz: f64,
+    pub run: u32,
+}
+
+impl DriveJson {
+    /// Of the frequency (mHz) and level sent, and the answer's run number.
+    pub fn of(freq_mhz: u32, level: Level, run: RunNumber) -> Self {
+        let (amplitude, accel_mps2) = match level {
+            Level::Drive(q15) => (Some(Q15(q15).to_fraction()), None),
+            Level::Accel(mm) => (None, Some(MmPerS2(mm).to_mps2())),
+        };
+        DriveJson { accel_mps2, amplitude, freq_hz: MilliHz(freq_mhz).to_hz(), run: run.0 }
+    }
+}
+
+/// The answer of stop and clear-fault (`chladni device stop|clear-fault --json`, `POST
+/// /api/stop|clear-fault`): the controller's run number of the command.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct RunNumberJson {
+    pub run: u32,
+}
+
+/// The `run`/`run-file --json` object.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunJson {
+    /// `started` without `--wait`; else how the run ended (`RunOutcome::name`).
+    pub outcome: &'static str,
+    /// The plan's name, when known (run by name, `run-file`).
+    pub plan: Option<String>,
+    pub run: u32,
+    /// The plan's slot, when known (run by slot, `run-file`).
+    pub slot: Option<u8>,
+    /// The last status seen (with `--wait`).
+    pub status: Option<StatusJson>,
 }

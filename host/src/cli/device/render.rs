@@ -6,10 +6,12 @@ use std::process::ExitCode;
 use chladni_shared::icd::link::{DeviceInfo, RunNumber, StatusReport, Telemetry};
 use chladni_shared::icd::plan::Level;
 use chladni_shared::icd::store::{DeviceConfig, PlanSummary};
-use chladni_shared::icd::units::{MilliHz, MmPerS2, Q15};
 use serde::Serialize;
 
-pub use chladni::controller::json::{FaultJson, PlanJson, PlansJson, StatusJson, TelemetryJson};
+pub use chladni::controller::json::{
+    DriveJson, FaultJson, InfoJson, PingsJson, PlanJson, PlansJson, RunJson, RunNumberJson,
+    StatusJson, TelemetryJson,
+};
 
 use chladni::controller::config_keys::{CONFIG_KEYS, ConfigKey, ConfigValue};
 
@@ -27,12 +29,7 @@ pub fn fault_text(s: &StatusReport) -> String {
 /// `info`.
 pub fn info(info: &DeviceInfo, json: bool) -> anyhow::Result<ExitCode> {
     if json {
-        print_json(&serde_json::json!({
-            "board": info.board.name(),
-            "build_id": format!("{:08x}", info.build_id),
-            "firmware_version": info.firmware_version.as_str(),
-            "protocol_version": info.protocol_version,
-        }))?;
+        print_json(&InfoJson::from(info))?;
     } else {
         println!("firmware   {}", info.firmware_version);
         println!("board      {}", info.board.name());
@@ -44,12 +41,11 @@ pub fn info(info: &DeviceInfo, json: bool) -> anyhow::Result<ExitCode> {
 
 /// `ping`: round-trip times in ms.
 pub fn pings(rtts: &[f64], json: bool) -> anyhow::Result<ExitCode> {
-    let mean = rtts.iter().sum::<f64>() / rtts.len().max(1) as f64;
-    let max = rtts.iter().cloned().fold(0.0, f64::max);
+    let p = PingsJson::of(rtts);
     if json {
-        print_json(&serde_json::json!({ "count": rtts.len(), "max_ms": max, "mean_ms": mean }))?;
+        print_json(&p)?;
     } else {
-        println!("{} ping(s): mean {mean:.3} ms, max {max:.3} ms", rtts.len());
+        println!("{} ping(s): mean {:.3} ms, max {:.3} ms", p.count, p.mean_ms, p.max_ms);
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -91,18 +87,13 @@ pub fn uploaded(p: &PlanSummary, json: bool) -> anyhow::Result<ExitCode> {
 
 /// `drive`: `{"accel_mps2", "amplitude", "freq_hz", "run"}`, the level not given null.
 pub fn driving(freq: u32, level: Level, run: RunNumber, json: bool) -> anyhow::Result<ExitCode> {
-    let hz = MilliHz(freq).to_hz();
-    let (amplitude, accel) = match level {
-        Level::Drive(q15) => (Some(Q15(q15).to_fraction()), None),
-        Level::Accel(mm) => (None, Some(MmPerS2(mm).to_mps2())),
-    };
+    let d = DriveJson::of(freq, level, run);
+    let hz = d.freq_hz;
     if json {
-        print_json(&serde_json::json!({
-            "accel_mps2": accel, "amplitude": amplitude, "freq_hz": hz, "run": run.0
-        }))?;
-    } else if let Some(a) = amplitude {
+        print_json(&d)?;
+    } else if let Some(a) = d.amplitude {
         println!("driving {hz:.3} Hz at amplitude {a:.4} (run {})", run.0);
-    } else if let Some(a) = accel {
+    } else if let Some(a) = d.accel_mps2 {
         println!("driving {hz:.3} Hz holding {a:.3} m/s² (closed loop; run {})", run.0);
     }
     Ok(ExitCode::SUCCESS)
@@ -111,7 +102,7 @@ pub fn driving(freq: u32, level: Level, run: RunNumber, json: bool) -> anyhow::R
 /// `clear-fault`.
 pub fn cleared(run: RunNumber, json: bool) -> anyhow::Result<ExitCode> {
     if json {
-        print_json(&serde_json::json!({ "run": run.0 }))?;
+        print_json(&RunNumberJson { run: run.0 })?;
     } else {
         println!("fault cleared (run {})", run.0);
     }
@@ -121,7 +112,7 @@ pub fn cleared(run: RunNumber, json: bool) -> anyhow::Result<ExitCode> {
 /// `stop`.
 pub fn stopped(run: RunNumber, json: bool) -> anyhow::Result<ExitCode> {
     if json {
-        print_json(&serde_json::json!({ "run": run.0 }))?;
+        print_json(&RunNumberJson { run: run.0 })?;
     } else {
         println!("stopping (run {})", run.0);
     }

@@ -17,9 +17,8 @@ use chladni_shared::icd::link::{Plan, RunNumber, StatusReport};
 use chladni_shared::icd::store::{PlanRef, PlanSummary};
 use chladni_shared::icd::units::{MilliHz, Q15};
 use indicatif::{ProgressBar, ProgressStyle};
-use serde::Serialize;
 
-use super::render::{StatusJson, TelemetryJson, fault_text, print_json, telemetry_line};
+use super::render::{RunJson, StatusJson, TelemetryJson, fault_text, print_json, telemetry_line};
 
 /// Exit code after Ctrl-C (128 + SIGINT, as shells report it).
 pub const EXIT_INTERRUPTED: u8 = 130;
@@ -57,20 +56,6 @@ pub fn upload(
     let result = client.upload(plan, slot, |done, _| bar.set_position(done as u64));
     bar.finish_and_clear();
     Ok(result?)
-}
-
-/// The `run`/`run-file --json` object.
-#[derive(Debug, Serialize)]
-struct RunJson {
-    /// `started` without `--wait`; else how the run ended ([`RunOutcome::name`]).
-    outcome: &'static str,
-    /// The plan's name, when known (run by name, `run-file`).
-    plan: Option<String>,
-    run: u32,
-    /// The plan's slot, when known (run by slot, `run-file`).
-    slot: Option<u8>,
-    /// The last status seen (with `--wait`).
-    status: Option<StatusJson>,
 }
 
 /// The stored plan a command runs, and its name when the command knows it.
