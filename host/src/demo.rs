@@ -333,7 +333,7 @@ pub fn prepare(config: &DemoConfig) -> Result<Prepared, DemoError> {
     }
     let part = Part::load(&config.part)
         .map_err(|e| DemoError::Input(format!("{}: {e}", config.part.display())))?;
-    let plate = PlateModel::load(&config.plate).map_err(DemoError::Input)?;
+    let plate = PlateModel::load(&config.plate).map_err(|e| DemoError::Input(e.to_string()))?;
     planner::check_input(&part, &plate).map_err(|e| DemoError::Input(e.to_string()))?;
     std::fs::create_dir_all(&config.out).map_err(|e| {
         DemoError::Input(format!("cannot create --out {}: {e}", config.out.display()))

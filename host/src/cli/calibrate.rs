@@ -79,7 +79,7 @@ impl CalibrateArgs {
     }
 
     fn calibrate(&self) -> Result<ExitCode, Failure> {
-        let plate = PlateModel::load(&self.plate).map_err(bad)?;
+        let plate = PlateModel::load(&self.plate).map_err(|e| bad(e.to_string()))?;
         let Some(mode) = plate.modes.iter().position(|m| m.name == self.mode) else {
             let names: Vec<String> =
                 plate.modes.iter().map(|m| format!("\"{}\"", m.name)).collect();

@@ -28,7 +28,7 @@ fn bad(msg: String) -> anyhow::Error {
 }
 
 fn load_plate(path: &Path) -> anyhow::Result<PlateModel> {
-    PlateModel::load(path).map_err(bad)
+    PlateModel::load(path).map_err(|e| bad(e.to_string()))
 }
 
 /// The `--feed X0 Y0 X1 Y1` region, checked against the plate.

@@ -209,6 +209,22 @@ pub enum ModelError {
     File(String),
 }
 
+/// Why [`PlateModel::load`] failed: the file (unreadable, not a plate file) or its modes.
+#[derive(Debug, thiserror::Error)]
+pub enum PlateLoadError {
+    /// Not readable, or not a plate file.
+    #[error(transparent)]
+    File(#[from] PlateFileError),
+    /// A plate file whose modes cannot be planned with.
+    #[error("{}: {source}", path.display())]
+    Model {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What is wrong.
+        source: ModelError,
+    },
+}
+
 /// Names the mode in every error.
 struct Ctx {
     index: usize,
@@ -579,10 +595,11 @@ impl PlateModel {
         PlateModel::from_file(&file)
     }
 
-    /// Reads, parses and types a plate file (every error is a message for exit code 2).
-    pub fn load(path: &Path) -> Result<PlateModel, String> {
-        let file = PlateFile::load(path).map_err(|e: PlateFileError| e.to_string())?;
-        PlateModel::from_file(&file).map_err(|e| format!("{}: {e}", path.display()))
+    /// Reads, parses and types a plate file (every error is bad input: exit code 2).
+    pub fn load(path: &Path) -> Result<PlateModel, PlateLoadError> {
+        let file = PlateFile::load(path)?;
+        PlateModel::from_file(&file)
+            .map_err(|source| PlateLoadError::Model { path: path.to_path_buf(), source })
     }
 
     /// The plate centre.
