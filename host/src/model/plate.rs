@@ -220,8 +220,8 @@ pub enum PlateLoadError {
     Model {
         /// The file.
         path: std::path::PathBuf,
-        /// What is wrong.
-        source: ModelError,
+        /// What is wrong (boxed: a ModelError is large).
+        source: Box<ModelError>,
     },
 }
 
@@ -599,7 +599,7 @@ impl PlateModel {
     pub fn load(path: &Path) -> Result<PlateModel, PlateLoadError> {
         let file = PlateFile::load(path)?;
         PlateModel::from_file(&file)
-            .map_err(|source| PlateLoadError::Model { path: path.to_path_buf(), source })
+            .map_err(|e| PlateLoadError::Model { path: path.to_path_buf(), source: Box::new(e) })
     }
 
     /// The plate centre.
