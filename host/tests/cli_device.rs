@@ -34,29 +34,7 @@ fn status_info_ping_config_and_list_print_their_json_shapes() {
     let emu = emulator("json");
     let port = emu.address();
     let status = json_of(&chladni(&["device", "status", "--port", &port, "--json"]));
-    assert_eq!(
-        keys(&status),
-        [
-            "accel_mps2",
-            "amplitude",
-            "effort",
-            "elapsed_ms",
-            "fault",
-            "freq_hz",
-            "least_slack_us",
-            "phase_deg",
-            "plan",
-            "remaining_ms",
-            "reset_cause",
-            "run",
-            "stack_high_water",
-            "state",
-            "step",
-            "target_accel_mps2",
-            "underruns",
-            "warning"
-        ]
-    );
+    assert_eq!(keys(&status), chladni::controller::json::STATUS_KEYS);
     assert_eq!(status["state"], "idle");
     let info = json_of(&chladni(&["device", "info", "--port", &port, "--json"]));
     // The board's value is checked end to end (tests/e2e.rs); here, the shape.

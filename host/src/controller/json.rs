@@ -41,6 +41,29 @@ pub struct StatusJson {
     pub warning: bool,
 }
 
+/// The documented keys of `status --json` (docs/device.md), in the order printed: what
+/// [`StatusJson`] serialises to (the CLI's and the end-to-end tests check it).
+pub const STATUS_KEYS: [&str; 18] = [
+    "accel_mps2",
+    "amplitude",
+    "effort",
+    "elapsed_ms",
+    "fault",
+    "freq_hz",
+    "least_slack_us",
+    "phase_deg",
+    "plan",
+    "remaining_ms",
+    "reset_cause",
+    "run",
+    "stack_high_water",
+    "state",
+    "step",
+    "target_accel_mps2",
+    "underruns",
+    "warning",
+];
+
 /// A latched fault: `{"cause", "value", "unit", "at_s"}`.
 #[derive(Debug, Clone, Serialize)]
 pub struct FaultJson {

@@ -221,6 +221,7 @@ pub fn config(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use chladni::controller::json::STATUS_KEYS;
     use chladni_shared::icd::link::{DriveState, Fault, FaultCause};
 
     pub fn status_report() -> StatusReport {
@@ -241,28 +242,6 @@ mod tests {
             ..StatusReport::IDLE
         }
     }
-
-    /// The documented keys of `status --json` (docs/device.md).
-    const STATUS_KEYS: [&str; 18] = [
-        "accel_mps2",
-        "amplitude",
-        "effort",
-        "elapsed_ms",
-        "fault",
-        "freq_hz",
-        "least_slack_us",
-        "phase_deg",
-        "plan",
-        "remaining_ms",
-        "reset_cause",
-        "run",
-        "stack_high_water",
-        "state",
-        "step",
-        "target_accel_mps2",
-        "underruns",
-        "warning",
-    ];
 
     fn keys(v: &serde_json::Value) -> Vec<&str> {
         v.as_object().unwrap().keys().map(|k| k.as_str()).collect()
