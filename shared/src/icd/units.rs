@@ -418,6 +418,27 @@ mod tests {
     }
 
     #[test]
+    fn representable_frequencies_round_once_and_the_rest_are_none() {
+        assert_eq!(MilliHz::rounded(60.0004), Some(MilliHz(60_000)));
+        assert_eq!(MilliHz::rounded(0.0006), Some(MilliHz(1)));
+        assert_eq!(MilliHz::rounded(5000.0), Some(MilliHz(5_000_000)), "no device range here");
+        for bad in [0.0004, 0.0, -1.0, 4.3e6, f64::NAN, f64::INFINITY] {
+            assert_eq!(MilliHz::rounded(bad), None, "{bad}");
+        }
+    }
+
+    #[test]
+    fn sample_clock_time_converts_once() {
+        assert_eq!(ms_from_samples(48_000, 48_000), 1000.0);
+        assert_eq!(ms_from_samples(24, 48_000), 0.5);
+        assert_eq!(s_from_samples(120_000, 48_000), 2.5);
+        assert_eq!(ms_from_samples(5, 0), 5000.0, "a rate of 0 counts as 1 Hz");
+        assert_eq!(whole_ms_from_samples(47, 48_000), 0, "rounded down");
+        assert_eq!(whole_ms_from_samples(96_047, 48_000), 2000);
+        assert_eq!(whole_ms_from_samples(u64::MAX, 1), u64::MAX, "saturates");
+    }
+
+    #[test]
     fn amplitude_is_a_checked_fraction() {
         assert_eq!(Q15::from_fraction(1.0), Ok(Q15::FULL));
         assert_eq!(Q15::from_fraction(0.5), Ok(Q15(16384)));
