@@ -353,3 +353,65 @@ pub fn events(
         }
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::part::Part;
+    use crate::model::plan_file::PlanFile;
+
+    fn setup() -> Setup {
+        let tri = Part::new("tri".into(), vec![[0.0, 0.0], [36.0, 0.0], [0.0, 22.0]], vec![]);
+        let plan = PlanFile {
+            final_orientation_deg: Some(10.0),
+            period_deg: Some(360.0),
+            ..PlanFile::default()
+        };
+        let check = Check::new(&plan, &[tri.unwrap()], 5.0, 2.0).unwrap();
+        Setup { check, size_mm: [300.0, 200.0], corners: None }
+    }
+
+    #[test]
+    fn only_png_and_jpeg_bodies_pass_and_other_bytes_are_named() {
+        let mut headers = HeaderMap::new();
+        assert_eq!(
+            check_photo_type(&headers).unwrap_err().status,
+            StatusCode::UNSUPPORTED_MEDIA_TYPE
+        );
+        for (t, ok) in [("image/png", true), ("IMAGE/JPEG; q=1", true), ("text/plain", false)] {
+            headers.insert(header::CONTENT_TYPE, HeaderValue::from_str(t).unwrap());
+            assert_eq!(check_photo_type(&headers).is_ok(), ok, "{t}");
+        }
+        let s = setup();
+        assert_eq!(examine(&s, b"hello").unwrap_err().0, "not_a_photo");
+        let mut gif = Vec::new();
+        image::RgbaImage::new(4, 4)
+            .write_to(&mut Cursor::new(&mut gif), image::ImageFormat::Gif)
+            .unwrap();
+        let (kind, message) = examine(&s, &gif).unwrap_err();
+        assert_eq!(kind, "not_a_photo");
+        assert!(message.contains("Gif") && message.contains("PNG or a JPEG"), "{message}");
+        // A PNG of even grey: a photo, but no plate in it.
+        let mut png = Vec::new();
+        image::GrayImage::from_pixel(200, 150, image::Luma([128]))
+            .write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        assert_eq!(examine(&s, &png).unwrap_err().0, "no_plate");
+    }
+
+    #[tokio::test]
+    async fn each_check_is_published_with_its_number_and_registers() {
+        let v = Verifier::new(Some(setup()));
+        assert_eq!(v.registers(), [0, 0, 0, 0, RATE_NONE]);
+        let mut events = v.watch();
+        let refused = v.verify(Bytes::from_static(b"not a photo")).await.unwrap();
+        assert_eq!((refused.seq, refused.code), (1, ResultCode::Refused));
+        assert_eq!(refused.json["kind"], "not_a_photo");
+        assert!(events.has_changed().unwrap());
+        assert_eq!(events.borrow_and_update().as_ref().unwrap().seq, 1);
+        assert_eq!(v.registers(), [1, 4, 0, 0, RATE_NONE]);
+        let off = Verifier::new(None).verify(Bytes::new()).await.unwrap_err();
+        assert_eq!(off.status, StatusCode::SERVICE_UNAVAILABLE);
+        assert!(off.message.contains("--verify-plan"), "{}", off.message);
+    }
+}
