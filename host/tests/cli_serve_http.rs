@@ -8,6 +8,11 @@
 //! `serve` with `--token-file` refuses requests without the token, and the dashboard logs in
 //! from the URL it printed, runs the plan and stops it.
 //!
+//! The same browser plays the camera's partner: a photo posted to `POST /api/verify` while the
+//! dashboard is open shows there (its event) with the found outlines; then the photo route by
+//! plain HTTP: a JPEG checked, the figure served, and the guard (a foreign Host or Origin, a
+//! form's content type, an oversized body) and a body that is no photo refused by name.
+//!
 //! Needs Debian's chromium, chromium-driver and python3-selenium (scripts/install-deps.sh): a
 //! machine without them fails here, naming the script, rather than skipping the test.
 
@@ -16,6 +21,8 @@ use std::net::{SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
+
+mod support;
 
 use chladni::controller::emulator::{Emulator, EmulatorConfig};
 use chladni::model::plan_file::PlanFile;
@@ -48,10 +55,6 @@ struct Serve {
 }
 
 impl Serve {
-    fn start(port: &str) -> Serve {
-        Self::start_with(port, &[]).0
-    }
-
     /// With more arguments; the URL printed (the login URL with a token).
     fn start_with(port: &str, args: &[&str]) -> (Serve, String) {
         let mut child = Command::new(env!("CARGO_BIN_EXE_chladni"))
@@ -182,8 +185,9 @@ fn refused_while_another_session_owns(emu: &Emulator, addr: SocketAddr) {
     drop(other);
 }
 
-/// The operator's run in the browser (`stop`: stopped once busy); what the script saw.
-fn browser_run(url: &str, stop: bool) -> Value {
+/// The operator's run in the browser (`stop`: stopped once busy; `photo`: posted first, and
+/// its check seen on the page); what the script saw.
+fn browser_run(url: &str, stop: bool, photo: Option<&Path>) -> Value {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/cell/dashboard.py");
     let shots = screenshot_dir();
     let out = Command::new("/usr/bin/python3")
@@ -191,6 +195,7 @@ fn browser_run(url: &str, stop: bool) -> Value {
         .args([url, "cell-http-2step"])
         .arg(&shots)
         .args(stop.then_some("stop"))
+        .args(photo.map(|p| format!("photo={}", p.display())))
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -235,6 +240,10 @@ fn cross_origin_attacks_run_nothing(addr: SocketAddr) {
         "{seen}"
     );
     assert!(attempts["json"].as_str().unwrap().starts_with("blocked"), "{seen}");
+    assert!(attempts["photo"].as_str().unwrap().starts_with("blocked"), "{seen}");
+    assert_eq!(attempts["photo_nocors"], "sent", "{seen}");
+    let (code, none) = http(addr, "GET /api/verify", "");
+    assert_eq!(code, 404, "a photo from another site was checked: {none}");
     assert!(
         seen["rebinding_page"].as_str().unwrap().contains("does not answer for host"),
         "{seen}"
@@ -266,7 +275,7 @@ fn token_login_runs_and_stops(emu: &Emulator) -> (Serve, String) {
         assert!(up.elapsed() < Duration::from_secs(10), "the token server never read idle");
         std::thread::sleep(Duration::from_millis(100));
     }
-    let seen = browser_run(&login, true);
+    let seen = browser_run(&login, true, None);
     eprintln!("the logged-in dashboard saw {seen}");
     assert!(seen["message"].as_str().unwrap().contains("run"), "{seen}");
     (serve, token)
@@ -277,7 +286,9 @@ fn the_dashboard_runs_a_stored_plan_and_the_api_reports_a_lost_link() {
     require_browser();
     let mut emu = emulator();
     upload_plan(&emu);
-    let mut serve = Serve::start(&emu.address());
+    let verify = support::photos::serve_args();
+    let verify: Vec<&str> = verify.iter().map(String::as_str).collect();
+    let mut serve = Serve::start_with(&emu.address(), &verify).0;
     let addr = serve.addr;
     let up = status_until(addr, Duration::from_secs(10), |s| s["state"] == "idle");
     assert_eq!(up["link_up"], true, "{up}");
@@ -292,7 +303,11 @@ fn the_dashboard_runs_a_stored_plan_and_the_api_reports_a_lost_link() {
     assert_eq!(code, 200, "{stopped}");
     status_until(addr, Duration::from_secs(5), |s| s["state"] == "idle");
 
-    let seen = browser_run(&serve.url(), false);
+    std::fs::create_dir_all(screenshot_dir()).unwrap();
+    let photo = screenshot_dir().join("verify-photo.png");
+    support::photos::one_good_one_off().save(&photo).unwrap();
+    let seen = browser_run(&serve.url(), false, Some(&photo));
+    check_seen_photo(&seen["verify"]);
     assert!(seen["busy_after_s"].as_f64().unwrap() < 2.0, "{seen}");
     // The plan is 6 s: done when it ended, not before (6.5-7 s measured; slack for a loaded
     // machine, where QEMU's controller runs late).
@@ -309,6 +324,7 @@ fn the_dashboard_runs_a_stored_plan_and_the_api_reports_a_lost_link() {
     assert!(stopped["run"].as_u64().unwrap() > done["last_run"].as_u64().unwrap());
     let idle = status_until(addr, Duration::from_secs(3), |s| s["state"] == "idle");
     assert_eq!(idle["state"], "idle", "{idle}");
+    check_photo_route(addr, &photo);
     // This server owns the controller while it serves: the next one starts after it.
     assert_eq!(serve.terminate(), Some(0));
     let (mut serve, token) = token_login_runs_and_stops(&emu);
@@ -330,4 +346,94 @@ fn the_dashboard_runs_a_stored_plan_and_the_api_reports_a_lost_link() {
     assert_eq!(code, 503, "{refused}");
     assert!(refused["error"].as_str().unwrap().contains("link is down"), "{refused}");
     assert_eq!(serve.terminate(), Some(0));
+}
+
+/// What the dashboard showed of the photo posted while it was open.
+fn check_seen_photo(seen: &Value) {
+    let posted = &seen["posted"];
+    assert_eq!((&posted["seq"], &posted["result"]), (&1.into(), &"off".into()), "{seen}");
+    assert_eq!((&posted["found"], &posted["oriented"]), (&2.into(), &1.into()), "{seen}");
+    assert_eq!(seen["result"], "off", "{seen}");
+    assert!(seen["summary"].as_str().unwrap().contains("1 of 2 parts as planned (50.0 %)"));
+    let off = seen["parts_off"].as_array().unwrap();
+    assert_eq!(off.len(), 1, "{seen}");
+    assert!(off[0].as_str().unwrap().starts_with("key: θ"), "{seen}");
+    // The outlines over the photo: green (as planned) and red (off), each a few hundred px.
+    let outlines = &seen["outlines"];
+    assert!(outlines["width"].as_u64().unwrap() > 500, "{seen}");
+    assert!(outlines["green"].as_u64().unwrap() > 200, "{seen}");
+    assert!(outlines["red"].as_u64().unwrap() > 200, "{seen}");
+}
+
+/// One request with a byte body and the given headers (Host is the server's unless given):
+/// the status and the body as JSON.
+fn post_bytes(addr: SocketAddr, headers: &[&str], body: &[u8]) -> (u16, Value) {
+    let mut stream = TcpStream::connect(addr).unwrap();
+    stream.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+    let mut head = "POST /api/verify HTTP/1.1\r\nConnection: close\r\n".to_string();
+    if !headers.iter().any(|h| h.starts_with("Host:")) {
+        head.push_str("Host: 127.0.0.1\r\n");
+    }
+    for h in headers {
+        head.push_str(h);
+        head.push_str("\r\n");
+    }
+    if !headers.iter().any(|h| h.starts_with("Content-Length:")) {
+        head.push_str(&format!("Content-Length: {}\r\n", body.len()));
+    }
+    head.push_str("\r\n");
+    stream.write_all(head.as_bytes()).unwrap();
+    // A refused body may be cut off: the answer is read whatever happened to it.
+    let _ = stream.write_all(body);
+    let mut answer = Vec::new();
+    let _ = stream.read_to_end(&mut answer);
+    let answer = String::from_utf8_lossy(&answer);
+    let (head, body) = answer.split_once("\r\n\r\n").unwrap_or_else(|| panic!("{answer}"));
+    let json = serde_json::from_str(body).unwrap_or_else(|e| panic!("{head}: {e}: {body}"));
+    (head[9..12].parse().unwrap(), json)
+}
+
+/// The photo route by plain HTTP: a JPEG checked (the second photo), the last one and its
+/// figure read back, and every refusal named.
+fn check_photo_route(addr: SocketAddr, png: &Path) {
+    let img = image::open(png).unwrap();
+    let mut jpeg = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut jpeg), image::ImageFormat::Jpeg).unwrap();
+    let (code, v) = post_bytes(addr, &["Content-Type: image/jpeg"], &jpeg);
+    assert_eq!(code, 200, "{v}");
+    assert_eq!((&v["seq"], &v["result"], &v["oriented"]), (&2.into(), &"off".into(), &1.into()));
+    let (code, last) = http(addr, "GET /api/verify", "");
+    assert_eq!((code, &last["seq"]), (200, &2.into()), "{last}");
+    let mut stream = TcpStream::connect(addr).unwrap();
+    write!(
+        stream,
+        "GET /api/verify/photo.png HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut answer = Vec::new();
+    stream.read_to_end(&mut answer).unwrap();
+    let split = answer.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
+    let head = String::from_utf8_lossy(&answer[..split]).to_ascii_lowercase();
+    assert!(head.starts_with("http/1.1 200") && head.contains("content-type: image/png"), "{head}");
+    let fig = image::load_from_memory(&answer[split + 4..]).unwrap();
+    assert!(fig.width() > 500, "{}", fig.width());
+    let bytes = std::fs::read(png).unwrap();
+    for (headers, status, words) in [
+        (vec!["Content-Type: image/png", "Host: evil.example"], 421, "--http-allow-host"),
+        (vec!["Content-Type: image/png", "Origin: http://evil.example"], 403, "origin"),
+        (vec!["Content-Type: text/plain"], 415, "image/png"),
+        (vec!["Content-Type: application/json"], 415, "image/jpeg"),
+        (vec!["Content-Type: image/png", "Content-Length: 40000000"], 413, "over the 16 MiB"),
+    ] {
+        let (code, v) = post_bytes(addr, &headers, &bytes);
+        assert_eq!(code, status, "{headers:?}: {v}");
+        assert!(v["error"].as_str().unwrap().contains(words), "{headers:?}: {v}");
+    }
+    let (_, last) = http(addr, "GET /api/verify", "");
+    assert_eq!(last["seq"], 2, "a refused request was checked: {last}");
+    // Not a photo: refused by name, and published (a PLC must not read the old result).
+    let (code, v) = post_bytes(addr, &["Content-Type: image/png"], b"not a photo at all");
+    assert_eq!((code, &v["kind"], &v["seq"]), (422, &"not_a_photo".into(), &3.into()), "{v}");
+    let (_, last) = http(addr, "GET /api/verify", "");
+    assert_eq!((&last["seq"], &last["result"]), (&3.into(), &"refused".into()), "{last}");
 }

@@ -5,6 +5,9 @@
 //! serves HTTP meanwhile, and a second client polls `/api/status` all through the run: both
 //! front ends share the one link owner, so both must see the same run, in order.
 //!
+//! After the run a photo of the plate is posted to the same process's `POST /api/verify`, and
+//! the PLC reads the check's result in input registers 16–20.
+//!
 //! Needs Debian's python3-pymodbus (scripts/install-deps.sh installs it); without it the test
 //! fails naming that script, it never skips.
 
@@ -15,6 +18,8 @@ use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
+
+mod support;
 
 use chladni::cell::modbus::{CommandResult, FAULT_LINK_DOWN};
 use chladni::controller::emulator::{Emulator, EmulatorConfig};
@@ -77,6 +82,7 @@ fn serve(emu: &Emulator) -> (Served, SocketAddr, SocketAddr) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_chladni"))
         .args(["serve", "--port", &emu.address(), "--json"])
         .args(["--modbus", "127.0.0.1:0", "--http", "127.0.0.1:0"])
+        .args(support::photos::serve_args())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
@@ -107,6 +113,27 @@ fn http_status(address: SocketAddr) -> (u16, Value) {
     let (head, body) = response.split_once("\r\n\r\n").unwrap_or_else(|| panic!("{response}"));
     let code = head.split(' ').nth(1).and_then(|c| c.parse().ok()).unwrap_or(0);
     (code, serde_json::from_str(body).unwrap_or_else(|e| panic!("{e}: {body}")))
+}
+
+/// The camera: a photo of two keys (one as planned, one off) posted to `POST /api/verify`.
+fn post_photo(address: SocketAddr) {
+    let mut png = Vec::new();
+    support::photos::one_good_one_off()
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    let mut stream = TcpStream::connect(address).expect("connect to the HTTP front end");
+    stream.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+    write!(
+        stream,
+        "POST /api/verify HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\nContent-Type: \
+         image/png\r\nContent-Length: {}\r\n\r\n",
+        png.len()
+    )
+    .unwrap();
+    stream.write_all(&png).unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).expect("read the HTTP response");
+    assert!(response.starts_with("HTTP/1.1 200"), "{response}");
 }
 
 /// Polls `/api/status` every 50 ms until `stop`; every answer's (state, last_run, device run).
@@ -210,6 +237,12 @@ fn a_plc_runs_a_plan_through_modbus_while_http_watches_and_both_see_the_link_los
     eprintln!("transcript: {}", saved.display());
     check_run(&out);
     check_http_alongside(&by_http, &out);
+    // No photo checked yet: sequence 0, result 0, rate "none".
+    assert_eq!(out["before"]["verify"], serde_json::json!([0, 0, 0, 0, 0xFFFF]));
+    post_photo(http);
+    let (checked, out) = client(address, &["verify"]);
+    // Photo 1: off (2), 2 parts found, 1 as planned, 50.0 %.
+    assert_eq!(out["verify"], serde_json::json!([1, 2, 2, 1, 500]), "{checked}");
 
     emu.kill();
     let killed = Instant::now();

@@ -1,7 +1,8 @@
 #!/usr/bin/python3
 """Attacks on the cell from the operator's own browser (headless Chromium): a page served from
 another origin tries a no-CORS fetch, a plain HTML form POST (enctype text/plain, the body
-shaped as JSON) and a JSON fetch at POST /api/run and /api/stop; then a DNS-rebinding page
+shaped as JSON) and a JSON fetch at POST /api/run and /api/stop, and an image fetch (CORS and
+no-CORS) at POST /api/verify; then a DNS-rebinding page
 (evil.example mapped to 127.0.0.1 by the browser's resolver rules) reads and commands the
 cell under its own name.
 
@@ -44,6 +45,18 @@ async function attack() {
                                               headers: {"Content-Type": "application/json"}});
     results.json = "status " + r.status;
   } catch (e) { results.json = "blocked: " + e.message; }
+  // A photo from another site: a CORS fetch of an image body needs a preflight (never
+  // granted); a no-CORS one goes out without its image type and is refused.
+  const png = new Blob([new Uint8Array([137, 80, 78, 71, 13, 10, 26, 10])], {type: "image/png"});
+  try {
+    const r = await fetch(cell + "/api/verify", {method: "POST", body: png,
+                                                 headers: {"Content-Type": "image/png"}});
+    results.photo = "status " + r.status;
+  } catch (e) { results.photo = "blocked: " + e.message; }
+  try {
+    await fetch(cell + "/api/verify", {method: "POST", mode: "no-cors", body: png});
+    results.photo_nocors = "sent";
+  } catch (e) { results.photo_nocors = "error " + e.message; }
   document.getElementById("sink").onload = () => {
     results.form = "submitted";
     document.title = "attacked";

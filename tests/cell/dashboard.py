@@ -3,9 +3,11 @@
 uses it: the stored plan is listed, its Run button starts it, the state goes busy then done,
 the acceleration plot gets points; screenshots on the way.
 
-Usage: dashboard.py URL PLAN_NAME SCREENSHOT_DIR [stop]
+Usage: dashboard.py URL PLAN_NAME SCREENSHOT_DIR [stop] [photo=PATH]
 With `stop`, the run is stopped with the Stop button once busy, and the state must read idle
-(the login case: URL is then the `/?token=...` URL serve printed).
+(the login case: URL is then the `/?token=...` URL serve printed). With `photo=PATH`, the
+script plays the camera first: it posts the PNG to /api/verify while the page is open, and the
+page must show the check (its event) with the photo and the found outlines drawn over it.
 Run by host/tests/cli_serve_http.rs against `chladni serve --http` on the QEMU controller.
 Prints one JSON line of what it saw; exits 1 naming the first thing that did not happen.
 Needs Debian's chromium, chromium-driver and python3-selenium (scripts/install-deps.sh).
@@ -15,6 +17,7 @@ import json
 import os
 import sys
 import time
+import urllib.request
 
 try:
     from selenium import webdriver
@@ -74,11 +77,53 @@ def run_and_stop(driver, seen):
     seen["points_busy"] = points(driver)
 
 
-def main(url, plan, shots, stop=False):
+# Counts the outline colours of the shown photo (the server draws green as planned, red off).
+COUNT_OUTLINES = """
+const img = document.getElementById("verify-photo");
+const c = document.createElement("canvas");
+c.width = img.naturalWidth; c.height = img.naturalHeight;
+const g = c.getContext("2d"); g.drawImage(img, 0, 0);
+const d = g.getImageData(0, 0, c.width, c.height).data;
+let green = 0, red = 0;
+for (let i = 0; i < d.length; i += 4) {
+  if (d[i] === 0 && d[i + 1] === 200 && d[i + 2] === 60) green++;
+  if (d[i] === 230 && d[i + 1] === 30 && d[i + 2] === 30) red++;
+}
+return {width: c.width, height: c.height, green, red};
+"""
+
+
+def post_photo(driver, url, path, seen):
+    """The camera's post, then what the open page shows of it (through its event stream)."""
+    base = url.split("?")[0].rstrip("/")
+    with open(path, "rb") as f:
+        body = f.read()
+    request = urllib.request.Request(base + "/api/verify", data=body, method="POST",
+                                     headers={"Content-Type": "image/png"})
+    with urllib.request.urlopen(request, timeout=30) as answer:
+        posted = json.loads(answer.read())
+    seq = str(posted["seq"])
+    wait_for(driver, "the photo check on the page",
+             lambda d: d.find_element(By.ID, "verify-result").get_attribute("data-seq") == seq, 10)
+    wait_for(driver, "the checked photo loaded", lambda d: d.execute_script(
+        "const i = document.getElementById('verify-photo'); return !i.hidden && i.complete && i.naturalWidth > 0;"), 10)
+    seen["verify"] = {
+        "posted": {k: posted[k] for k in ("seq", "result", "found", "oriented")},
+        "result": driver.find_element(By.ID, "verify-result").text,
+        "summary": driver.find_element(By.ID, "verify-summary").text,
+        "parts_off": [li.text for li in driver.find_elements(By.CSS_SELECTOR, "#verify-parts li")],
+        "outlines": driver.execute_script(COUNT_OUTLINES),
+    }
+    driver.find_element(By.ID, "verify-photo").screenshot(os.path.join(SHOTS, "dashboard-verify.png"))
+
+
+def main(url, plan, shots, stop=False, photo=None):
     driver = browser()
     seen = {}
     try:
         driver.get(url)
+        if photo:
+            post_photo(driver, url, photo, seen)
         slot = wait_for(driver, f"the plan '{plan}' in the list", lambda d: next(
             (r.get_attribute("data-slot") for r in d.find_elements(By.CSS_SELECTOR, "#plans tr[data-slot]")
              if plan in r.text), False), 10)
@@ -118,8 +163,10 @@ def main(url, plan, shots, stop=False):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) not in (4, 5) or sys.argv[4:] not in ([], ["stop"]):
+    extra = sys.argv[4:]
+    photos = [a[len("photo="):] for a in extra if a.startswith("photo=")]
+    if len(sys.argv) < 4 or any(a != "stop" and not a.startswith("photo=") for a in extra):
         sys.exit(__doc__)
     SHOTS = sys.argv[3]
     os.makedirs(SHOTS, exist_ok=True)
-    main(sys.argv[1], sys.argv[2], SHOTS, stop=sys.argv[4:] == ["stop"])
+    main(sys.argv[1], sys.argv[2], SHOTS, stop="stop" in extra, photo=(photos or [None])[0])

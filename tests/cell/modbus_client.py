@@ -8,6 +8,7 @@ last line, one JSON object with what it saw, for host/tests/cli_serve_modbus.rs 
 
     modbus_client.py HOST PORT run SLOT          # map, bad slot, run SLOT, poll until done
     modbus_client.py HOST PORT wait-link-lost    # poll until state 3 with fault 100
+    modbus_client.py HOST PORT verify            # the last photo check's registers
 
 Exit status: 0 when the conversation ran (the checks are the caller's), 1 when a request failed
 in a way a PLC could not go on from (no connection, no answer), 2 for bad arguments.
@@ -30,7 +31,9 @@ INPUT_NAMES = [
     "state", "link_up", "slot", "step", "repetition", "remaining_ms_hi", "remaining_ms_lo",
     "accel_0.01mps2", "freq_0.1hz", "fault", "result", "heartbeat", "command_run_hi",
     "command_run_lo", "device_run_hi", "device_run_lo",
+    "verify_seq", "verify_result", "verify_found", "verify_oriented", "verify_rate_0.1%",
 ]
+VERIFY_RESULTS = {0: "none", 1: "ok", 2: "off", 3: "empty", 4: "refused"}
 HOLDING_NAMES = ["slot", "repeat", "command"]
 STATES = {0: "idle", 1: "busy", 2: "done", 3: "error"}
 EXCEPTIONS = {1: "IllegalFunction", 2: "IllegalDataAddress", 3: "IllegalDataValue",
@@ -92,7 +95,7 @@ def decode(regs):
         "repetition": regs[4], "remaining_ms": regs[5] << 16 | regs[6],
         "accel_mps2": regs[7] / 100, "freq_hz": regs[8] / 10, "fault": regs[9],
         "result": regs[10], "heartbeat": regs[11], "command_run": regs[12] << 16 | regs[13],
-        "device_run": regs[14] << 16 | regs[15],
+        "device_run": regs[14] << 16 | regs[15], "verify": regs[16:21],
     }
 
 
@@ -141,8 +144,21 @@ def wait_link_lost(client):
     return {"seen": seen}
 
 
+def verify(client):
+    """Reads the last photo check's registers (16..20) and decodes them."""
+    regs = read(client, "input", 16, 5)
+    if regs is None:
+        raise Failed("reading the verification registers was refused")
+    seq, result, found, oriented, rate = regs
+    shown = "none" if rate == 0xFFFF else f"{rate / 10} %"
+    say(f"  = photo check {seq}: {VERIFY_RESULTS.get(result, '?')}, {oriented} of {found} parts "
+        f"as planned ({shown})")
+    return {"verify": regs}
+
+
 def main(argv):
-    if len(argv) < 4 or argv[3] not in ("run", "wait-link-lost") or (argv[3] == "run") != (len(argv) == 5):
+    modes = ("run", "wait-link-lost", "verify")
+    if len(argv) < 4 or argv[3] not in modes or (argv[3] == "run") != (len(argv) == 5):
         print(__doc__, file=sys.stderr)
         return 2
     host, port, mode = argv[1], int(argv[2]), argv[3]
@@ -152,7 +168,12 @@ def main(argv):
         return 1
     say(f"connected to {host}:{port} (pymodbus)")
     try:
-        out = run(client, int(argv[4])) if mode == "run" else wait_link_lost(client)
+        if mode == "run":
+            out = run(client, int(argv[4]))
+        elif mode == "verify":
+            out = verify(client)
+        else:
+            out = wait_link_lost(client)
     except Failed as e:
         print(f"modbus_client: {e}", file=sys.stderr)
         return 1

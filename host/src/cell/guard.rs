@@ -9,6 +9,8 @@
 //!   (else 415): a page from another origin can send such a body only after a CORS preflight,
 //!   which this server never grants; and an `Origin` header, when present, must be this
 //!   server's own (`http://` + its Host) or one given with `--http-allow-origin` (else 403).
+//!   The photo route takes `image/png` or `image/jpeg` instead ([`super::verify`]), types a
+//!   page from another origin can send no more freely than JSON.
 //! - Token (when the server has one): `Authorization: Bearer TOKEN`, or the cookie the
 //!   dashboard's login URL (`/?token=TOKEN`) sets (HttpOnly, SameSite=Strict: page scripts
 //!   cannot read it, other sites' requests do not carry it); else 401.
@@ -88,7 +90,11 @@ fn check_request(access: &Access, request: &Request) -> Result<(), ApiError> {
     }
     if !matches!(*request.method(), Method::GET | Method::HEAD) {
         check_origin(access, request.headers(), &host)?;
-        check_json_body(request.headers())?;
+        if request.uri().path() == super::verify::ROUTE {
+            super::verify::check_photo_type(request.headers())?;
+        } else {
+            check_json_body(request.headers())?;
+        }
     }
     Ok(())
 }

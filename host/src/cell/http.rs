@@ -8,7 +8,10 @@
 //!   events, one per new status, at most one per [`MIN_EVENT_GAP`];
 //! - `GET /api/plans`: the stored plans ([`PlansJson`], as `chladni device plans --json`);
 //! - `POST /api/run` `{"slot": N, "repeat": M}` (`repeat` optional), `POST /api/stop`,
-//!   `POST /api/clear-fault`.
+//!   `POST /api/clear-fault`;
+//! - `POST /api/verify` (a photo), `GET /api/verify`, `GET /api/verify/photo.png`: the check
+//!   of a run from a photo ([`verify`], its own body limit); `/api/events` also carries its
+//!   results (`event: verify`).
 //!
 //! Every error is `{"error": "..."}` naming the value and the fix, with the status telling its
 //! kind: 400 a request that is not what the route takes, 422 a slot that does not exist or
@@ -48,6 +51,7 @@ use tower_http::timeout::{RequestBodyTimeoutLayer, TimeoutLayer};
 use super::guard::{self, Access};
 use super::net::{self, Caps};
 use super::ratelog;
+use super::verify::{self, Verifier};
 use super::{Cell, CellError, CellStatus};
 use crate::controller::client::DeviceError;
 use crate::controller::json::{PlanJson, PlansJson, RunNumberJson};
@@ -61,7 +65,8 @@ const DASHBOARD: &str = include_str!("dashboard.html");
 
 /// The routes, for the message of a request that matches none.
 const ROUTES: &str = "GET /, GET /api/status, GET /api/events, GET /api/plans, \
-                      POST /api/run, POST /api/stop, POST /api/clear-fault";
+                      POST /api/run, POST /api/stop, POST /api/clear-fault, \
+                      POST /api/verify, GET /api/verify, GET /api/verify/photo.png";
 
 /// The largest request body taken (a run request is a few dozen bytes).
 pub const MAX_BODY: usize = 4 * 1024;
@@ -86,20 +91,27 @@ pub struct Options {
     pub connections: usize,
     /// See [`Caps::http_overflow`].
     pub overflow: usize,
+    /// What `POST /api/verify` checks photos by (and publishes to).
+    pub verifier: Verifier,
 }
 
 impl Options {
     /// Loopback use without a token, with the caps of this process's open-file limit.
     pub fn local() -> Self {
         let caps = Caps::from_limit(net::open_file_limit(), 1);
-        Options { access: Access::default(), connections: caps.http, overflow: caps.http_overflow }
+        Options {
+            access: Access::default(),
+            connections: caps.http,
+            overflow: caps.http_overflow,
+            verifier: Verifier::new(None),
+        }
     }
 }
 
 /// Serves the dashboard and the API on `listener`; it never returns on its own (accept errors
 /// are logged and retried).
 pub async fn serve(cell: Cell, listener: TcpListener, options: Options) -> std::io::Result<()> {
-    let app = router(cell, options.access);
+    let app = router_with(cell, options.access, options.verifier);
     let normal = Arc::new(Semaphore::new(options.connections));
     let overflow = Arc::new(Semaphore::new(options.overflow));
     loop {
@@ -149,9 +161,17 @@ fn refuse_connection(stream: &TcpStream, peer: std::net::SocketAddr) {
 /// The routes, on `cell`, behind the guard and the limits; public so that tests and other
 /// servers can mount them.
 pub fn router(cell: Cell, access: Access) -> Router {
+    router_with(cell, access, Verifier::new(None))
+}
+
+/// The same with the photo check's routes on `verifier` ([`super::verify`]): a photo is far
+/// larger than [`MAX_BODY`], so that route has its own limit inside the guard.
+pub fn router_with(cell: Cell, access: Access, verifier: Verifier) -> Router {
     routes(cell)
-        .layer(axum::middleware::from_fn_with_state(Arc::new(access), guard::check))
+        .layer(axum::Extension(verifier.clone()))
         .layer(RequestBodyLimitLayer::new(MAX_BODY))
+        .merge(verify::routes(verifier))
+        .layer(axum::middleware::from_fn_with_state(Arc::new(access), guard::check))
         .layer(RequestBodyTimeoutLayer::new(BODY_TIMEOUT))
         .layer(TimeoutLayer::with_status_code(StatusCode::GATEWAY_TIMEOUT, REQUEST_TIMEOUT))
         .layer(axum::middleware::map_response(json_errors))
@@ -253,6 +273,11 @@ impl IntoResponse for ApiError {
         }
         json(self.status, &Body { error: self.message })
     }
+}
+
+/// A JSON response, for the other front-end modules ([`json`]).
+pub(crate) fn json_response<T: Serialize>(status: StatusCode, value: &T) -> Response {
+    json(status, value)
 }
 
 /// A JSON response. Serializing the API's own types cannot fail; if it ever did, the client
@@ -395,8 +420,12 @@ fn repeat_of(v: &Value) -> Result<u16, ApiError> {
     })
 }
 
-async fn events(State(cell): State<Cell>) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
-    Sse::new(status_events(cell.watch())).keep_alive(KeepAlive::default())
+async fn events(
+    State(cell): State<Cell>,
+    axum::Extension(verifier): axum::Extension<Verifier>,
+) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
+    let verified = verify::events(verifier.watch());
+    Sse::new(stream::select(status_events(cell.watch()), verified)).keep_alive(KeepAlive::default())
 }
 
 /// The status stream: the current status at once, then each new one, no two closer than

@@ -9,7 +9,8 @@
 //! - The front ends (`chladni serve`) turn their protocol into [`Cell`] calls and its
 //!   [`CellStatus`] into their registers or pages: [`modbus`] (Modbus TCP for a PLC, framed by
 //!   [`mbap`]; the register map is in docs/cell.md) and [`http`] (the dashboard and JSON API
-//!   for people, behind [`guard`]).
+//!   for people, behind [`guard`]); [`verify`] checks photos of a run against its plan for
+//!   both.
 //! - [`net`] (accepting, connection caps, allow-lists) and [`ratelog`] (bounded logging) keep
 //!   both front ends up under floods of connections and bad requests.
 
@@ -20,5 +21,6 @@ pub mod modbus;
 pub mod net;
 pub mod owner;
 pub mod ratelog;
+pub mod verify;
 
 pub use owner::{Cell, CellError, CellState, CellStatus, POLL_PERIOD, RunStarted};

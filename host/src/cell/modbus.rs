@@ -32,6 +32,7 @@ use super::mbap;
 use super::net::{self, Cidr};
 use super::owner::{Cell, CellError, CellStatus};
 use super::ratelog;
+use super::verify::Verifier;
 use crate::controller::client::DeviceError;
 
 /// Holding register: the plan slot a run command runs (0..[`PLAN_SLOTS`]).
@@ -74,8 +75,21 @@ pub mod input {
     /// The run number of the drive command in effect on the controller, 32 bits (high word
     /// first).
     pub const DEVICE_RUN: u16 = 14;
+    /// Number of the registers above, from the cell's status ([`super::input_registers`]).
+    pub const STATUS_COUNT: u16 = 16;
+    /// The last photo check's number, low 16 bits (0: none yet; [`crate::cell::verify`]).
+    pub const VERIFY_SEQ: u16 = 16;
+    /// Its result: 0 none, 1 ok, 2 off, 3 no part found, 4 photo refused
+    /// ([`crate::cell::verify::ResultCode`]).
+    pub const VERIFY_RESULT: u16 = 17;
+    /// Parts found in it.
+    pub const VERIFY_FOUND: u16 = 18;
+    /// Parts in it as the plan predicts.
+    pub const VERIFY_ORIENTED: u16 = 19;
+    /// Its success rate, 0.1 % (0..=1000); 0xFFFF none.
+    pub const VERIFY_RATE: u16 = 20;
     /// Number of input registers; addresses from here on are illegal.
-    pub const COUNT: u16 = 16;
+    pub const COUNT: u16 = 21;
 }
 
 /// "None" in the slot and step registers.
@@ -231,10 +245,13 @@ fn remaining_ms(report: &StatusReport) -> u32 {
 
 /// The input registers for a status and the holding state, in address order. Nothing that
 /// comes from the controller is shown while the link is down: those registers read "none"/0.
-pub fn input_registers(status: &CellStatus, holding: &Holding) -> [u16; input::COUNT as usize] {
+pub fn input_registers(
+    status: &CellStatus,
+    holding: &Holding,
+) -> [u16; input::STATUS_COUNT as usize] {
     use input::*;
     let live = status.report.as_ref().filter(|_| status.link_up);
-    let mut r = [0u16; COUNT as usize];
+    let mut r = [0u16; STATUS_COUNT as usize];
     let mut set = |address: u16, value: u16| r[usize::from(address)] = value;
     set(STATE, status.state.code());
     set(LINK_UP, u16::from(status.link_up));
@@ -345,12 +362,26 @@ pub fn parse_write(address: u16, values: &[u16]) -> Result<Write, Rejected> {
 pub struct Registers {
     cell: Cell,
     holding: Arc<Mutex<Holding>>,
+    verifier: Verifier,
 }
 
 impl Registers {
     /// Registers in their start state (slot 0, repeat 0, no command yet) for `cell`.
     pub fn new(cell: Cell) -> Self {
-        Registers { cell, holding: Arc::new(Mutex::new(Holding::default())) }
+        let holding = Arc::new(Mutex::new(Holding::default()));
+        Registers { cell, holding, verifier: Verifier::new(None) }
+    }
+
+    /// The same, the verification registers reading `verifier`'s last photo check.
+    pub fn with_verifier(self, verifier: Verifier) -> Self {
+        Registers { verifier, ..self }
+    }
+
+    /// The whole input map: the status registers, then the last photo check's.
+    pub fn input_table(&self) -> Vec<u16> {
+        let mut table = input_registers(&self.cell.status(), &self.holding()).to_vec();
+        table.extend(self.verifier.registers());
+        table
     }
 
     /// The holding state now.
@@ -366,7 +397,7 @@ impl Registers {
     pub async fn handle(&self, request: Request<'_>) -> Result<Response, ExceptionCode> {
         match request {
             Request::ReadInputRegisters(address, quantity) => {
-                let table = input_registers(&self.cell.status(), &self.holding());
+                let table = self.input_table();
                 read_range(&table, address, quantity, MAX_READ).map(Response::ReadInputRegisters)
             }
             Request::ReadHoldingRegisters(address, quantity) => {

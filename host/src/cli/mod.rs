@@ -21,6 +21,7 @@ mod physics;
 mod plan;
 mod plate;
 mod serve;
+mod verify;
 
 /// Bad input from the user: exit code 2.
 #[derive(Debug, thiserror::Error)]
@@ -129,6 +130,9 @@ enum Command {
     Physics(physics::PhysicsCommand),
     /// Serve the controller to a cell: Modbus TCP for a PLC, HTTP for people (docs/cell.md).
     Serve(serve::ServeArgs),
+    /// A photo of the plate after a run against the plan's prediction: per part ok or off,
+    /// the success rate; exit 1 when any part is off (docs/plate.md).
+    Verify(verify::VerifyArgs),
 }
 
 impl Cli {
@@ -146,6 +150,7 @@ impl Cli {
             Command::Plan(args) => args.run(),
             Command::Simulate(args) => args.run(),
             Command::Serve(args) => args.run(),
+            Command::Verify(args) => args.run(),
         }
     }
 }

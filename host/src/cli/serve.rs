@@ -25,6 +25,7 @@ use anyhow::Context as _;
 use chladni::cell::guard::{self, Access};
 use chladni::cell::modbus::{self, Registers};
 use chladni::cell::net::{self, Caps, Cidr};
+use chladni::cell::verify::{Setup, Verifier};
 use chladni::cell::{Cell, http};
 use clap::Args;
 use tokio::net::TcpListener;
@@ -71,6 +72,61 @@ pub struct ServeArgs {
     /// Print the listening addresses as JSON objects, one a line.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    verify: VerifyServeArgs,
+}
+
+/// What `POST /api/verify` checks photos against (docs/cell.md, "Verifying a run from a
+/// photo"); without --verify-plan the route refuses photos.
+#[derive(Debug, Args)]
+struct VerifyServeArgs {
+    /// The plan whose result photos are checked against (chladni plan --out).
+    #[arg(long, value_name = "plan.json", requires_all = ["verify_part", "verify_plate"])]
+    verify_plan: Option<PathBuf>,
+    /// The part(s) the plan was made for, in its order; repeat for several.
+    #[arg(long, value_name = "FILE", requires = "verify_plan")]
+    verify_part: Vec<PathBuf>,
+    /// The plate the plan was made for (TOML).
+    #[arg(long, value_name = "PLATE.toml", requires = "verify_plan")]
+    verify_plate: Option<PathBuf>,
+    /// The plate's corners in the camera's picture (px, as for `chladni locate`); found in
+    /// each photo when not given.
+    #[arg(
+        long,
+        num_args = 8,
+        allow_negative_numbers = true,
+        requires = "verify_plan",
+        value_names = ["X0", "Y0", "X1", "Y1", "X2", "Y2", "X3", "Y3"]
+    )]
+    verify_corners: Option<Vec<f64>>,
+    /// Orientation tolerance of a part as planned (deg).
+    #[arg(long, value_name = "D", default_value_t = chladni::vision::verify::DEFAULT_TOL_DEG)]
+    verify_tol_deg: f64,
+    /// Position tolerance, where the plan fixes a position (mm).
+    #[arg(long, value_name = "D", default_value_t = chladni::vision::verify::DEFAULT_TOL_MM)]
+    verify_tol_mm: f64,
+}
+
+impl VerifyServeArgs {
+    /// The verifier: the plan, parts and plate loaded and checked now, so that a bad file is
+    /// refused at start (exit 2) rather than at the first photo.
+    fn verifier(&self) -> anyhow::Result<Verifier> {
+        let (Some(plan), Some(plate)) = (&self.verify_plan, &self.verify_plate) else {
+            return Ok(Verifier::new(None));
+        };
+        let (size_mm, check) = super::verify::load_check(
+            plan,
+            &self.verify_part,
+            plate,
+            (self.verify_tol_deg, self.verify_tol_mm),
+        )
+        .map_err(|f| InputError(format!("--verify-plan: {:#}", f.error)))?;
+        let corners = self
+            .verify_corners
+            .as_deref()
+            .map(|c| [[c[0], c[1]], [c[2], c[3]], [c[4], c[5]], [c[6], c[7]]]);
+        Ok(Verifier::new(Some(Setup { check, size_mm, corners })))
+    }
 }
 
 /// A front end's task: it runs until the process stops, or ends with why it failed.
@@ -100,6 +156,7 @@ impl ServeArgs {
     async fn serve(&self) -> anyhow::Result<ExitCode> {
         let access = self.access()?;
         let modbus_options = self.modbus_options()?;
+        let verifier = self.verify.verifier()?;
         let caps = Caps::from_limit(net::open_file_limit(), usize::from(self.modbus_clients));
         let cell = Cell::start(&self.port, &format!("chladni serve (pid {})", std::process::id()));
         // Before any address is printed: whoever reads it may signal at once (and `ctrlc`
@@ -112,7 +169,7 @@ impl ServeArgs {
         if let Some(address) = self.modbus {
             let listener = bind(address, "--modbus").await?;
             self.announce("modbus", listener.local_addr()?.to_string(), None)?;
-            let registers = Registers::new(cell.clone());
+            let registers = Registers::new(cell.clone()).with_verifier(verifier.clone());
             let options = modbus::Options { clients: caps.modbus, ..modbus_options };
             front_ends.spawn(async move {
                 ("modbus", modbus::serve(listener, registers, options).await)
@@ -124,8 +181,12 @@ impl ServeArgs {
             let login = access.token.as_ref().map(|t| format!("{url}?token={t}"));
             self.announce("http", url, login)?;
             let cell = cell.clone();
-            let options =
-                http::Options { access, connections: caps.http, overflow: caps.http_overflow };
+            let options = http::Options {
+                access,
+                connections: caps.http,
+                overflow: caps.http_overflow,
+                verifier,
+            };
             front_ends.spawn(async move { ("http", http::serve(cell, listener, options).await) });
         }
         tokio::select! {

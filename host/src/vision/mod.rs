@@ -33,6 +33,7 @@ mod split;
 pub mod synth;
 #[cfg(test)]
 mod tests;
+pub mod verify;
 
 use fit::{Fitted, Sample, View};
 

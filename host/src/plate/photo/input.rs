@@ -56,12 +56,29 @@ fn reader(path: &Path) -> Result<ImageReader<std::io::BufReader<std::fs::File>>,
 /// Reads a photo as grey levels: the format from the content, the size checked on the header
 /// before decoding.
 pub fn read(path: &Path) -> Result<GrayImage, PhotoError> {
+    decode_checked(path, || reader(path))
+}
+
+/// The same for a photo in memory (one posted to the cell), named `name` in errors.
+pub fn read_bytes(bytes: &[u8], name: &Path) -> Result<GrayImage, PhotoError> {
+    let fail = |e: std::io::Error| PhotoError::Read { path: name.into(), reason: e.to_string() };
+    decode_checked(name, || {
+        ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format().map_err(fail)
+    })
+}
+
+/// Decodes what `open` reads (called twice: once for the header, once for the pixels), the
+/// header's pixel count checked against [`MAX_PIXELS`] first.
+fn decode_checked<R: std::io::BufRead + std::io::Seek>(
+    path: &Path,
+    open: impl Fn() -> Result<ImageReader<R>, PhotoError>,
+) -> Result<GrayImage, PhotoError> {
     let fail = |e: image::ImageError| PhotoError::Read { path: path.into(), reason: e.to_string() };
-    let (w, h) = reader(path)?.into_dimensions().map_err(fail)?;
+    let (w, h) = open()?.into_dimensions().map_err(fail)?;
     if u64::from(w) * u64::from(h) > MAX_PIXELS {
         return Err(PhotoError::TooLarge { path: path.into(), w, h });
     }
-    let mut r = reader(path)?;
+    let mut r = open()?;
     // The header was checked above; these limits hold the decoder to it.
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(w);
