@@ -63,7 +63,7 @@ pub use crate::model::angle::cdist;
 pub use confirm::{confirm, confirm_any};
 pub use failure::PlanFailure;
 pub use input::{MAX_PLAN_VERTICES, PlanInputError, check_input, plan_name};
-pub use maps::{StepMap, line_map, map_starts, sampled_map};
+pub use maps::{StepMap, line_map, map_starts, rim_line, sampled_map};
 pub(crate) use maps::{balance_offset, on_plate_edge};
 pub use options::{Backend, PlanOptions};
 pub use result::{PlannedStep, Synthesis};
@@ -209,7 +209,9 @@ pub(crate) fn remapped(
     Ok(Problem { maps, ..problem.clone() })
 }
 
-/// A straight-node map of `kind` ([`MapKind::Auto`] starts with the static one).
+/// A straight-node map of `kind` ([`MapKind::Auto`] starts with the static one); a node the
+/// part cannot rest across ([`rim_line`]: along or beyond an edge) is mapped by simulation
+/// with the rim whatever the kind.
 fn line_map_of(
     part: &Part,
     mode: &crate::model::plate::Mode,
@@ -218,6 +220,10 @@ fn line_map_of(
     opt: &PlanOptions,
     kind: MapKind,
 ) -> Result<StepMap, String> {
+    let body = Body::with_samples(part, 160);
+    if rim_line(body.radius, mode, plate) {
+        return Ok(sampled_map(&body, mode, plate, opt.sim_starts, period));
+    }
     match kind {
         MapKind::Static | MapKind::Auto => line_map(part, mode, opt.backend),
         MapKind::Dynamic => {
