@@ -10,10 +10,15 @@
 //!      give no plan): measured by
 //!      simulating the approach to the node from both sides for 72 start orientations; an
 //!      orientation whose outcome depends on the side is mapped to every rest it reaches;
-//!    - hyperbola and grid nodes: quasi-static simulation ([`crate::motion::sim`]) from `sim_starts`
-//!      start orientations at one start point (hyperbola: its vertex; grid: the plate centre);
-//!      final orientations are clustered (2°) into rests, boundaries lie between neighbouring
-//!      starts that end in different rests.
+//!    - hyperbola and grid nodes: quasi-static simulation ([`crate::motion::sim`]) from
+//!      `sim_starts` start orientations at each start point of [`map_starts`] (the hyperbola's
+//!      vertex or the plate centre, and the inset corners);
+//!      final orientations are clustered (2°) into rests; an orientation whose rest depends on
+//!      the start point maps to all of them; boundaries lie between neighbouring starts whose
+//!      sets of rests differ;
+//!    - a straight node along or beyond an edge ([`rim_line`]): simulated like a curved node,
+//!      with the rim (the field pushes the part into the wall, which turns it onto a stable
+//!      edge) and starts pushed against the walls.
 //! 2. **Equivalence.** Orientations are taken modulo the period P = 360°/m, m = the part's
 //!    rotational symmetry order, doubled (lcm with 2) when every mode is a straight node with
 //!    equal gains (t(θ + 180°) = t(θ)).
