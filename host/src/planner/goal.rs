@@ -18,7 +18,7 @@ use super::position::{self, POSITION_TOL_MM};
 use super::search::{Minimize, Path, Reach, Search, State, Target};
 use super::{
     PlanFailure, PlanOptions, PlannedStep, Problem, Progress, Settle, Synthesis, cdist,
-    confirm_any, on_plate_edge, settle_time, slowest_settled, start_points, step_duration_ms,
+    confirm_any, settle_time, slowest_settled, start_points, step_duration_ms,
 };
 
 /// One part of a plan for several parts: its predictions.
@@ -71,13 +71,12 @@ impl Durations<'_> {
             let mode = &plate.modes[k];
             let field = FieldModel::new(mode, plate);
             let p = super::settle::settle_params(mode, plate);
-            let grid = matches!(mode.node, Node::Grid(_));
             start_points(body, mode, plate)
                 .into_iter()
                 .map(|pt| {
                     let q = Pose { x: pt[0], y: pt[1], theta: theta.to_radians() };
                     let r = sim::run(body, &field, p, q);
-                    (r.settle_s, grid && on_plate_edge(body, plate, r.pose))
+                    (r.settle_s, super::maps::outside_reach(body, mode, plate, r.pose))
                 })
                 .collect()
         })
@@ -247,7 +246,8 @@ fn unconfirmed(
     let mut bad = Vec::new();
     for w in path.windows(2) {
         let (k, mode) = (w[1].0, &plate.modes[w[1].0]);
-        if !matches!(mode.node, Node::Line { .. }) {
+        // Simulated maps (curved, grid and rim nodes) are measured already.
+        if !matches!(mode.node, Node::Line { .. }) || problem.maps[k].sampled.is_some() {
             continue;
         }
         for &u in &w[0].1[i] {

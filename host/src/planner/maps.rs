@@ -17,7 +17,7 @@ use super::symmetry::body_symmetry_order;
 use crate::analysis::reference::{RefField, Reference};
 use crate::model::angle::cdist;
 use crate::model::part::Part;
-use crate::model::plate::{Mode, Node, PlateModel};
+use crate::model::plate::{Edge, Mode, Node, PlateModel};
 use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
 
 /// One mode's orientation map.
@@ -29,8 +29,9 @@ pub struct StepMap {
     pub boundaries: Vec<f64>,
     /// Every orientation is at rest.
     pub neutral: bool,
-    /// Simulated maps: start orientations (deg) and the rest each reached (deg).
-    pub(super) sampled: Option<Vec<(f64, f64)>>,
+    /// Simulated maps: start orientations (deg) and every rest reached from them over the
+    /// start points (deg; empty: some run did not come to rest).
+    pub(super) sampled: Option<Vec<(f64, Vec<f64>)>>,
     /// Extra distance to boundaries for sampled maps (half the start spacing).
     pub(super) slack: f64,
     /// Simulated grid maps: start points outside the mode's reach (no interior node
@@ -62,10 +63,18 @@ impl StepMap {
     /// approaches from; `Err(distance)` when `theta` lies within `margin` of a basin boundary
     /// (distance 0: a simulated run from it did not come to rest).
     pub fn apply_all(&self, theta: f64, margin: f64) -> Result<Vec<f64>, f64> {
-        match &self.dynamic {
-            Some(d) if !self.neutral => {
+        match (&self.dynamic, &self.sampled) {
+            (Some(d), _) if !self.neutral => {
                 self.near_boundary(theta, margin)?;
                 d.images(theta).ok_or(0.0)
+            }
+            (None, Some(s)) if !self.neutral => {
+                self.near_boundary(theta, margin)?;
+                match nearest_sample(s, theta) {
+                    Some([]) => Err(0.0),
+                    Some(v) => Ok(v.to_vec()),
+                    None => Ok(vec![theta]),
+                }
             }
             _ => self.apply(theta, margin).map(|v| vec![v]),
         }
@@ -87,20 +96,10 @@ impl StepMap {
             return Ok(theta.rem_euclid(360.0));
         }
         self.near_boundary(theta, margin)?;
-        if self.dynamic.is_some() {
+        if self.dynamic.is_some() || self.sampled.is_some() {
             return match self.apply_all(theta, margin)?.as_slice() {
                 [v] => Ok(*v),
                 _ => Err(0.0),
-            };
-        }
-        if let Some(s) = &self.sampled {
-            let best = s
-                .iter()
-                .min_by(|a, b| cdist(a.0, theta, 360.0).total_cmp(&cdist(b.0, theta, 360.0)));
-            return match best {
-                Some(b) if b.1.is_nan() => Err(0.0),
-                Some(b) => Ok(b.1),
-                None => Ok(theta),
             };
         }
         if let Some(&s) = self.stable.iter().find(|&&s| cdist(s, theta, 360.0) < 1e-3) {
@@ -127,6 +126,30 @@ impl StepMap {
             .find(|&s| width(s) > 0.0 && width(s) < next)
             .unwrap_or(theta))
     }
+}
+
+/// The rests a simulated map recorded for the start orientation nearest `theta`.
+fn nearest_sample(s: &[(f64, Vec<f64>)], theta: f64) -> Option<&[f64]> {
+    s.iter()
+        .min_by(|a, b| cdist(a.0, theta, 360.0).total_cmp(&cdist(b.0, theta, 360.0)))
+        .map(|b| b.1.as_slice())
+}
+
+/// Does a straight node lie where a part of radius `radius` cannot rest across it: the node
+/// line misses the plate inset by the radius (a node along or beyond an edge, as a clamped
+/// edge is)? Then the field pushes the part into the rim, not onto the node, and the static
+/// alignment function (balance on the node, then rotate) does not apply: the planner maps
+/// such a mode by simulation with the rim ([`sampled_map`]), where the wall's reaction turns
+/// the part to a stable edge (push alignment).
+pub fn rim_line(radius: f64, mode: &Mode, plate: &PlateModel) -> bool {
+    let Node::Line { angle_deg, offset_mm } = mode.node else { return false };
+    let [w, h] = plate.size_mm;
+    let r = radius.min(w / 2.0).min(h / 2.0);
+    let (s, c) = angle_deg.to_radians().sin_cos();
+    let ctr = plate.center();
+    let xi = |p: [f64; 2]| -s * (p[0] - ctr[0]) + c * (p[1] - ctr[1]) - offset_mm;
+    let d = [[r, r], [w - r, r], [w - r, h - r], [r, h - r]].map(xi);
+    d.iter().all(|&x| x > 0.0) || d.iter().all(|&x| x < 0.0)
 }
 
 /// A straight-node map from the shared fixed-point analysis or the f64 reference.
@@ -182,7 +205,12 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, S
 
 /// Where simulated maps start the part: the hyperbola's vertex (else the plate centre) and
 /// the four plate corners inset by the part's radius, since a part may meet a curved node
-/// anywhere and the outcome can depend on where.
+/// anywhere and the outcome can depend on where. For a node the field pushes the part into
+/// the rim from ([`rim_line`]) with a wall, also the four edge midpoints on the rim: each
+/// start pose there is pushed against the wall ([`Rim::project`]), so the map records what
+/// the rim does to a part dropped against it. (Not the corners themselves: a part pushed into
+/// a corner touches two walls and can jam there at whatever orientation it arrived;
+/// docs/plan.md, "The rim in the step maps".)
 pub fn map_starts(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]> {
     let first = match mode.node {
         Node::Hyperbola { center_mm, angle_deg, a_mm, .. } => {
@@ -193,37 +221,45 @@ pub fn map_starts(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]>
     };
     let [w, h] = plate.size_mm;
     let r = body.radius.min(w / 2.0).min(h / 2.0);
-    vec![first, [r, r], [w - r, r], [w - r, h - r], [r, h - r]]
+    let mut out = vec![first, [r, r], [w - r, r], [w - r, h - r], [r, h - r]];
+    if plate.edge == Edge::Wall && rim_line(body.radius, mode, plate) {
+        out.extend([[w / 2.0, 0.0], [w, h / 2.0], [w / 2.0, h], [0.0, h / 2.0]]);
+    }
+    out
 }
 
 /// A map from simulation (any node kind): `n` start orientations at each of [`map_starts`].
 /// Final orientations are clustered (2°, modulo the period); an orientation whose outcome
-/// differs between start points is ambiguous and treated as lying on a basin boundary, and
-/// so is one whose run does not come to rest within 5000 T₀ (T₀: time to travel one radius
-/// at full pull). A part of rotational symmetry order m (dividing `n`) is simulated from the
-/// first n/m start orientations of each point only; the others are those runs turned.
+/// differs between start points maps to every rest it reached (the search carries the whole
+/// set on, as for dynamic maps, [`StepMap::apply_all`]); one whose run does not come to rest
+/// within 5000 T₀ (T₀: time to travel one radius at full pull) is treated as lying on a basin
+/// boundary, and so is the place between neighbouring start orientations whose sets of rests
+/// differ. A part of rotational symmetry order m (dividing `n`) is simulated from the first
+/// n/m start orientations of each point only; the others are those runs turned.
 ///
-/// Grid modes only: a start point from which some run ends with the centroid within half the
-/// part's radius of the plate edge reached no interior node (near a clamped edge φ and ∂φ/∂x
-/// vanish, the pull falls off like x³ and parts drift onto the clamp); it lies outside the
-/// mode's reach, is left out of the map and counted in [`StepMap::dead_starts`].
+/// The rim: a part the field pushes into a wall comes to rest against it on a stable edge
+/// (the wall's reaction turns it: push alignment) and that rest is recorded like any other.
+/// Grid modes only: a start point from which some run ends with the centroid within the
+/// part's radius of the plate edge (or off it) reached no interior node (near a clamped edge
+/// φ and ∂φ/∂x vanish, the pull falls off like x³ and parts drift onto the clamp); it lies
+/// outside the mode's reach, is left out of the map and counted in [`StepMap::dead_starts`]
+/// (docs/plan.md: recording those rim rests as well was tried and is not done yet).
 pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, period: f64) -> StepMap {
     let field = FieldModel::new(mode, plate);
     let t0 = body.radius / (mode.speed_mm_s * field.max_gain());
+    let rim = Rim::of(plate);
     let p = SimParams {
         speed: mode.speed_mm_s,
         t_limit: 5000.0 * t0,
         run_to_limit: false,
-        rim: Some(Rim::of(plate)),
+        rim: Some(rim),
     };
     // 0.3 of a step off 0° (so also off 45°, 90°, ... for n = 36, 90, 360): a start point on
-    // the node (the plate centre often is) would
-    // otherwise sample the symmetric unstable rests (0°, 90°, ...) exactly and report them as
-    // rests.
+    // the node (the plate centre often is) would otherwise sample the symmetric unstable
+    // rests (0°, 90°, ...) exactly and report them as rests.
     let thetas: Vec<f64> = (0..n).map(|i| (i as f64 + 0.3) * 360.0 / n as f64).collect();
     let mut clusters = Clusters::new(period, CLUSTER_DEG);
     let mut labels: Vec<Vec<Option<usize>>> = Vec::new();
-    let on_edge = |q: Pose| on_plate_edge(body, plate, q);
     let mut dead_starts = 0;
     // A part of symmetry order m started at θ + 360°/m is the same body at the same place as
     // at θ: its run is that run turned by 360°/m (to rounding), so only the first n/m start
@@ -232,18 +268,21 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
     let m = if m > 1 && n.is_multiple_of(m) { m } else { 1 };
     let (distinct, turn) = (n / m, std::f64::consts::TAU / m as f64);
     // Every start point's runs at once, in parallel (no wait for the slowest run of each
-    // point), collected in order: the map does not depend on the thread count.
+    // point), collected in order: the map does not depend on the thread count. Start poses
+    // on the rim are pushed against its wall.
     let poses: Vec<Pose> = map_starts(body, mode, plate)
         .iter()
         .flat_map(|s| {
-            thetas[..distinct].iter().map(|th| Pose { x: s[0], y: s[1], theta: th.to_radians() })
+            thetas[..distinct]
+                .iter()
+                .map(|th| rim.project(body, Pose { x: s[0], y: s[1], theta: th.to_radians() }))
         })
         .collect();
     let all: Vec<(Pose, bool)> = poses
         .par_iter()
         .map(|&q| {
             let r = sim::run(body, &field, p, q);
-            (r.pose, r.rested)
+            (r.pose, r.rested && !r.lost)
         })
         .collect();
     for simulated in all.chunks(distinct.max(1)) {
@@ -252,25 +291,24 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
             let (q, rested) = simulated[i % distinct];
             (Pose { theta: q.theta + (i / distinct) as f64 * turn, ..q }, rested)
         });
-        if matches!(mode.node, Node::Grid(_)) && simulated.iter().any(|r| on_edge(r.0)) {
+        if simulated.iter().any(|r| outside_reach(body, mode, plate, r.0)) {
             dead_starts += 1;
             continue;
         }
-        let mut label = Vec::with_capacity(n);
-        for (end, rested) in runs {
-            if !rested {
-                label.push(None);
-                continue;
-            }
-            label.push(Some(clusters.label(end.theta.to_degrees())));
-        }
+        let label = runs
+            .map(|(end, rested)| rested.then(|| clusters.label(end.theta.to_degrees())))
+            .collect();
         labels.push(label);
     }
     let rep = clusters.means();
-    let combined: Vec<Option<usize>> = (0..n)
+    // Per start orientation: every rest reached over the start points (`None`: some run did
+    // not come to rest).
+    let combined: Vec<Option<Vec<usize>>> = (0..n)
         .map(|i| {
-            let l = labels.first()?[i];
-            labels.iter().all(|ls| ls[i] == l).then_some(l)?
+            let mut set = labels.iter().map(|ls| ls[i]).collect::<Option<Vec<usize>>>()?;
+            set.sort_unstable();
+            set.dedup();
+            Some(set)
         })
         .collect();
     let mut boundaries = Vec::new();
@@ -280,8 +318,11 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
             boundaries.push((thetas[i] + 180.0 / n as f64).rem_euclid(360.0));
         }
     }
-    let sampled =
-        thetas.iter().zip(&combined).map(|(&th, l)| (th, l.map_or(f64::NAN, |l| rep[l]))).collect();
+    let sampled = thetas
+        .iter()
+        .zip(&combined)
+        .map(|(&th, l)| (th, l.iter().flatten().map(|&k| rep[k]).collect()))
+        .collect();
     StepMap {
         stable: rep,
         boundaries,
@@ -291,6 +332,12 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
         dead_starts,
         dynamic: None,
     }
+}
+
+/// Is a run that ended at `q` under a grid mode outside the mode's reach: the part ended on
+/// the plate edge or off it instead of on an interior node (see [`sampled_map`])?
+pub(crate) fn outside_reach(body: &Body, mode: &Mode, plate: &PlateModel, q: Pose) -> bool {
+    matches!(mode.node, Node::Grid(_)) && on_plate_edge(body, plate, q)
 }
 
 /// Does a part that ended at `q` sit on the plate's edge (centroid within its radius of

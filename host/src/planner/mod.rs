@@ -10,10 +10,15 @@
 //!      give no plan): measured by
 //!      simulating the approach to the node from both sides for 72 start orientations; an
 //!      orientation whose outcome depends on the side is mapped to every rest it reaches;
-//!    - hyperbola and grid nodes: quasi-static simulation ([`crate::motion::sim`]) from `sim_starts`
-//!      start orientations at one start point (hyperbola: its vertex; grid: the plate centre);
-//!      final orientations are clustered (2°) into rests, boundaries lie between neighbouring
-//!      starts that end in different rests.
+//!    - hyperbola and grid nodes: quasi-static simulation ([`crate::motion::sim`]) from
+//!      `sim_starts` start orientations at each start point of [`map_starts`] (the hyperbola's
+//!      vertex or the plate centre, and the inset corners);
+//!      final orientations are clustered (2°) into rests; an orientation whose rest depends on
+//!      the start point maps to all of them; boundaries lie between neighbouring starts whose
+//!      sets of rests differ;
+//!    - a straight node along or beyond an edge ([`rim_line`]): simulated like a curved node,
+//!      with the rim (the field pushes the part into the wall, which turns it onto a stable
+//!      edge) and starts pushed against the walls.
 //! 2. **Equivalence.** Orientations are taken modulo the period P = 360°/m, m = the part's
 //!    rotational symmetry order, doubled (lcm with 2) when every mode is a straight node with
 //!    equal gains (t(θ + 180°) = t(θ)).
@@ -63,7 +68,7 @@ pub use crate::model::angle::cdist;
 pub use confirm::{confirm, confirm_any};
 pub use failure::PlanFailure;
 pub use input::{MAX_PLAN_VERTICES, PlanInputError, check_input, plan_name};
-pub use maps::{StepMap, line_map, map_starts, sampled_map};
+pub use maps::{StepMap, line_map, map_starts, rim_line, sampled_map};
 pub(crate) use maps::{balance_offset, on_plate_edge};
 pub use options::{Backend, PlanOptions};
 pub use result::{PlannedStep, Synthesis};
@@ -209,7 +214,9 @@ pub(crate) fn remapped(
     Ok(Problem { maps, ..problem.clone() })
 }
 
-/// A straight-node map of `kind` ([`MapKind::Auto`] starts with the static one).
+/// A straight-node map of `kind` ([`MapKind::Auto`] starts with the static one); a node the
+/// part cannot rest across ([`rim_line`]: along or beyond an edge) is mapped by simulation
+/// with the rim whatever the kind.
 fn line_map_of(
     part: &Part,
     mode: &crate::model::plate::Mode,
@@ -218,6 +225,10 @@ fn line_map_of(
     opt: &PlanOptions,
     kind: MapKind,
 ) -> Result<StepMap, String> {
+    let body = Body::with_samples(part, 160);
+    if rim_line(body.radius, mode, plate) {
+        return Ok(sampled_map(&body, mode, plate, opt.sim_starts, period));
+    }
     match kind {
         MapKind::Static | MapKind::Auto => line_map(part, mode, opt.backend),
         MapKind::Dynamic => {

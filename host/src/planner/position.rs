@@ -32,16 +32,22 @@ pub fn reachable_region(
     path: &[(usize, Vec<f64>)],
 ) -> Vec<[f64; 2]> {
     let [w, h] = plate.size_mm;
-    let r = Body::new(part).radius.min(w / 2.0).min(h / 2.0);
+    let radius = Body::new(part).radius;
+    let r = radius.min(w / 2.0).min(h / 2.0);
     let whole = vec![[r, r], [w - r, r], [w - r, h - r], [r, h - r]];
     let c = plate.center();
     let mut pts = whole.clone();
     for (k, after) in path {
         let mode = &plate.modes[*k];
+        // A node along or beyond an edge leaves the part against the rim, not on the node.
         let Node::Line { angle_deg, offset_mm } = mode.node else {
             pts = whole.clone();
             continue;
         };
+        if super::maps::rim_line(radius, mode, plate) {
+            pts = whole.clone();
+            continue;
+        }
         let (s, co) = angle_deg.to_radians().sin_cos();
         let (n, t) = ([-s, co], [co, s]);
         let tau = |p: &[f64; 2]| t[0] * (p[0] - c[0]) + t[1] * (p[1] - c[1]);

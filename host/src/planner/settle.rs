@@ -3,8 +3,8 @@
 
 use rayon::prelude::*;
 
-use super::maps::on_plate_edge;
-use crate::model::plate::{Mode, Node, PlateModel};
+use super::maps::outside_reach;
+use crate::model::plate::{Mode, PlateModel};
 use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
 
 /// Inset plate corners (by the part radius) farthest from a straight node on each side, or
@@ -75,9 +75,7 @@ pub fn settle_time(body: &Body, mode: &Mode, plate: &PlateModel, orientations: &
             .collect();
         // Grid modes: a corner outside the mode's reach (see [`sampled_map`]) never reaches a
         // node; its drift onto the clamp is no settle time.
-        if matches!(mode.node, Node::Grid(_))
-            && runs.iter().any(|r| on_plate_edge(body, plate, r.pose))
-        {
+        if runs.iter().any(|r| outside_reach(body, mode, plate, r.pose)) {
             ends_on_edge.push(pt);
             continue;
         }

@@ -3,7 +3,7 @@
 
 use crate::model::angle::cdist;
 use crate::model::part::Part;
-use crate::model::plate::{Mode, PlateModel};
+use crate::model::plate::PlateModel;
 use crate::motion::sim::{Body, FieldModel};
 
 /// Rotational symmetry order of a part (largest m such that turning it by 360°/m about its
@@ -42,7 +42,13 @@ fn gcd(a: u32, b: u32) -> u32 {
 /// order, doubled (lcm with 2) when every mode is a straight node with equal gains.
 pub fn plan_period(part: &Part, plate: &PlateModel) -> f64 {
     let m_part = symmetry_order(part);
-    let all_sym = plate.modes.iter().all(Mode::is_symmetric_line);
+    // A node along an edge pushes the part into one wall: θ and θ + 180° rest on different
+    // edges there ([`super::maps::rim_line`]).
+    let radius = Body::new(part).radius;
+    let all_sym = plate
+        .modes
+        .iter()
+        .all(|m| m.is_symmetric_line() && !super::maps::rim_line(radius, m, plate));
     let m = if all_sym { m_part * 2 / gcd(m_part, 2) } else { m_part };
     360.0 / m as f64
 }
