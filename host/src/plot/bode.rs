@@ -1,6 +1,6 @@
-//! The Bode plot of a frequency sweep (PNG): the measured acceleration amplitude on a
-//! log-frequency axis, the phase below it on the same axis, and each resonance marked by a
-//! dashed line labelled with its frequency and Q.
+//! The Bode plot of a frequency sweep (PNG or SVG, by the file's extension): the measured
+//! acceleration amplitude on a log-frequency axis, the phase below it on the same axis, and
+//! each resonance marked by a dashed line labelled with its frequency and Q.
 
 use std::ops::Range;
 use std::path::Path;
@@ -9,10 +9,8 @@ use plotters::coord::Shift;
 use plotters::coord::ranged1d::ValueFormatter;
 use plotters::prelude::*;
 
-use super::{PlotError, text, write_figure};
+use super::{Figure, PlotError, text, write_chart};
 use crate::controller::sweep::{Resonance, SweepSample};
-
-type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
 
 const MARK: RGBColor = RGBColor(200, 40, 40);
 
@@ -24,16 +22,31 @@ pub fn bode_figure(
     samples: &[SweepSample],
     resonances: &[Resonance],
 ) -> Result<(), PlotError> {
-    write_figure(path, |tmp| {
-        let root = BitMapBackend::new(tmp, (900, 620)).into_drawing_area();
+    write_chart(path, &BodeFigure { title, samples, resonances })
+}
+
+/// What [`bode_figure`] draws.
+struct BodeFigure<'a> {
+    title: &'a str,
+    samples: &'a [SweepSample],
+    resonances: &'a [Resonance],
+}
+
+impl Figure for BodeFigure<'_> {
+    fn size(&self) -> (u32, u32) {
+        (900, 620)
+    }
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>
+    where
+        DB::ErrorType: 'static,
+    {
         root.fill(&WHITE).map_err(text)?;
-        let root = root.titled(title, ("sans-serif", 18)).map_err(text)?;
+        let root = root.titled(self.title, ("sans-serif", 18)).map_err(text)?;
         let (top, bottom) = root.split_vertically(330);
-        let range = freq_range(samples);
-        draw_magnitude(&top, range.clone(), samples, resonances)?;
-        draw_phase(&bottom, range, samples, resonances)?;
-        root.present().map_err(text)
-    })
+        let range = freq_range(self.samples);
+        draw_magnitude(&top, range.clone(), self.samples, self.resonances)?;
+        draw_phase(&bottom, range, self.samples, self.resonances)
+    }
 }
 
 /// The frequency axis: the sweep's span (a decade around 1 Hz when there is nothing to show).
@@ -66,14 +79,15 @@ fn hz_label(f: &f64) -> String {
 }
 
 /// Dashed vertical lines at each resonance, from `y.start` to `y.end`.
-fn mark_resonances<X, Y>(
-    chart: &mut ChartContext<'_, BitMapBackend<'_>, Cartesian2d<X, Y>>,
+fn mark_resonances<DB: DrawingBackend, X, Y>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<X, Y>>,
     resonances: &[Resonance],
     y: Range<f64>,
 ) -> Result<(), String>
 where
     X: Ranged<ValueType = f64> + ValueFormatter<f64>,
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+    DB::ErrorType: 'static,
 {
     for r in resonances {
         let line = [(r.freq_hz, y.start), (r.freq_hz, y.end)];
@@ -82,12 +96,15 @@ where
     Ok(())
 }
 
-fn draw_magnitude(
-    area: &Area<'_>,
+fn draw_magnitude<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
     range: Range<f64>,
     samples: &[SweepSample],
     resonances: &[Resonance],
-) -> Result<(), String> {
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
     let top = samples.iter().filter_map(|s| s.accel_mps2).fold(0.0, f64::max).max(1e-3) * 1.15;
     let mut c = ChartBuilder::on(area)
         .margin(10)
@@ -119,12 +136,15 @@ fn draw_magnitude(
     Ok(())
 }
 
-fn draw_phase(
-    area: &Area<'_>,
+fn draw_phase<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
     range: Range<f64>,
     samples: &[SweepSample],
     resonances: &[Resonance],
-) -> Result<(), String> {
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
     let mut c = ChartBuilder::on(area)
         .margin(10)
         .x_label_area_size(30)
@@ -148,7 +168,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_bode_plot_is_written_with_and_without_measurements() {
+    fn a_bode_plot_is_written_as_png_and_svg_with_and_without_measurements() {
         let dir = std::env::temp_dir().join(format!("chladni-bode-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let samples: Vec<SweepSample> = (0..50)
@@ -169,6 +189,23 @@ mod tests {
         bode_figure(&path, "sweep", &samples, &res).unwrap();
         let bytes = std::fs::read(&path).unwrap();
         assert_eq!(&bytes[1..4], b"PNG");
+        // The same figure as SVG: a document usvg reads, with both axes, the curve and the
+        // resonance's label.
+        let svg = dir.join("bode.svg");
+        bode_figure(&svg, "sweep", &samples, &res).unwrap();
+        let text = std::fs::read_to_string(&svg).unwrap();
+        let tree = usvg::Tree::from_str(&text, &usvg::Options::default()).unwrap();
+        assert!(tree.root().has_children());
+        let doc = roxmltree::Document::parse(&text).unwrap();
+        let texts: Vec<&str> = doc
+            .descendants()
+            .filter(|n| n.has_tag_name("text"))
+            .filter_map(|n| n.text().map(str::trim))
+            .collect();
+        for want in ["frequency (Hz)", "acceleration (m/s²)", "phase (°)", "181.6 Hz, Q 25"] {
+            assert!(texts.contains(&want), "{want} not in {texts:?}");
+        }
+        assert!(doc.descendants().any(|n| n.has_tag_name("polyline")), "no magnitude curve");
         let empty = dir.join("empty.png");
         bode_figure(&empty, "nothing measured", &[], &[]).unwrap();
         assert!(std::fs::metadata(&empty).unwrap().len() > 1000);
