@@ -91,10 +91,13 @@ where
     draw_supports(&mut chart, plate)
 }
 
+/// A rectangle of one sign of φ: lower-left and upper-right corners (mm), φ ≥ 0.
+type SignCell = ((f64, f64), (f64, f64), bool);
+
 /// The sign of φ as rectangles (plate mm: lower-left, upper-right, φ ≥ 0): each grid point's
 /// cell, with the runs of one sign along a row merged (an SVG of a few hundred rectangles
 /// instead of one per grid point).
-fn sign_runs(grid: &Grid, [w, h]: [f64; 2]) -> Vec<((f64, f64), (f64, f64), bool)> {
+fn sign_runs(grid: &Grid, [w, h]: [f64; 2]) -> Vec<SignCell> {
     let (dx, dy) = (w / (grid.nx - 1) as f64, h / (grid.ny - 1) as f64);
     let mut out = Vec::new();
     for j in 0..grid.ny {
