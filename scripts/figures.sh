@@ -97,7 +97,9 @@ if [ "$device" = 1 ]; then
     "$CHLADNI" emulator --json --time-limit-s 600 >"$scratch/emulator.json" 2>"$scratch/emulator.log" &
     emulator_pid=$!
     for _ in $(seq 600); do
-        if [ -s "$scratch/emulator.json" ] || ! kill -0 "$emulator_pid" 2>/dev/null; then break; fi
+        # The firmware's log lines come first; the ready line is the JSON with the port.
+        if grep -q '"port"' "$scratch/emulator.json" || ! kill -0 "$emulator_pid" 2>/dev/null
+        then break; fi
         sleep 0.5
     done
     port="$(sed -n 's/.*"port": *"\([^"]*\)".*/\1/p' "$scratch/emulator.json")"

@@ -56,15 +56,22 @@ fn freq_range(samples: &[SweepSample]) -> Range<f64> {
     if lo.is_finite() && hi > lo { lo..hi } else { 1.0..10.0 }
 }
 
-/// Frequency ticks: 1, 1.5, 2, 3, 5, 7 × 10ⁿ inside `range` (plotters' log axis labels only
-/// powers of ten, i.e. nothing inside the decade or so a sweep spans).
+/// Frequency ticks inside `range`, both ends included (plotters' log axis labels only powers
+/// of ten, i.e. nothing inside the decade or so a sweep spans): 1, 1.5, 2, 3, 5, 7 × 10ⁿ,
+/// or finer steps when the sweep spans less than a factor of 4 (100–300 Hz: every 20 Hz to
+/// 200, then 250 and 300).
 fn ticks(range: &Range<f64>) -> Vec<f64> {
+    let coarse = [1.0, 1.5, 2.0, 3.0, 5.0, 7.0];
+    let fine = [1.0, 1.2, 1.4, 1.6, 1.8, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0];
+    let steps: &[f64] = if range.end / range.start <= 4.0 { &fine } else { &coarse };
+    // A hair of slack so an end given as 300 Hz keeps its 300 tick.
+    let (lo, hi) = (range.start * (1.0 - 1e-9), range.end * (1.0 + 1e-9));
     let mut out = Vec::new();
     let mut decade = 10f64.powf(range.start.max(1e-3).log10().floor());
     while decade <= range.end {
-        for m in [1.0, 1.5, 2.0, 3.0, 5.0, 7.0] {
+        for &m in steps {
             let f = m * decade;
-            if range.contains(&f) {
+            if (lo..=hi).contains(&f) {
                 out.push(f);
             }
         }
@@ -108,6 +115,7 @@ where
     let top = samples.iter().filter_map(|s| s.accel_mps2).fold(0.0, f64::max).max(1e-3) * 1.15;
     let mut c = ChartBuilder::on(area)
         .margin(10)
+        .margin_right(24)
         .x_label_area_size(30)
         .y_label_area_size(60)
         .build_cartesian_2d(range.clone().log_scale().with_key_points(ticks(&range)), 0.0..top)
@@ -116,6 +124,7 @@ where
         .x_desc("frequency (Hz)")
         .y_desc("acceleration (m/s²)")
         .x_label_formatter(&hz_label)
+        .y_label_formatter(&|v| super::tick(*v, top))
         .label_style(("sans-serif", 12))
         .draw()
         .map_err(text)?;
@@ -123,15 +132,16 @@ where
     c.draw_series(LineSeries::new(points, BLUE.stroke_width(2))).map_err(text)?;
     mark_resonances(&mut c, resonances, 0.0..top)?;
     for r in resonances {
-        let q = r.q.map_or("Q ?".to_string(), |q| format!("Q {q:.0}"));
+        // A low Q with a decimal (the CLI's table prints 9.5, not 9).
+        let q = r.q.map_or("Q ?".to_string(), |q| {
+            if q < 20.0 { format!("Q {q:.1}") } else { format!("Q {q:.0}") }
+        });
         let label = format!("{:.1} Hz, {q}", r.freq_hz);
         let y = (r.accel_mps2 * 1.03).min(top * 0.97);
-        c.draw_series([Text::new(
-            label,
-            (r.freq_hz, y),
-            ("sans-serif", 13).into_font().color(&MARK),
-        )])
-        .map_err(text)?;
+        // 6 px right of the dashed line, so the label does not sit on it.
+        let font = ("sans-serif", 13).into_font().color(&MARK);
+        c.draw_series([EmptyElement::at((r.freq_hz, y)) + Text::new(label, (6, 0), font)])
+            .map_err(text)?;
     }
     Ok(())
 }
@@ -145,27 +155,82 @@ fn draw_phase<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
+    let phases = phase_range(&unwrapped_phase(samples));
     let mut c = ChartBuilder::on(area)
         .margin(10)
+        .margin_right(24)
         .x_label_area_size(30)
         .y_label_area_size(60)
-        .build_cartesian_2d(range.clone().log_scale().with_key_points(ticks(&range)), -180.0..180.0)
+        .build_cartesian_2d(
+            range.clone().log_scale().with_key_points(ticks(&range)),
+            phases.clone(),
+        )
         .map_err(text)?;
     c.configure_mesh()
         .x_desc("frequency (Hz)")
         .y_desc("phase (°)")
         .x_label_formatter(&hz_label)
+        .y_label_formatter(&|v| super::tick(*v, 360.0))
         .label_style(("sans-serif", 12))
         .draw()
         .map_err(text)?;
-    let points = samples.iter().filter_map(|s| s.phase_deg.map(|p| (s.freq_hz, p)));
-    c.draw_series(points.map(|p| Circle::new(p, 2, BLUE.filled()))).map_err(text)?;
-    mark_resonances(&mut c, resonances, -180.0..180.0)
+    let points = unwrapped_phase(samples);
+    c.draw_series(points.into_iter().map(|p| Circle::new(p, 2, BLUE.filled()))).map_err(text)?;
+    mark_resonances(&mut c, resonances, phases)
+}
+
+/// The measured phases (Hz, °) unwrapped along the sweep: no ±180° jumps between neighbours
+/// (the phase of a resonance swings through 180°), shifted by whole turns so that the
+/// last (highest-frequency) phase lies in (−180°, 180°].
+fn unwrapped_phase(samples: &[SweepSample]) -> Vec<(f64, f64)> {
+    let mut out: Vec<(f64, f64)> = Vec::new();
+    for (f, p) in samples.iter().filter_map(|s| s.phase_deg.map(|p| (s.freq_hz, p))) {
+        let p = match out.last() {
+            Some(&(_, prev)) => prev + crate::model::angle::signed_diff(p, prev, 360.0),
+            None => p,
+        };
+        out.push((f, p));
+    }
+    if let Some(&(_, last)) = out.last() {
+        let shift = crate::model::angle::signed_diff(last, 0.0, 360.0) - last;
+        out.iter_mut().for_each(|p| p.1 += shift);
+    }
+    out
+}
+
+/// The phase axis: the phases and 10° around them in whole 30° steps (−180..180° when
+/// nothing was measured).
+fn phase_range(points: &[(f64, f64)]) -> Range<f64> {
+    let (lo, hi) = points
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| (l.min(p.1), h.max(p.1)));
+    if !lo.is_finite() {
+        return -180.0..180.0;
+    }
+    let lo = ((lo - 10.0) / 30.0).floor() * 30.0;
+    let hi = ((hi + 10.0) / 30.0).ceil() * 30.0;
+    lo..hi.max(lo + 30.0)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ticks_include_both_ends_and_are_finer_on_a_short_sweep() {
+        assert_eq!(
+            ticks(&(100.0..300.0)),
+            [100.0, 120.0, 140.0, 160.0, 180.0, 200.0, 250.0, 300.0]
+        );
+        assert_eq!(ticks(&(40.0..300.0)), [50.0, 70.0, 100.0, 150.0, 200.0, 300.0]);
+        assert_eq!(phase_range(&[(1.0, 2.0), (2.0, 172.0)]), -30.0..210.0);
+        assert_eq!(phase_range(&[]), -180.0..180.0);
+        // A sweep whose phase crosses ±180°: one continuous curve.
+        let p = |ph: f64| SweepSample { freq_hz: 1.0, accel_mps2: None, phase_deg: Some(ph) };
+        let u = unwrapped_phase(&[p(-130.0), p(-175.0), p(175.0), p(20.0)]);
+        let d: Vec<f64> = u.iter().map(|q| q.1).collect();
+        assert_eq!(d, [230.0, 185.0, 175.0, 20.0]);
+    }
 
     #[test]
     fn a_bode_plot_is_written_as_png_and_svg_with_and_without_measurements() {
