@@ -95,8 +95,9 @@ fn fast_json_demo_runs_the_plan_sample_exact_on_qemu() {
         let (a, b) = (&predicted["position_mm"][i], &plan["final_position_mm"][i]);
         assert!((f(a) - f(b)).abs() < 0.01, "{predicted} vs {plan}");
     }
-    // Not a terminal: plain telemetry lines (on stderr with --json), the summary for people.
-    assert!(stderr.contains("plan 'demo' step 1"), "{stderr}");
+    // Not a terminal: plain telemetry lines (on stderr with --json), the summary for people;
+    // the second step seen (numbered from 1, as `plan` prints steps).
+    assert!(stderr.contains("plan 'demo' step 2"), "{stderr}");
     assert!(stderr.contains("time scale  1/"), "{stderr}");
     for file in ["plan.json", "device-plan.json", "plan.png", "traces.png", "firmware.log"] {
         assert!(out.join(file).is_file(), "{file}");

@@ -414,7 +414,7 @@ mod tests {
         let path = dir.join("p.json");
         let step = r#"{"freq_hz":0.5,"amplitude":0.1,"duration_ms":5,"ramp_ms":0}"#;
         std::fs::write(&path, format!(r#"{{"name":"x","repeat":1,"steps":[{step}]}}"#)).unwrap();
-        assert!(read_plan(&path).unwrap_err().0.contains("step 0: frequency 0.500 Hz"));
+        assert!(read_plan(&path).unwrap_err().0.contains("step 1: frequency 0.500 Hz"));
         std::fs::write(&path, "{").unwrap();
         assert!(read_plan(&path).unwrap_err().0.contains("not a valid plan"));
         let many: Vec<&str> =

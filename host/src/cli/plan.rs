@@ -122,8 +122,8 @@ pub struct PlanArgs {
     /// Write the plan file (for `chladni simulate` and `chladni device run-file`).
     #[arg(long, value_name = "plan.json")]
     out: Option<PathBuf>,
-    /// Draw the step-by-step plan figure (PNG) for a few example starts.
-    #[arg(long, value_name = "FILE.png")]
+    /// Draw the step-by-step plan figure (PNG, or SVG for a .svg name) for a few example starts.
+    #[arg(long, value_name = "FILE.png|FILE.svg")]
     plot: Option<PathBuf>,
     /// Parts are dropped in this rectangle (mm): plan by tracking poses from it.
     #[arg(long, num_args = 4, value_names = ["X0", "Y0", "X1", "Y1"], allow_negative_numbers = true)]
@@ -205,7 +205,7 @@ impl PlanArgs {
         let mut inputs: Vec<(&str, &Path)> =
             self.part.iter().map(|p| ("part", p.as_path())).collect();
         inputs.push(("plate", self.plate.as_path()));
-        check_plot("--plot", &self.plot, &["png"], &inputs)?;
+        check_plot("--plot", &self.plot, &chladni::plot::FIGURE_EXTENSIONS, &inputs)?;
         if let Some(out) = &self.out {
             check_output("--out", out, &inputs)?;
         }
@@ -458,8 +458,9 @@ pub struct SimulateArgs {
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
-    /// Draw traces of the first trials (PNG); also FILE-plan.png, the step-by-step figure.
-    #[arg(long, value_name = "FILE.png")]
+    /// Draw traces of the first trials (PNG, or SVG for a .svg name); also FILE-plan.png
+    /// (.svg), the step-by-step figure.
+    #[arg(long, value_name = "FILE.png|FILE.svg")]
     plot: Option<PathBuf>,
     /// Draw the random start poses in this rectangle (mm), where a feed-region plan holds.
     #[arg(long, num_args = 4, value_names = ["X0", "Y0", "X1", "Y1"], allow_negative_numbers = true)]
@@ -517,7 +518,7 @@ impl SimulateArgs {
         let mut inputs: Vec<(&str, &Path)> =
             self.part.iter().map(|p| ("part", p.as_path())).collect();
         inputs.extend([("plate", self.plate.as_path()), ("plan", self.plan.as_path())]);
-        check_plot("--plot", &self.plot, &["png"], &inputs)?;
+        check_plot("--plot", &self.plot, &chladni::plot::FIGURE_EXTENSIONS, &inputs)?;
         check_plot("--traces", &self.traces, &["jsonl"], &inputs)?;
         check_plot("--animate", &self.animate, &["gif"], &inputs)?;
         if let Some(path) = &self.plot {

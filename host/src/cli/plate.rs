@@ -53,9 +53,12 @@ pub struct ModesArgs {
     /// Print `{"modes": [{"freq_hz": f, "lambda": λ}, ...]}` instead of a table.
     #[arg(long)]
     json: bool,
-    /// Write one node-line PNG per mode (mode-01.png, ...) into this directory.
+    /// Write one node-line figure per mode (mode-01.png, ...) into this directory.
     #[arg(long, value_name = "DIR")]
     plot: Option<PathBuf>,
+    /// The `--plot` figures' format: png, or svg (mode-01.svg, ...).
+    #[arg(long, value_name = "png|svg", default_value = "png", value_parser = ["png", "svg"])]
+    plot_format: String,
     /// Write a plate file: the input's `[plate]` table plus one `[[mode]]` per mode, with the
     /// mode shape sampled on a grid (`node = { kind = "grid", ... }`).
     #[arg(long, value_name = "FILE")]
@@ -95,7 +98,7 @@ impl ModesArgs {
         let shown = self.resonances(&plate, &all)?;
         let sol = &shown.sol;
         if let Some(dir) = &self.plot {
-            plot_modes(dir, &plate, &shown)?;
+            plot_modes(dir, &self.plot_format, &plate, &shown)?;
         }
         let rocking = rocking::rocking_mode(&plate, sol, self.rocking_hz)
             .map_err(|e| InputError(e.to_string()))?;
@@ -185,7 +188,7 @@ impl ModesArgs {
         }
         if let Some(dir) = &self.plot {
             for k in 0..self.count {
-                check_output("--plot", &dir.join(mode_figure_name(k)), &inputs)?;
+                check_output("--plot", &dir.join(mode_figure_name(k, &self.plot_format)), &inputs)?;
             }
         }
         Ok(())
@@ -237,9 +240,10 @@ impl ModesArgs {
     }
 }
 
-/// The file name of mode `k`'s figure (0-based) in the `--plot` directory.
-fn mode_figure_name(k: usize) -> String {
-    format!("mode-{:02}.png", k + 1)
+/// The file name of mode `k`'s figure (0-based) in the `--plot` directory, `ext` "png" or
+/// "svg".
+fn mode_figure_name(k: usize, ext: &str) -> String {
+    format!("mode-{:02}.{ext}", k + 1)
 }
 
 /// The modes `plate modes` shows and writes, with their names and, for a drive point, their
@@ -250,8 +254,8 @@ struct Shown {
     excitation: Vec<f64>,
 }
 
-/// One Chladni figure per mode in `dir`.
-fn plot_modes(dir: &Path, plate: &Plate, shown: &Shown) -> anyhow::Result<()> {
+/// One Chladni figure per mode in `dir`, as `ext` ("png" or "svg").
+fn plot_modes(dir: &Path, ext: &str, plate: &Plate, shown: &Shown) -> anyhow::Result<()> {
     let sol = &shown.sol;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let bar = ProgressBar::new(sol.modes.len() as u64).with_style(
@@ -266,7 +270,7 @@ fn plot_modes(dir: &Path, plate: &Plate, shown: &Shown) -> anyhow::Result<()> {
             "{} — {}: {:.1} Hz, λ = {:.3}",
             plate.name, shown.labels[k], m.freq_hz, m.lambda
         );
-        plot::chladni_figure(&dir.join(mode_figure_name(k)), &title, plate, &grid, &lines)
+        plot::chladni_figure(&dir.join(mode_figure_name(k, ext)), &title, plate, &grid, &lines)
             .map_err(plot_error)?;
         bar.inc(1);
     }

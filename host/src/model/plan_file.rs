@@ -166,39 +166,41 @@ pub enum PlanFileError {
     Json(String),
     /// A frequency that is not a positive finite number of Hz the device can represent.
     #[error(
-        "step {step}: {} (give Hz, e.g. 60.0)",
+        "step {}: {} (give Hz, e.g. 60.0)",
+        step + 1,
         FrequencyError::outside(*value, &DeviceLimits::DEFAULT)
     )]
     Frequency {
-        /// Step index.
+        /// Step index, 0-based (the message prints it 1-based, as `chladni plan` does).
         step: usize,
         /// Value.
         value: f64,
     },
     /// Amplitude outside 0..=1.
-    #[error("step {step}: amplitude {value} outside 0..=1 (fraction of full scale)")]
+    #[error("step {}: amplitude {value} outside 0..=1 (fraction of full scale)", step + 1)]
     Amplitude {
-        /// Step index.
+        /// Step index, 0-based (the message prints it 1-based, as `chladni plan` does).
         step: usize,
         /// Value.
         value: f64,
     },
     /// Neither or both of `amplitude` and `accel_mps2`.
     #[error(
-        "step {step}: {} (give \"amplitude\": 0..1 for open loop or \"accel_mps2\": m/s² for \
+        "step {}: {} (give \"amplitude\": 0..1 for open loop or \"accel_mps2\": m/s² for \
          closed loop)",
+        step + 1,
         if *both { "both amplitude and accel_mps2" } else { "no amplitude or accel_mps2" }
     )]
     Level {
-        /// Step index.
+        /// Step index, 0-based (the message prints it 1-based, as `chladni plan` does).
         step: usize,
         /// Both were given (else neither).
         both: bool,
     },
     /// An acceleration target that is not a non-negative number of m/s².
-    #[error("step {step}: {message}")]
+    #[error("step {}: {message}", step + 1)]
     Accel {
-        /// Step index.
+        /// Step index, 0-based (the message prints it 1-based, as `chladni plan` does).
         step: usize,
         /// The conversion's message.
         message: String,
@@ -398,7 +400,7 @@ mod tests {
         );
         assert_eq!(
             err.to_string(),
-            "step 1: acceleration target 150.000 m/s² above the maximum 100.000 m/s²"
+            "step 2: acceleration target 150.000 m/s² above the maximum 100.000 m/s²"
         );
     }
 
@@ -409,14 +411,14 @@ mod tests {
         let err = PlanFile::parse(&text).unwrap().to_plan(&DeviceLimits::DEFAULT).unwrap_err();
         assert_eq!(err, PlanFileError::Level { step: 0, both: true });
         assert!(
-            err.to_string().starts_with("step 0: both amplitude and accel_mps2 (give"),
+            err.to_string().starts_with("step 1: both amplitude and accel_mps2 (give"),
             "{err}"
         );
         let neither = r#"{"freq_hz": 60.0, "duration_ms": 5, "amplitude": 0.5}"#;
         let text = format!(r#"{{"steps": [{neither}, {{"freq_hz": 60.0, "duration_ms": 5}}]}}"#);
         let err = PlanFile::parse(&text).unwrap().to_plan(&DeviceLimits::DEFAULT).unwrap_err();
         assert_eq!(err, PlanFileError::Level { step: 1, both: false });
-        assert!(err.to_string().contains("step 1: no amplitude or accel_mps2"), "{err}");
+        assert!(err.to_string().contains("step 2: no amplitude or accel_mps2"), "{err}");
         let neg = r#"{"steps": [{"freq_hz": 60.0, "duration_ms": 5, "accel_mps2": -3.0}]}"#;
         let err = PlanFile::parse(neg).unwrap().to_plan(&DeviceLimits::DEFAULT).unwrap_err();
         assert!(matches!(err, PlanFileError::Accel { step: 0, .. }), "{err:?}");

@@ -114,6 +114,8 @@ where
     part.configure_mesh()
         .x_desc("x (mm)")
         .y_desc("y (mm)")
+        .x_label_formatter(&|v| super::tick(*v, 2.0 * r))
+        .y_label_formatter(&|v| super::tick(*v, 2.0 * r))
         .light_line_style(WHITE)
         .draw()
         .map_err(err)?;
@@ -135,6 +137,9 @@ where
     Ok(())
 }
 
+/// How far the angle axes reach beyond 0° and 360° (degrees).
+const ANGLE_PAD: f64 = 6.0;
+
 /// A chart over θ in [0°, 360°) with its caption, the y range and the axis names
 /// ([x, y]); the turn and alignment panels share it.
 fn angle_chart<'a, DB: DrawingBackend>(
@@ -147,12 +152,15 @@ where
     DB::ErrorType: 'static,
 {
     let y_labels = if y.end > 100.0 { 9 } else { 10 };
+    let y_span = y.end - y.start;
+    // 6° beyond each end: a rest at 0° or 359.9° is drawn whole, not cut by the frame.
     let mut chart = ChartBuilder::on(area)
         .caption(caption, ("sans-serif", 16))
         .margin(10)
+        .margin_right(16)
         .x_label_area_size(30)
         .y_label_area_size(45)
-        .build_cartesian_2d(0.0..360.0, y)
+        .build_cartesian_2d(-ANGLE_PAD..360.0 + ANGLE_PAD, y)
         .map_err(err)?;
     chart
         .configure_mesh()
@@ -160,6 +168,8 @@ where
         .y_desc(y_desc)
         .x_labels(9)
         .y_labels(y_labels)
+        .x_label_formatter(&|v| super::tick(*v, 360.0))
+        .y_label_formatter(&|v| super::tick(*v, y_span))
         .light_line_style(WHITE)
         .draw()
         .map_err(err)?;
@@ -215,7 +225,7 @@ where
     let mut align = angle_chart(
         area,
         "alignment function a(θ)",
-        0.0..360.0,
+        -ANGLE_PAD..360.0 + ANGLE_PAD,
         ["start θ (deg)", "final θ (deg)"],
     )?;
     align

@@ -15,7 +15,9 @@ use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};
 use plotters::prelude::*;
 
-use super::plan::{PALETTE, Trace, TracesFigure, draw_part, node_polylines};
+use super::plan::{
+    PALETTE, Trace, TracesFigure, draw_part, draw_plate, node_polylines, plate_ranges,
+};
 use super::{PlotError, text, write_figure};
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
@@ -100,7 +102,6 @@ fn draw_frame<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let [w, h] = anim.plate.size_mm;
     root.fill(&WHITE).map_err(text)?;
     let k = step_at(anim.step_ends, t);
     let caption = match anim.modes.get(k).map(|&m| &anim.plate.modes[m]) {
@@ -117,12 +118,9 @@ where
     let cw = root.estimate_text_size(&clock, &style).map_err(text)?.0 as i32;
     root.draw_text(&clock, &style, (WIDTH as i32 - cw - 8, 4)).map_err(text)?;
     let (_, area) = root.split_vertically(CAPTION_PX);
-    let mut chart =
-        ChartBuilder::on(&area).margin(8).build_cartesian_2d(0.0..w, 0.0..h).map_err(text)?;
-    let plate_fill = Rectangle::new([(0.0, 0.0), (w, h)], RGBColor(245, 245, 240).filled());
-    chart.draw_series(std::iter::once(plate_fill)).map_err(text)?;
-    let rim = Rectangle::new([(0.0, 0.0), (w, h)], BLACK.stroke_width(1));
-    chart.draw_series(std::iter::once(rim)).map_err(text)?;
+    let (xr, yr) = plate_ranges(anim.plate);
+    let mut chart = ChartBuilder::on(&area).margin(8).build_cartesian_2d(xr, yr).map_err(text)?;
+    draw_plate(&mut chart, anim.plate)?;
     for line in nodes.get(k).into_iter().flatten() {
         let node = PathElement::new(line.clone(), NODE_COLOR.stroke_width(3));
         chart.draw_series(std::iter::once(node)).map_err(text)?;

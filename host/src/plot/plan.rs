@@ -1,4 +1,4 @@
-//! Plan and simulation figures (PNG): the step-by-step plan figure like the paper's Fig. 10
+//! Plan and simulation figures (PNG or SVG, by the file's extension): the step-by-step plan figure like the paper's Fig. 10
 //! (rows = example start poses, columns = steps; each panel shows the plate, the step's node,
 //! the part before the step in white and after it in dark), and motion traces like Figs. 8d
 //! and 9 (centroid paths with the part drawn along them, and θ(t)).
@@ -7,7 +7,12 @@ use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
 
-use super::{PlotError, text, write_figure};
+use std::ops::Range;
+
+use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
+
+use super::{Figure, PlotError, text, write_chart};
 
 use crate::model::feed_region::FeedRegion;
 use crate::model::part::Part;
@@ -80,11 +85,7 @@ pub fn node_polylines(mode: &Mode, plate: &PlateModel) -> Vec<Vec<(f64, f64)>> {
 
 /// Draws the part at `pose`: its outline filled with `fill`, holes white, edges black.
 pub(crate) fn draw_part<DB: DrawingBackend>(
-    chart: &mut ChartContext<
-        '_,
-        DB,
-        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
-    >,
+    chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     body: &Body,
     pose: Pose,
     fill: RGBColor,
@@ -108,10 +109,37 @@ where
 /// The node of the running step in the plan figure and the animation.
 pub(crate) const NODE_COLOR: RGBColor = RGBColor(200, 60, 40);
 
+/// The chart's x and y ranges for a plate: the plate with a margin of 2 % of its longer side
+/// on every side, so that a part resting against the rim is drawn whole, on the plate's edge,
+/// instead of cut by the chart's frame (the wall holds parts flush with the edge: on the
+/// hyperbola plate the node runs on past the edge, and parts drawn to it settle there).
+pub(crate) fn plate_ranges(plate: &PlateModel) -> (Range<f64>, Range<f64>) {
+    let [w, h] = plate.size_mm;
+    let pad = 0.02 * w.max(h);
+    (-pad..w + pad, -pad..h + pad)
+}
+
+/// The plate: a light fill and its rim as a black line.
+pub(crate) fn draw_plate<DB: DrawingBackend>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    plate: &PlateModel,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let [w, h] = plate.size_mm;
+    let fill = Rectangle::new([(0.0, 0.0), (w, h)], RGBColor(245, 245, 240).mix(0.8).filled());
+    chart.draw_series(std::iter::once(fill)).map_err(err)?;
+    let rim = Rectangle::new([(0.0, 0.0), (w, h)], BLACK.stroke_width(2));
+    chart.draw_series(std::iter::once(rim)).map_err(err)?;
+    Ok(())
+}
+
 /// One example start: the pose before each step and after the last.
 pub type Example = Vec<Pose>;
 
 /// The plan figure: `examples[r][k]` is the pose before step k (and `[steps]` the end).
+/// PNG or SVG by the extension of `path` (see [`super::write_chart`]).
 pub fn plan_figure(
     path: &Path,
     title: &str,
@@ -120,70 +148,77 @@ pub fn plan_figure(
     modes: &[usize],
     examples: &[Example],
 ) -> Result<(), PlotError> {
-    write_figure(path, |tmp| draw_plan(tmp, title, body, plate, modes, examples))
+    write_chart(path, &PlanFigure { title, body, plate, modes, examples })
 }
 
-fn draw_plan(
-    path: &Path,
-    title: &str,
-    body: &Body,
-    plate: &PlateModel,
-    modes: &[usize],
-    examples: &[Example],
-) -> Result<(), String> {
-    let [w, h] = plate.size_mm;
-    let cols = modes.len().max(1);
-    let rows = examples.len().max(1);
-    let pw = 300u32;
-    let ph = ((pw as f64 - 20.0) * h / w + 40.0) as u32;
-    let size = (pw * cols as u32, ph * rows as u32 + 40);
-    let root = BitMapBackend::new(path, size).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
-    let root = root.titled(title, ("sans-serif", 15)).map_err(err)?;
-    let panels = root.split_evenly((rows, cols));
-    for (r, ex) in examples.iter().enumerate() {
-        for (k, &m) in modes.iter().enumerate() {
-            let mode = &plate.modes[m];
-            let mut chart = ChartBuilder::on(&panels[r * cols + k])
-                .caption(
-                    format!("step {}: {} ({} Hz)", k + 1, mode.name, mode.freq_hz),
-                    ("sans-serif", 13),
-                )
-                .margin(6)
-                .build_cartesian_2d(0.0..w, 0.0..h)
-                .map_err(err)?;
-            chart
-                .draw_series(std::iter::once(Rectangle::new(
-                    [(0.0, 0.0), (w, h)],
-                    RGBColor(245, 245, 240).filled(),
-                )))
-                .map_err(err)?;
-            chart
-                .draw_series(std::iter::once(Rectangle::new(
-                    [(0.0, 0.0), (w, h)],
-                    BLACK.stroke_width(1),
-                )))
-                .map_err(err)?;
-            for line in node_polylines(mode, plate) {
-                chart
-                    .draw_series(std::iter::once(PathElement::new(
-                        line,
-                        NODE_COLOR.stroke_width(2),
-                    )))
-                    .map_err(err)?;
-            }
-            draw_part(&mut chart, body, ex[k], WHITE)?;
-            draw_part(&mut chart, body, ex[k + 1], RGBColor(60, 60, 90))?;
-            let path: Vec<(f64, f64)> = vec![(ex[k].x, ex[k].y), (ex[k + 1].x, ex[k + 1].y)];
-            chart
-                .draw_series(std::iter::once(PathElement::new(
-                    path,
-                    RGBColor(120, 120, 200).stroke_width(1),
-                )))
-                .map_err(err)?;
-        }
+/// What [`plan_figure`] draws.
+struct PlanFigure<'a> {
+    title: &'a str,
+    body: &'a Body,
+    plate: &'a PlateModel,
+    modes: &'a [usize],
+    examples: &'a [Example],
+}
+
+impl Figure for PlanFigure<'_> {
+    fn size(&self) -> (u32, u32) {
+        let [w, h] = self.plate.size_mm;
+        let cols = self.modes.len().max(1) as u32;
+        let rows = self.examples.len().max(1) as u32;
+        let pw = 300u32;
+        let ph = ((pw as f64 - 20.0) * h / w + 40.0) as u32;
+        (pw * cols, ph * rows + 40)
     }
-    root.present().map_err(err)?;
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE).map_err(err)?;
+        let root = root.titled(self.title, ("sans-serif", 15)).map_err(err)?;
+        let cols = self.modes.len().max(1);
+        let panels = root.split_evenly((self.examples.len().max(1), cols));
+        for (r, ex) in self.examples.iter().enumerate() {
+            for (k, &m) in self.modes.iter().enumerate() {
+                draw_plan_panel(&panels[r * cols + k], self, k, m, ex)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One panel of the plan figure: step `k` (mode `m`) of example `ex`.
+fn draw_plan_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    fig: &PlanFigure<'_>,
+    k: usize,
+    m: usize,
+    ex: &Example,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let mode = &fig.plate.modes[m];
+    let (xr, yr) = plate_ranges(fig.plate);
+    let mut chart = ChartBuilder::on(area)
+        .caption(format!("step {}: {} ({} Hz)", k + 1, mode.name, mode.freq_hz), ("sans-serif", 13))
+        .margin(6)
+        .build_cartesian_2d(xr, yr)
+        .map_err(err)?;
+    draw_plate(&mut chart, fig.plate)?;
+    for line in node_polylines(mode, fig.plate) {
+        chart
+            .draw_series(std::iter::once(PathElement::new(line, NODE_COLOR.stroke_width(2))))
+            .map_err(err)?;
+    }
+    draw_part(&mut chart, fig.body, ex[k], WHITE)?;
+    draw_part(&mut chart, fig.body, ex[k + 1], RGBColor(60, 60, 90))?;
+    let path: Vec<(f64, f64)> = vec![(ex[k].x, ex[k].y), (ex[k + 1].x, ex[k + 1].y)];
+    chart
+        .draw_series(std::iter::once(PathElement::new(
+            path,
+            RGBColor(120, 120, 200).stroke_width(1),
+        )))
+        .map_err(err)?;
     Ok(())
 }
 
@@ -220,22 +255,30 @@ pub(crate) const PALETTE: [RGBColor; 6] = [
 ];
 
 /// Traces: the plate with every step's node, centroid paths with the part drawn along them;
-/// θ(t) with step boundaries and the target orientation.
+/// θ(t) with step boundaries and the target orientation. PNG or SVG by the extension.
 pub fn traces_figure(path: &Path, fig: &TracesFigure<'_>) -> Result<(), PlotError> {
-    write_figure(path, |tmp| {
-        let root = BitMapBackend::new(tmp, (1300, 560)).into_drawing_area();
+    write_chart(path, fig)
+}
+
+impl Figure for TracesFigure<'_> {
+    fn size(&self) -> (u32, u32) {
+        (1300, 560)
+    }
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>
+    where
+        DB::ErrorType: 'static,
+    {
         root.fill(&WHITE).map_err(err)?;
-        let root = root.titled(fig.title, ("sans-serif", 18)).map_err(err)?;
+        let root = root.titled(self.title, ("sans-serif", 18)).map_err(err)?;
         let (left, right) = root.split_horizontally(680);
-        draw_paths(&left, fig)?;
-        draw_orientation(&right, fig)?;
-        root.present().map_err(err)
-    })
+        draw_paths(&left, self)?;
+        draw_orientation(&right, self)
+    }
 }
 
 /// Left panel of the traces figure: nodes, centroid paths, the part along them.
 fn draw_paths<DB: DrawingBackend>(
-    left: &DrawingArea<DB, plotters::coord::Shift>,
+    left: &DrawingArea<DB, Shift>,
     fig: &TracesFigure<'_>,
 ) -> Result<(), String>
 where
@@ -244,13 +287,14 @@ where
     let TracesFigure { body, plate, modes, traces, .. } = *fig;
     let [w, h] = plate.size_mm;
     let palette = PALETTE;
+    let (xr, yr) = plate_ranges(plate);
     let mut chart = ChartBuilder::on(left)
         .caption("part motion (white: start, dark: end of plan)", ("sans-serif", 14))
         .margin(10)
         .margin_right(24)
         .x_label_area_size(34)
         .y_label_area_size(56)
-        .build_cartesian_2d(0.0..w, 0.0..h)
+        .build_cartesian_2d(xr, yr)
         .map_err(err)?;
     chart
         .configure_mesh()
@@ -261,6 +305,7 @@ where
         .light_line_style(WHITE)
         .draw()
         .map_err(err)?;
+    draw_plate(&mut chart, plate)?;
     // Nodes in their own colours (not the traces'), dashed, one legend entry per step.
     for (k, &m) in modes.iter().enumerate() {
         let c = NODE_PALETTE[k % NODE_PALETTE.len()];
@@ -327,7 +372,7 @@ fn unwrapped_deg(tr: &Trace) -> Vec<(f64, f64)> {
 
 /// Right panel of the traces figure: θ(t) with step boundaries and the target orientation.
 fn draw_orientation<DB: DrawingBackend>(
-    right: &DrawingArea<DB, plotters::coord::Shift>,
+    right: &DrawingArea<DB, Shift>,
     fig: &TracesFigure<'_>,
 ) -> Result<(), String>
 where
@@ -431,9 +476,11 @@ pub fn synthesis_figure(
     plan_figure(path, &title, &body, plate, &modes, &examples)
 }
 
-/// The step-by-step figure written beside a traces figure `F.png`: `F-plan.png`.
+/// The step-by-step figure written beside a traces figure `F.png` (`F.svg`): `F-plan.png`
+/// (`F-plan.svg`, the same format).
 pub fn trials_plan_path(traces: &Path) -> PathBuf {
-    PathBuf::from(format!("{}-plan.png", traces.with_extension("").display()))
+    let ext = traces.extension().and_then(|e| e.to_str()).unwrap_or("png");
+    PathBuf::from(format!("{}-plan.{ext}", traces.with_extension("").display()))
 }
 
 /// The figures of a Monte Carlo run (`chladni simulate --plot`, `chladni demo`): traces of the

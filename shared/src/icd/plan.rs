@@ -178,7 +178,8 @@ impl Default for DeviceLimits {
     }
 }
 
-/// Why a plan was refused.
+/// Why a plan was refused. `step` is the step's index in the plan, 0-based (what the wire
+/// carries); the message (`Display`) numbers steps from 1, as people read them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum PlanError {
@@ -195,7 +196,7 @@ pub enum PlanError {
     ZeroRepeat,
     /// A step's frequency is outside the device's range.
     FrequencyOutOfRange {
-        /// Step index.
+        /// Step index, 0-based (the message prints it 1-based).
         step: u16,
         /// The frequency asked for, mHz.
         freq_mhz: u32,
@@ -206,7 +207,7 @@ pub enum PlanError {
     },
     /// A step's amplitude is above the device's maximum.
     AmplitudeTooHigh {
-        /// Step index.
+        /// Step index, 0-based (the message prints it 1-based).
         step: u16,
         /// The amplitude asked for, Q15.
         amplitude_q15: u16,
@@ -215,7 +216,7 @@ pub enum PlanError {
     },
     /// A step's acceleration target is above the device's maximum.
     AccelTooHigh {
-        /// Step index.
+        /// Step index, 0-based (the message prints it 1-based).
         step: u16,
         /// The target asked for, mm/s².
         accel_mmps2: u32,
@@ -224,12 +225,12 @@ pub enum PlanError {
     },
     /// A step lasts 0 ms.
     ZeroDuration {
-        /// Step index.
+        /// Step index, 0-based (the message prints it 1-based).
         step: u16,
     },
     /// A step's ramp is longer than the step.
     RampLongerThanStep {
-        /// Step index.
+        /// Step index, 0-based (the message prints it 1-based).
         step: u16,
         /// The ramp, ms.
         ramp_ms: u32,
@@ -327,6 +328,12 @@ impl core::fmt::Display for SetpointError {
 
 impl core::error::Error for SetpointError {}
 
+/// A step index (0-based, as on the wire) as people number steps: from 1, as `chladni plan`
+/// prints them.
+fn step_number(index: u16) -> u32 {
+    u32::from(index) + 1
+}
+
 impl core::fmt::Display for PlanError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match *self {
@@ -337,20 +344,24 @@ impl core::fmt::Display for PlanError {
             PlanError::ZeroRepeat => write!(f, "repeat must be at least 1"),
             PlanError::FrequencyOutOfRange { step, freq_mhz, min_mhz, max_mhz } => {
                 let e = SetpointError::FrequencyOutOfRange { freq_mhz, min_mhz, max_mhz };
-                write!(f, "step {step}: {e}")
+                write!(f, "step {}: {e}", step_number(step))
             }
             PlanError::AmplitudeTooHigh { step, amplitude_q15, max_q15 } => {
                 let e = SetpointError::AmplitudeTooHigh { amplitude_q15, max_q15 };
-                write!(f, "step {step}: {e}")
+                write!(f, "step {}: {e}", step_number(step))
             }
             PlanError::AccelTooHigh { step, accel_mmps2, max_mmps2 } => {
                 let e = SetpointError::AccelTooHigh { accel_mmps2, max_mmps2 };
-                write!(f, "step {step}: {e}")
+                write!(f, "step {}: {e}", step_number(step))
             }
-            PlanError::ZeroDuration { step } => write!(f, "step {step}: duration is 0 ms"),
-            PlanError::RampLongerThanStep { step, ramp_ms, duration_ms } => {
-                write!(f, "step {step}: ramp {ramp_ms} ms longer than the step ({duration_ms} ms)")
+            PlanError::ZeroDuration { step } => {
+                write!(f, "step {}: duration is 0 ms", step_number(step))
             }
+            PlanError::RampLongerThanStep { step, ramp_ms, duration_ms } => write!(
+                f,
+                "step {}: ramp {ramp_ms} ms longer than the step ({duration_ms} ms)",
+                step_number(step)
+            ),
             PlanError::TooLong { total_ms, max_ms } => {
                 write!(f, "plan lasts {total_ms} ms, the device allows at most {max_ms} ms")
             }
@@ -458,11 +469,16 @@ mod tests {
         assert_eq!(std::format!("{fast}"), "frequency 5000.000 Hz outside 1.000..=2000.000 Hz");
         let loud = l.check_setpoint(440_000, Level::Drive(40_000)).unwrap_err();
         assert_eq!(std::format!("{loud}"), "amplitude 40000/32768 above the maximum 32767/32768");
-        // In a plan, the same problem names its step.
+        // In a plan, the same problem names its step, numbered from 1 (index 3 is step 4);
+        // the last index a plan can carry still has its number.
         assert_eq!(
             std::format!("{}", fast.at_step(3)),
-            "step 3: frequency 5000.000 Hz outside 1.000..=2000.000 Hz"
+            "step 4: frequency 5000.000 Hz outside 1.000..=2000.000 Hz"
         );
+        let last = PlanError::ZeroDuration { step: u16::MAX };
+        assert_eq!(std::format!("{last}"), "step 65536: duration is 0 ms");
+        let ramp = PlanError::RampLongerThanStep { step: 0, ramp_ms: 11, duration_ms: 10 };
+        assert_eq!(std::format!("{ramp}"), "step 1: ramp 11 ms longer than the step (10 ms)");
     }
 
     extern crate std;

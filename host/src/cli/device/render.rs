@@ -131,13 +131,20 @@ pub fn status(s: &StatusReport, json: bool) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// A 0-based index from the controller (the running step, the repetition) as people count:
+/// from 1, as `chladni plan` numbers steps. The JSON keeps the controller's index.
+pub fn counted(index: u16) -> u32 {
+    u32::from(index) + 1
+}
+
 /// The `status` table, as (label, value) lines.
 pub fn status_lines(s: &StatusReport) -> Vec<(&'static str, String)> {
     let j = StatusJson::from(s);
     let mut lines = vec![("state", j.state.to_string()), ("run", j.run.to_string())];
     match (&s.plan, s.step) {
         (Some(plan), Some(step)) => {
-            lines.push(("plan", format!("{plan}: step {step}, repetition {}", s.repetition)));
+            let (step, rep) = (counted(step), counted(s.repetition));
+            lines.push(("plan", format!("{plan}: step {step}, repetition {rep}")));
             lines.push(("remaining", format!("{:.1} ms", j.remaining_ms)));
         }
         (Some(plan), None) => lines.push(("plan", plan.to_string())),
@@ -172,8 +179,10 @@ pub fn telemetry_line(t: &Telemetry) -> String {
     let step = match (&s.plan, s.step) {
         (Some(plan), Some(step)) => {
             format!(
-                "plan '{plan}' step {step} rep {} remaining {:.0} ms",
-                s.repetition, j.remaining_ms
+                "plan '{plan}' step {} rep {} remaining {:.0} ms",
+                counted(step),
+                counted(s.repetition),
+                j.remaining_ms
             )
         }
         _ => "no plan".to_string(),
@@ -319,6 +328,8 @@ mod tests {
             "out_of_band -3250 mdB at 2.500 s (`chladni device clear-fault` clears it)"
         );
         assert_eq!(line("reset"), "watchdog");
+        // The running step and repetition (0-based on the wire: 2 and 1) as people count them.
+        assert_eq!(line("plan"), "square-45: step 3, repetition 2");
         // Open loop, no sensor data: nulls, and "-" for people.
         let open = status_report();
         let v = serde_json::to_value(StatusJson::from(&open)).unwrap();
@@ -340,7 +351,7 @@ mod tests {
         assert_eq!(v["state"], "ramp_up");
         assert_eq!(v.as_object().unwrap().len(), STATUS_KEYS.len() + 2);
         let line = telemetry_line(&t);
-        assert!(line.contains("plan 'square-45' step 2 rep 1 remaining 500 ms"), "{line}");
+        assert!(line.contains("plan 'square-45' step 3 rep 2 remaining 500 ms"), "{line}");
         assert!(line.contains("181.500 Hz") && line.contains("run 17"), "{line}");
     }
 

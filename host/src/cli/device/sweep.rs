@@ -53,8 +53,8 @@ pub struct SweepArgs {
     /// Write the points as CSV: freq_hz,accel_mps2,phase_deg.
     #[arg(long, value_name = "sweep.csv")]
     out: Option<PathBuf>,
-    /// Draw the Bode plot (PNG).
-    #[arg(long, value_name = "sweep.png")]
+    /// Draw the Bode plot (PNG, or SVG for a .svg name).
+    #[arg(long, value_name = "sweep.png|sweep.svg")]
     plot: Option<PathBuf>,
     /// Print JSON: {"points":[{"freq_hz","accel_mps2","phase_deg"}],"resonances":[{"freq_hz","q"}]}.
     #[arg(long)]
@@ -136,7 +136,7 @@ impl SweepArgs {
         let modes = self.write_modes.as_deref();
         let inputs: Vec<(&str, &std::path::Path)> =
             modes.map(|p| ("plate", p)).into_iter().collect();
-        check_plot("--plot", &self.plot, &["png"], &inputs)?;
+        check_plot("--plot", &self.plot, &chladni::plot::FIGURE_EXTENSIONS, &inputs)?;
         if let Some(out) = &self.out {
             check_output("--out", out, &inputs)?;
         }

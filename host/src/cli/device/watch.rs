@@ -162,8 +162,8 @@ fn show_progress(bar: &ProgressBar, s: &StatusReport) {
     bar.set_message(format!(
         "{} · step {} · rep {} · {:.3} Hz · amplitude {:.3}",
         s.state.name(),
-        s.step.map_or("-".to_string(), |i| i.to_string()),
-        s.repetition,
+        s.step.map_or("-".to_string(), |i| super::render::counted(i).to_string()),
+        super::render::counted(s.repetition),
         MilliHz(s.freq_mhz).to_hz(),
         Q15(s.amplitude_q15).to_fraction()
     ));
