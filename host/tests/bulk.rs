@@ -164,3 +164,29 @@ fn the_two_part_plan_runs_both_parts_together_and_they_end_apart() {
     );
     assert_eq!(parts[0]["trials"], 2);
 }
+
+#[test]
+fn plan_copies_reports_the_chosen_candidate_and_refuses_several_parts() {
+    let (part, plate) = (ex("parts/rectangle.json"), ex("plates/four-lines.toml"));
+    let out = chladni(&["plan", &part, "--plate", &plate, "--copies", "3", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["copies"], 3);
+    assert!(v["oriented"].is_f64() && v["lost"].is_u64(), "{v}");
+    let best = v["parts_per_min"].as_f64().unwrap();
+    let cands = v["candidates"].as_array().unwrap();
+    assert!(cands.len() >= 2, "{v}");
+    for c in cands {
+        assert!(c["parts_per_min"].as_f64().unwrap() <= best, "{c} beats the chosen {best}");
+    }
+    // The plan printed is the chosen one: its prediction is a candidate's with that throughput.
+    let chosen = cands.iter().find(|c| c["parts_per_min"].as_f64() == Some(best)).unwrap();
+    assert_eq!(chosen["final_orientation_deg"], v["final_orientation_deg"]);
+    let tri = ex("parts/triangle.json");
+    let out = chladni(&["plan", &part, &tri, "--plate", &plate, "--copies", "3"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&out.stderr)
+            .contains("--copies ranks plans for copies of one part")
+    );
+}

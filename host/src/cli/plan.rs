@@ -21,6 +21,7 @@ use super::parse::{f64_where, finite, positive};
 use super::part::PartRead;
 use super::{InputError, check_output, check_plot, output_error, plot_error};
 
+mod copies;
 mod together;
 
 fn bad(msg: String) -> anyhow::Error {
@@ -152,6 +153,11 @@ pub struct PlanArgs {
     /// part file's `"flips": true` does for that part; docs/plan.md, "Both faces").
     #[arg(long)]
     both_faces: bool,
+    /// Bulk feeding: of the plans the planner offers (its own, one per other reachable
+    /// orientation, the least in time), the one orienting the most of N copies dropped together
+    /// per minute (docs/motion.md, "Bulk feeding"); one part on one face.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1000))]
+    copies: Option<u32>,
 }
 
 /// `--maps`: which step maps straight-node modes use ([`MapKind`]).
@@ -220,6 +226,7 @@ impl PlanArgs {
         let name = given.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join("+");
         let faces = mirror::faces(&given, self.both_faces);
         self.one_part_flags(faces.parts.len(), "faces to plan (both faces of a part that flips)")?;
+        self.check_copies(faces.parts.len())?;
         note_self_mirrored(&faces);
         // A goal is the face-up one; a flipped face takes no goal.
         let goals: Vec<Option<f64>> = (faces.of.iter())
@@ -230,6 +237,7 @@ impl PlanArgs {
             eprintln!("warning: {warning}");
         }
         let region = feed_region(&self.feed, &plate)?;
+        let opt = self.plan_options(region, &goals);
         let syn = match self.synthesize(&parts, &plate, region, &goals) {
             Ok(syn) => syn,
             Err(e) => {
@@ -240,6 +248,7 @@ impl PlanArgs {
                 return Ok(ExitCode::from(1));
             }
         };
+        let (syn, bulk) = self.for_copies(&parts, &plate, &opt, syn)?;
         let mut file = syn.to_file(&plate, &name);
         if let Some(preds) = &mut file.parts {
             for (p, o) in preds.iter_mut().zip(&faces.of) {
@@ -253,9 +262,10 @@ impl PlanArgs {
                 .map_err(output_error)?;
         }
         if self.json {
-            println!("{json}");
+            println!("{}", copies::with_bulk(json, &bulk));
         } else {
             print_plan(&parts, &plate, &syn);
+            copies::print_bulk(&bulk);
             if let Some(out) = &self.out {
                 println!("written    {}", out.display());
             }
@@ -270,16 +280,9 @@ impl PlanArgs {
         Ok(ExitCode::SUCCESS)
     }
 
-    /// The plan: over orientation sets (one part or several), or by tracking poses from the
-    /// feed region.
-    fn synthesize(
-        &self,
-        parts: &[Part],
-        plate: &PlateModel,
-        region: Option<FeedRegion>,
-        goals: &[Option<f64>],
-    ) -> Result<Synthesis, PlanFailure> {
-        let opt = PlanOptions {
+    /// The planner's options from the flags (the first part's goal).
+    fn plan_options(&self, region: Option<FeedRegion>, goals: &[Option<f64>]) -> PlanOptions {
+        PlanOptions {
             margin_deg: self.margin_deg,
             safety: self.safety,
             feed: region,
@@ -296,7 +299,19 @@ impl PlanArgs {
             fix_position: self.fix_position,
             goal_pos_mm: self.goal_pos.as_ref().map(|g| [g[0], g[1]]),
             ..Default::default()
-        };
+        }
+    }
+
+    /// The plan: over orientation sets (one part or several), or by tracking poses from the
+    /// feed region.
+    fn synthesize(
+        &self,
+        parts: &[Part],
+        plate: &PlateModel,
+        region: Option<FeedRegion>,
+        goals: &[Option<f64>],
+    ) -> Result<Synthesis, PlanFailure> {
+        let opt = self.plan_options(region, goals);
         match &region {
             Some(r) => {
                 let bar = search_bar(self.json);

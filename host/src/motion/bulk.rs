@@ -93,11 +93,12 @@ pub fn place(rng: &mut Rng, d: &Drop<'_>) -> Result<Vec<Pose>, CannotPlace> {
     Ok(out)
 }
 
-/// The drops: each body's trials (start and final poses, lost), and the deepest overlap of
-/// any two parts at the end of any drop (mm).
+/// The drops: each body's trials (start and final poses, lost, and the poses before each
+/// step and at the end in `examples`, for every drop), and the deepest overlap of any two
+/// parts at the end of any drop (mm).
 #[derive(Debug, Clone, Default)]
 pub struct Drops {
-    /// One [`Trials`] per body (traces and examples left empty).
+    /// One [`Trials`] per body (traces left empty; `examples`: every drop's poses at steps).
     pub per_body: Vec<Trials>,
     /// Deepest final overlap (mm).
     pub max_overlap_mm: f64,
@@ -118,29 +119,51 @@ pub fn run_drops(
     for _ in 0..drops {
         let start = place(&mut rng, d)?;
         // One part alone runs the single-part path (motion::integrate), unchanged.
-        let r = if let ([body], [q]) = (d.bodies, start.as_slice()) {
+        let (r, at_steps) = if let ([body], [q]) = (d.bodies, start.as_slice()) {
             let (poses, _, _) = simulate_plan(body, d.plate, d.fields, d.steps, *q);
             let end = *poses.last().unwrap_or(q);
-            ManyRun {
+            let at_steps = poses.iter().map(|&p| vec![p]).collect();
+            let r = ManyRun {
                 poses: vec![end],
                 lost: vec![rim.lost(end)],
                 trace: Vec::new(),
                 t_end: 0.0,
                 rested: true,
                 steps: 0,
-            }
+            };
+            (r, at_steps)
         } else {
-            simulate_plan_many(&g, d.plate, d.fields, d.steps, &start)
+            let r = simulate_plan_many(&g, d.plate, d.fields, d.steps, &start);
+            let at_steps = step_poses(&r, d.steps);
+            (r, at_steps)
         };
         out.max_overlap_mm = out.max_overlap_mm.max(g.max_overlap(&r.poses, &r.lost));
         for (i, t) in out.per_body.iter_mut().enumerate() {
             t.starts.push(start[i]);
             t.finals.push(r.poses[i]);
             t.lost.push(r.lost[i]);
+            t.examples.push(at_steps.iter().map(|qs| qs[i]).collect());
         }
         progress();
     }
     Ok(out)
+}
+
+/// The poses of a group's run before each step and at the end of every step (the last of
+/// its trace samples at each step's end time: [`run_many`] ends each step with a sample at
+/// its time limit).
+///
+/// [`run_many`]: crate::motion::many::run_many
+fn step_poses(r: &ManyRun, steps: &[SimStep]) -> Vec<Vec<Pose>> {
+    let mut out = vec![r.trace.first().map_or_else(|| r.poses.clone(), |(_, q)| q.clone())];
+    let mut end = 0.0;
+    for s in steps {
+        end += s.duration_s;
+        let slack = 1e-9 * end.max(1.0);
+        let at = r.trace.iter().rev().find(|(t, _)| *t <= end + slack);
+        out.push(at.map_or_else(|| r.poses.clone(), |(_, q)| q.clone()));
+    }
+    out
 }
 
 /// The `chladni simulate --copies N --json` object (keys in alphabetical order).
@@ -253,5 +276,34 @@ mod tests {
             assert!(e.to_string().contains(&format!("cannot place {n} parts")), "{e}");
         }
         assert_eq!(pl.friction, DEFAULT_FRICTION);
+    }
+
+    /// Every drop keeps each part's poses at each step's end: the same poses as the plan
+    /// cut after that step, run from the same start (the group's runs are deterministic).
+    #[test]
+    fn drops_keep_each_parts_poses_at_every_step() {
+        let m =
+            mode("freq_hz = 50.0\nnode = { kind = \"line\", angle_deg = 90.0, offset_mm = 0.0 }");
+        let pl = plate(&m);
+        let body = Body::new(&rect());
+        let pieces = Pieces::of(&body);
+        let fields = vec![FieldModel::new(&m, &pl)];
+        let steps = [SimStep::new(0, 1500, 1.0), SimStep::new(0, 2500, 1.0)];
+        let (b, p) = (vec![&body; 3], vec![&pieces; 3]);
+        let d =
+            Drop { bodies: &b, pieces: &p, plate: &pl, fields: &fields, steps: &steps, feed: None };
+        let drops = run_drops(&d, 1, 3, || ()).unwrap();
+        let rim = Rim::of(&pl);
+        let g = Group { bodies: &b, pieces: &p, rim: Some(rim), friction: rim.friction };
+        let start: Vec<Pose> = drops.per_body.iter().map(|t| t.starts[0]).collect();
+        let cut = simulate_plan_many(&g, &pl, &fields, &steps[..1], &start);
+        for (i, t) in drops.per_body.iter().enumerate() {
+            let at = &t.examples[0];
+            assert_eq!(at.len(), 3);
+            assert_eq!(at[0], start[i]);
+            assert_eq!(at[1], cut.poses[i], "part {i} after step 1");
+            assert_eq!(at[2], t.finals[0]);
+            assert_ne!(at[1], at[2], "part {i} did not move in step 2");
+        }
     }
 }
