@@ -1,6 +1,7 @@
 //! The JSON shapes of the controller's status, telemetry and stored plans, as `chladni device
 //! --json` prints them and `chladni serve` answers them (keys in alphabetical order; documented
-//! in docs/drive.md). One home, so the CLI and the cell's HTTP API never disagree.
+//! in docs/device.md, "Drive and status" and "Telemetry"). One home, so the CLI and the cell's
+//! HTTP API never disagree.
 
 use chladni_shared::icd::link::{StatusReport, Telemetry};
 use chladni_shared::icd::plan::Level;
