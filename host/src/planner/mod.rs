@@ -150,7 +150,7 @@ impl Problem {
 /// Plans: maps, search, durations, position ([`plan_parts`] for one part, its goal
 /// [`PlanOptions::goal_deg`]); with a feed region, by tracking poses from it ([`feed::plan`], no
 /// progress shown). When the maps of [`PlanOptions::maps`] give no plan, the other maps are
-/// tried before giving up ([`fallback`]).
+/// tried before giving up (`fallback`).
 pub fn plan(part: &Part, plate: &PlateModel, opt: &PlanOptions) -> Result<Synthesis, PlanFailure> {
     if let Some(region) = &opt.feed {
         return feed::plan(part, plate, opt, region, &indicatif::ProgressBar::hidden());
