@@ -1,7 +1,9 @@
 //! The one way the host's integration tests start the emulated controller (the QEMU board
 //! behind the link proxy) and put plans on it: a scratch flash and log in the temp folder named
 //! after the test and the process, QEMU killed after a time limit whatever the test does, and a
-//! failed start reported with the log's tail.
+//! failed start reported with the log's tail. (The end-to-end crate, tests/, has its own
+//! `start_emulator` in tests/lib.rs: the same, but its logs and flash files stay in
+//! target/e2e-logs for CI to keep, and `CHLADNI_PORT` swaps in a real board.)
 // Each includer uses only part of it.
 #![allow(dead_code)]
 
