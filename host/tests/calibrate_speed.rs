@@ -11,7 +11,7 @@ use chladni::plate::calibrate::{self, CalPart, FitError, Measured, Observation};
 use chladni::rng::Rng;
 
 mod support;
-use support::cli::{chladni, tmp};
+use support::cli::{chladni, tmp_dir};
 use support::examples;
 
 const TRUE_SPEED: f64 = 14.2;
@@ -166,13 +166,13 @@ fn observations_that_do_not_move_are_refused() {
 
 #[test]
 fn cli_fits_writes_the_plate_file_and_refuses_bad_csv() {
-    let plate_path = tmp("cal", "plate.toml");
+    let plate_path = tmp_dir("cal").join("plate.toml");
     let original =
         std::fs::read_to_string(examples::root().join("examples/plates/four-lines.toml")).unwrap();
     std::fs::write(&plate_path, &original).unwrap();
     std::fs::copy(
         examples::root().join("examples/parts/triangle.json"),
-        tmp("cal", "triangle.json"),
+        tmp_dir("cal").join("triangle.json"),
     )
     .unwrap();
     let (obs, times) = time_observations(0.03, 8);
@@ -183,7 +183,7 @@ fn cli_fits_writes_the_plate_file_and_refuses_bad_csv() {
         let s = o.start;
         csv += &format!("{},{},{},{},{t}\n", names[o.part], s.x, s.y, s.theta.to_degrees());
     }
-    let csv_path = tmp("cal", "obs.csv");
+    let csv_path = tmp_dir("cal").join("obs.csv");
     std::fs::write(&csv_path, &csv).unwrap();
     let hole = examples::root().join("examples/parts/plate-with-hole.json");
     let run = |csv: &PathBuf, extra: &[&str]| {
@@ -230,7 +230,7 @@ fn cli_fits_writes_the_plate_file_and_refuses_bad_csv() {
     assert!(out.status.success());
     assert_eq!(std::fs::read_to_string(&plate_path).unwrap(), original);
     // Bad CSV: exit 2, line and column named, JSON error object.
-    let bad = tmp("cal", "bad.csv");
+    let bad = tmp_dir("cal").join("bad.csv");
     std::fs::write(&bad, csv.replacen(",", ",x", 3).replace(&format!("{}", times[0]), "soon"))
         .unwrap();
     let out = run(&bad, &[]);

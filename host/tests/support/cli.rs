@@ -71,6 +71,14 @@ pub fn tmp(tag: &str, name: &str) -> PathBuf {
     std::env::temp_dir().join(format!("chladni-{tag}-{}-{name}", std::process::id()))
 }
 
+/// A scratch folder unique to this test process, created: `TMP/chladni-TAG-PID/`, for files
+/// that name each other by relative path.
+pub fn tmp_dir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("chladni-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
 /// Writes `bytes` to [`tmp`]`(tag, name)`; its path as a string argument.
 pub fn write_tmp(tag: &str, name: &str, bytes: impl AsRef<[u8]>) -> String {
     let path = tmp(tag, name);
