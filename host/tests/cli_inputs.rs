@@ -25,7 +25,7 @@ fn plan_refuses_to_overwrite_its_part_or_plate() {
     refused(&out, &format!("--out {p} is the part {p}"));
     assert_eq!(std::fs::read(&part).unwrap(), before, "the part was changed");
     // Another spelling of the same file is the same file.
-    let dotted = part.parent().unwrap().join(".").join("tri.json");
+    let dotted = part.parent().unwrap().join(".").join(part.file_name().unwrap());
     let out = chladni(&["plan", p, "--plate", &plate, "--out", dotted.to_str().unwrap()]);
     refused(&out, "is the part");
     let plate_copy = tmp("inputs", "plate.toml");
