@@ -16,6 +16,16 @@ cargo fmt --all -- --check
 step "clippy (host crates)"
 cargo clippy --all-targets -- -D warnings
 
+# Intra-doc links and the doc comments themselves: a broken link or a link to a private item
+# fails here.
+step "rustdoc (host crates, warnings are errors)"
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps
+
+# The README's and docs' marked command examples, run on the debug binary and compared with the
+# output they show (scripts/docs-check.sh --update rewrites outdated ones).
+step "docs check (command examples)"
+scripts/docs-check.sh
+
 # The fuzz crate is its own workspace (fuzz/): formatted and linted with the same stable
 # toolchain; without libFuzzer's runtime, so no C++ is compiled for the check.
 step "format + clippy (fuzz crate)"

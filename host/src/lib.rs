@@ -8,7 +8,6 @@
 //! - [`plate`]: the plate mode solver, node lines, node fields, Chladni photos.
 //! - [`planner`]: sensorless plan synthesis (step maps, BFS over orientation sets; feed-region
 //!   plans by tracking simulated poses, [`planner::feed`]).
-//! - [`bulk_plan`]: `plan --copies N`, the planner's candidates ranked by bulk throughput.
 //! - [`plot`]: figures of analyses, plans, traces and plate modes.
 //! - [`controller`]: the link client, the QEMU emulator, firmware builds.
 //! - [`demo`]: `chladni demo`, the main job end to end (plan, figures, Monte Carlo, the
@@ -21,7 +20,6 @@
 #![forbid(unsafe_code)]
 
 pub mod analysis;
-pub mod bulk_plan;
 pub mod cell;
 pub mod controller;
 pub mod demo;

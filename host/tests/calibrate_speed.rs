@@ -3,7 +3,6 @@
 //! `chladni plate calibrate-speed`; bad files and undetermined fits are refused.
 
 use std::path::PathBuf;
-use std::process::{Command, Output};
 
 use chladni::model::part::Part;
 use chladni::model::plate::PlateModel;
@@ -11,20 +10,11 @@ use chladni::motion::sim::{self, Body, FieldModel, Pose, SimParams};
 use chladni::plate::calibrate::{self, CalPart, FitError, Measured, Observation};
 use chladni::rng::Rng;
 
-#[path = "support/examples.rs"]
-mod examples;
+mod support;
+use support::cli::{chladni, tmp_dir};
+use support::examples;
 
 const TRUE_SPEED: f64 = 14.2;
-
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("chladni-cal-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
 
 /// Time (s) until the centroid first comes within 1 mm of its rest, from a run at μ (no rim:
 /// the starts below stay clear of it, where a run is the same with or without one)
@@ -176,12 +166,15 @@ fn observations_that_do_not_move_are_refused() {
 
 #[test]
 fn cli_fits_writes_the_plate_file_and_refuses_bad_csv() {
-    let plate_path = tmp("plate.toml");
+    let plate_path = tmp_dir("cal").join("plate.toml");
     let original =
         std::fs::read_to_string(examples::root().join("examples/plates/four-lines.toml")).unwrap();
     std::fs::write(&plate_path, &original).unwrap();
-    std::fs::copy(examples::root().join("examples/parts/triangle.json"), tmp("triangle.json"))
-        .unwrap();
+    std::fs::copy(
+        examples::root().join("examples/parts/triangle.json"),
+        tmp_dir("cal").join("triangle.json"),
+    )
+    .unwrap();
     let (obs, times) = time_observations(0.03, 8);
     let mut csv =
         String::from("part,x_mm,y_mm,theta_deg,t_s,end_x_mm,end_y_mm,end_theta_deg\n# stopwatch\n");
@@ -190,7 +183,7 @@ fn cli_fits_writes_the_plate_file_and_refuses_bad_csv() {
         let s = o.start;
         csv += &format!("{},{},{},{},{t}\n", names[o.part], s.x, s.y, s.theta.to_degrees());
     }
-    let csv_path = tmp("obs.csv");
+    let csv_path = tmp_dir("cal").join("obs.csv");
     std::fs::write(&csv_path, &csv).unwrap();
     let hole = examples::root().join("examples/parts/plate-with-hole.json");
     let run = |csv: &PathBuf, extra: &[&str]| {
@@ -237,7 +230,7 @@ fn cli_fits_writes_the_plate_file_and_refuses_bad_csv() {
     assert!(out.status.success());
     assert_eq!(std::fs::read_to_string(&plate_path).unwrap(), original);
     // Bad CSV: exit 2, line and column named, JSON error object.
-    let bad = tmp("bad.csv");
+    let bad = tmp_dir("cal").join("bad.csv");
     std::fs::write(&bad, csv.replacen(",", ",x", 3).replace(&format!("{}", times[0]), "soon"))
         .unwrap();
     let out = run(&bad, &[]);

@@ -8,28 +8,11 @@
 use std::time::{Duration, Instant};
 
 use chladni::cell::{Cell, CellError, CellState, CellStatus};
-use chladni::controller::emulator::{Emulator, EmulatorConfig};
-use chladni_shared::icd::plan::{Level, Plan, Step};
+
+mod support;
+use support::emu;
 
 const SLOT: u8 = 2;
-
-fn emulator() -> Emulator {
-    let config = EmulatorConfig::scratch("cell-owner", Duration::from_secs(120));
-    Emulator::start(&config).expect("start the emulator")
-}
-
-/// Two steps of 800 ms, open loop, into [`SLOT`].
-fn upload_plan(emu: &Emulator) {
-    let step =
-        |freq_mhz| Step { freq_mhz, level: Level::Drive(8_000), duration_ms: 800, ramp_ms: 50 };
-    let plan = Plan {
-        name: heapless::String::try_from("owner").unwrap(),
-        repeat: 1,
-        steps: heapless::Vec::from_slice(&[step(110_000), step(140_000)]).unwrap(),
-    };
-    let mut client = emu.connect("cell_owner upload").expect("connect");
-    client.upload(&plan, Some(SLOT), |_, _| {}).expect("upload");
-}
 
 /// The states published until `wanted` holds (that status last); panics after `limit`.
 async fn until(
@@ -55,8 +38,9 @@ async fn until(
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_owner_runs_stops_and_reports_a_lost_and_found_link() {
-    let mut emu = emulator();
-    upload_plan(&emu);
+    let mut emu = emu::emulator_for("cell-owner", Duration::from_secs(120));
+    // Two steps of 800 ms, open loop.
+    emu::upload(&emu, &emu::open_loop_plan("owner", &[110_000, 140_000], 8_000, 800), SLOT);
     let cell = Cell::start(&emu.address(), "cell_owner test");
     until(&cell, Duration::from_secs(10), |s| s.link_up && s.state == CellState::Idle).await;
 
@@ -76,8 +60,12 @@ async fn the_owner_runs_stops_and_reports_a_lost_and_found_link() {
     let (plans, _) = cell.plans().expect("plans");
     assert_eq!(plans.iter().map(|p| p.slot).collect::<Vec<_>>(), [SLOT]);
 
-    cell.run(u32::from(SLOT), None).await.expect("run again");
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    let second = cell.run(u32::from(SLOT), None).await.expect("run again");
+    // Stopped while the device reports it running.
+    until(&cell, Duration::from_secs(5), |s| {
+        s.device.as_ref().is_some_and(|d| d.run == second.run)
+    })
+    .await;
     let stop = cell.stop().await.expect("stop");
     assert!(stop > started.run);
     let seen = until(&cell, Duration::from_secs(5), |s| s.state != CellState::Busy).await;

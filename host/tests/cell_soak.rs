@@ -16,10 +16,11 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use chladni::controller::emulator::{Emulator, EmulatorConfig};
 use chladni::rng::Rng;
 use chladni_shared::icd::plan::{Level, Plan, Step};
 use serde_json::Value;
+
+mod support;
 
 /// The heartbeat's least count in a second with the link up (nominal 10).
 const MIN_HEARTBEAT_PER_S: u64 = 5;
@@ -273,8 +274,7 @@ fn monitor(
 #[test]
 fn serve_survives_a_random_mix_of_clients_and_a_controller_restart() {
     let soak = soak_time();
-    let config = EmulatorConfig::scratch("cell-soak", soak + Duration::from_secs(300));
-    let mut emu = Emulator::start(&config).expect("start the emulator");
+    let mut emu = support::emu::emulator_for("cell-soak", soak + Duration::from_secs(300));
     let step =
         |freq_mhz| Step { freq_mhz, level: Level::Drive(8_000), duration_ms: 1_500, ramp_ms: 50 };
     let plan = Plan {

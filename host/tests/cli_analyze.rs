@@ -1,35 +1,12 @@
 //! `chladni analyze` end to end: output format, exit codes, plots.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn example(name: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/parts").join(name).display().to_string()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("chladni-analyze-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
-fn json(args: &[&str]) -> serde_json::Value {
-    let out = chladni(args);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    serde_json::from_slice(&out.stdout).unwrap()
-}
-
-fn floats(v: &serde_json::Value) -> Vec<f64> {
-    v.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
-}
+mod support;
+use support::cli::{chladni, ex, floats, ok_json, tmp};
 
 #[test]
 fn rectangle_json_is_exactly_the_documented_object() {
-    let v = json(&["analyze", &example("rectangle.json"), "--field", "sign", "--json"]);
+    let v =
+        ok_json(&chladni(&["analyze", &ex("parts/rectangle.json"), "--field", "sign", "--json"]));
     let keys: Vec<&str> = v.as_object().unwrap().keys().map(String::as_str).collect();
     assert_eq!(keys.len(), 6);
     for k in ["part", "field", "stable_deg", "unstable_deg", "neutral", "period_deg"] {
@@ -45,30 +22,31 @@ fn rectangle_json_is_exactly_the_documented_object() {
 
 #[test]
 fn square_is_neutral_in_a_linear_field_and_diagonal_in_a_sign_field() {
-    let sq = tmp("square.json");
+    let sq = tmp("analyze", "square.json");
     std::fs::write(&sq, r#"{"name": "square", "outline": [[0,0],[20,0],[20,20],[0,20]]}"#).unwrap();
     let sq = sq.display().to_string();
-    let v = json(&["analyze", &sq, "--field", "linear", "--json"]);
+    let v = ok_json(&chladni(&["analyze", &sq, "--field", "linear", "--json"]));
     assert_eq!(v["neutral"], true);
     assert!(v["stable_deg"].as_array().unwrap().is_empty());
     assert!(v["unstable_deg"].as_array().unwrap().is_empty());
-    let v = json(&["analyze", &sq, "--field", "sign", "--json"]);
+    let v = ok_json(&chladni(&["analyze", &sq, "--field", "sign", "--json"]));
     assert_eq!(floats(&v["stable_deg"]), [45.0, 135.0, 225.0, 315.0]);
     assert_eq!(v["period_deg"], 90.0);
 }
 
 #[test]
 fn rotated_input_file_shifts_the_orientations() {
-    let base = json(&["analyze", &example("triangle.json"), "--field", "sign", "--json"]);
+    let base =
+        ok_json(&chladni(&["analyze", &ex("parts/triangle.json"), "--field", "sign", "--json"]));
     // The same triangle turned by 30° and moved: rests shift by −30°.
     let (s, c) = 30f64.to_radians().sin_cos();
     let pts: Vec<[f64; 2]> = [[0.0, 0.0], [30.0, 0.0], [8.0, 20.0]]
         .iter()
         .map(|p: &[f64; 2]| [c * p[0] - s * p[1] + 55.0, s * p[0] + c * p[1] - 7.0])
         .collect();
-    let f = tmp("turned.json");
+    let f = tmp("analyze", "turned.json");
     std::fs::write(&f, serde_json::json!({"name": "turned", "outline": pts}).to_string()).unwrap();
-    let v = json(&["analyze", f.to_str().unwrap(), "--field", "sign", "--json"]);
+    let v = ok_json(&chladni(&["analyze", f.to_str().unwrap(), "--field", "sign", "--json"]));
     let mut want: Vec<f64> =
         floats(&base["stable_deg"]).iter().map(|d| (d - 30.0).rem_euclid(360.0)).collect();
     want.sort_by(f64::total_cmp);
@@ -87,7 +65,7 @@ fn every_example_part_analyses_and_the_table_is_readable() {
         "plate-with-hole.json",
         "key.svg",
     ] {
-        let out = chladni(&["analyze", &example(name), "--field", "linear"]);
+        let out = chladni(&["analyze", &ex(&format!("parts/{name}")), "--field", "linear"]);
         assert!(out.status.success(), "{name}: {}", String::from_utf8_lossy(&out.stderr));
         let text = String::from_utf8(out.stdout).unwrap();
         assert!(text.contains("stable") && text.contains("period"), "{text}");
@@ -96,7 +74,7 @@ fn every_example_part_analyses_and_the_table_is_readable() {
 
 #[test]
 fn bad_input_exits_with_code_2_and_names_the_problem() {
-    let bow = tmp("bowtie.json");
+    let bow = tmp("analyze", "bowtie.json");
     std::fs::write(&bow, r#"{"outline": [[0,0],[2,2],[2,0],[0,2]]}"#).unwrap();
     let out = chladni(&["analyze", bow.to_str().unwrap(), "--field", "sign"]);
     assert_eq!(out.status.code(), Some(2));
@@ -105,7 +83,7 @@ fn bad_input_exits_with_code_2_and_names_the_problem() {
         err.contains("self-intersection") && err.contains("vertex 0") && err.lines().count() == 1,
         "{err}"
     );
-    let rect = example("rectangle.json");
+    let rect = ex("parts/rectangle.json");
     for args in [
         vec!["analyze", &rect, "--field", "sine"],
         vec!["analyze", &rect, "--field", "sine", "--wavelength", "10"],
@@ -127,12 +105,12 @@ fn bad_input_exits_with_code_2_and_names_the_problem() {
 
 #[test]
 fn plots_are_written_as_png_and_svg() {
-    let png = tmp("l.png");
-    let svg = tmp("l.svg");
+    let png = tmp("analyze", "l.png");
+    let svg = tmp("analyze", "l.svg");
     for p in [&png, &svg] {
         let out = chladni(&[
             "analyze",
-            &example("l-shape.json"),
+            &ex("parts/l-shape.json"),
             "--field",
             "sign",
             "--plot",

@@ -2,25 +2,11 @@
 //! expected number of frames of the expected size, the parts move between the first and the
 //! last frame, and bad uses are refused before any simulation.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
-
 use image::AnimationDecoder;
 use image::codecs::gif::GifDecoder;
 
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn repo(path: &str) -> String {
-    format!("{}/../{path}", env!("CARGO_MANIFEST_DIR"))
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("chladni-animate-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d.join(name)
-}
+mod support;
+use support::cli::{chladni, repo, tmp};
 
 const PART: &str = "examples/parts/triangle.json";
 const PLATE: &str = "examples/plates/four-lines.toml";
@@ -28,7 +14,7 @@ const PLAN: &str = "examples/plans/triangle-four-lines.json";
 
 #[test]
 fn the_animation_decodes_into_moving_frames_of_the_plate_size() {
-    let gif = tmp("run.gif");
+    let gif = tmp("animate", "run.gif");
     let (part, plate, plan) = (repo(PART), repo(PLATE), repo(PLAN));
     let out = chladni(&[
         "simulate",
@@ -68,7 +54,7 @@ fn the_animation_decodes_into_moving_frames_of_the_plate_size() {
 fn animate_refuses_other_formats_and_two_faces_before_simulating() {
     let (part, plate, plan) = (repo(PART), repo(PLATE), repo(PLAN));
     let base = ["simulate", &part, "--plate", &plate, "--plan", &plan];
-    let png = tmp("run.png");
+    let png = tmp("animate", "run.png");
     let mut args = base.to_vec();
     args.extend(["--animate", png.to_str().unwrap()]);
     let out = chladni(&args);
@@ -77,7 +63,7 @@ fn animate_refuses_other_formats_and_two_faces_before_simulating() {
     assert!(err.contains("--animate file must end in .gif"), "{err}");
     assert!(!png.exists());
 
-    let gif = tmp("faces.gif");
+    let gif = tmp("animate", "faces.gif");
     let mut args = base.to_vec();
     args.extend(["--both-faces", "--animate", gif.to_str().unwrap()]);
     let out = chladni(&args);

@@ -2,27 +2,8 @@
 //! and `--traces`, figures as SVG. Each check compares the data with the numbers the command
 //! prints otherwise.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
-
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn repo(path: &str) -> String {
-    format!("{}/../{path}", env!("CARGO_MANIFEST_DIR"))
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("chladni-data-out-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d.join(name)
-}
-
-fn json(out: &Output) -> serde_json::Value {
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    serde_json::from_slice(&out.stdout).unwrap()
-}
+mod support;
+use support::cli::{chladni, ok_json as json, repo, tmp};
 
 #[test]
 fn analyze_samples_agree_with_the_rests_and_the_csv() {
@@ -53,7 +34,7 @@ fn analyze_samples_agree_with_the_rests_and_the_csv() {
         );
     }
     // The CSV holds the same samples.
-    let csv = tmp("triangle.csv");
+    let csv = tmp("data-out", "triangle.csv");
     let out = chladni(&[
         "analyze",
         &part,
@@ -87,7 +68,7 @@ fn analyze_samples_agree_with_the_rests_and_the_csv() {
 #[test]
 fn analyze_plot_as_svg_is_xml_with_its_three_panels() {
     let part = repo("examples/parts/triangle.json");
-    let svg = tmp("triangle.svg");
+    let svg = tmp("data-out", "triangle.svg");
     let out = chladni(&["analyze", &part, "--field", "sign", "--plot", svg.to_str().unwrap()]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let text = std::fs::read_to_string(&svg).unwrap();
@@ -99,7 +80,7 @@ fn analyze_plot_as_svg_is_xml_with_its_three_panels() {
 
 #[test]
 fn simulate_poses_and_traces_agree_with_the_statistics() {
-    let traces = tmp("traces.jsonl");
+    let traces = tmp("data-out", "traces.jsonl");
     let args = [
         "simulate",
         &repo("examples/parts/triangle.json"),

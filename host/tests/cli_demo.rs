@@ -4,11 +4,13 @@
 //! fault named, then refused while latched), and the errors that name their fix.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::Output;
 use std::time::Duration;
 
-use chladni::controller::emulator::{Emulator, EmulatorConfig};
 use chladni_shared::icd::link::TestFault;
+
+mod support;
+use support::cli::json as json_of;
 
 const PART: &str = "../examples/parts/triangle.json";
 const PLATE: &str = "../examples/plates/four-lines.toml";
@@ -19,20 +21,14 @@ fn out_dir(name: &str) -> PathBuf {
     dir
 }
 
+/// `chladni ARGS`, with `PATH` replaced by `path_env` if given.
 fn chladni(args: &[&str], path_env: Option<&Path>) -> Output {
-    let mut command = Command::new(env!("CARGO_BIN_EXE_chladni"));
-    command.args(args).stdin(Stdio::null());
+    let mut command = support::cli::command();
+    command.args(args);
     if let Some(path) = path_env {
         command.env("PATH", path);
     }
     command.output().unwrap()
-}
-
-fn json_of(out: &Output) -> serde_json::Value {
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    serde_json::from_str(stdout.trim()).unwrap_or_else(|e| {
-        panic!("{e}: {stdout}\nstderr: {}", String::from_utf8_lossy(&out.stderr))
-    })
 }
 
 fn f(v: &serde_json::Value) -> f64 {
@@ -109,13 +105,7 @@ fn fast_json_demo_runs_the_plan_sample_exact_on_qemu() {
 fn a_disconnected_shaker_faults_the_run_and_a_latched_fault_is_refused() {
     let out = out_dir("fault");
     std::fs::create_dir_all(&out).unwrap();
-    let config = EmulatorConfig {
-        time_limit: Some(Duration::from_secs(120)),
-        log_file: Some(out.join("emulator.log")),
-        flash_file: Some(out.join("emulator-flash.bin")),
-        ..Default::default()
-    };
-    let emu = Emulator::start(&config).expect("start the emulator");
+    let emu = support::emu::emulator_for("cli-demo-fault", Duration::from_secs(120));
     emu.connect("cli_demo test").unwrap().inject_fault(TestFault::ShakerDisconnected).unwrap();
     let port = emu.address();
     let args = ["demo", "--fast", "--json", "--port", &port, "--out", out.to_str().unwrap()];

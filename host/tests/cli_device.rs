@@ -3,30 +3,18 @@
 //! monitor, and Ctrl-C.
 
 use std::io::{BufRead, BufReader};
-use std::process::{Command, Output, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use chladni::controller::emulator::{Emulator, EmulatorConfig};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 
-fn emulator(name: &str) -> Emulator {
-    let config = EmulatorConfig::scratch(&format!("cli-device-{name}"), Duration::from_secs(300));
-    Emulator::start(&config).expect("start the emulator")
-}
+mod support;
+use support::cli::{chladni, keys, ok_json as json_of};
 
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn json_of(out: &Output) -> serde_json::Value {
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert_eq!(out.status.code(), Some(0), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
-    serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("{e}: {stdout}"))
-}
-
-fn keys(v: &serde_json::Value) -> Vec<&str> {
-    v.as_object().unwrap().keys().map(|k| k.as_str()).collect()
+/// This file's controller for test `name`.
+fn emulator(name: &str) -> chladni::controller::emulator::Emulator {
+    support::emu::emulator(&format!("cli-device-{name}"))
 }
 
 #[test]
@@ -119,7 +107,7 @@ fn a_second_program_is_told_at_once_who_holds_the_controller() {
 
 /// Starts `chladni device ARGS…` with stdout piped; returns it and a reader of its lines.
 fn spawn(args: &[&str]) -> (std::process::Child, BufReader<std::process::ChildStdout>) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_chladni"))
+    let mut child = support::cli::command()
         .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -186,7 +174,8 @@ fn ctrl_c_during_run_file_wait_stops_the_plan_and_exits_130() {
         line.clear();
         assert!(stdout.read_line(&mut line).unwrap() > 0, "run-file ended before running");
     }
-    std::thread::sleep(Duration::from_millis(500));
+    // No wait needed: the CLI installs its Ctrl-C handler and has the run accepted before it
+    // prints that line.
     kill(Pid::from_raw(child.id() as i32), Signal::SIGINT).unwrap();
     let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);

@@ -1,11 +1,8 @@
 //! `chladni emulator` through the built binary, with the real QEMU controller: the exit codes
 //! a user sees when the time limit ends the run, and when `--flash-file` cannot be a flash.
 
-use std::process::{Command, Output};
-
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
+mod support;
+use support::cli::chladni;
 
 #[test]
 fn the_time_limit_ends_the_emulator_with_success_and_says_so() {

@@ -1,31 +1,13 @@
 //! `chladni flash` end to end, up to the probe: every check that runs before a probe is touched,
 //! and the no-probe path (skipped, without flashing, if a probe is attached).
 
-mod support {
-    pub mod elf;
-}
-
 use std::path::PathBuf;
-use std::process::{Command, Output};
 
 use chladni_shared::icd::link::Board;
 use support::elf::{EM_ARM, Segment, elf};
 
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("chladni-flash-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
-fn write(name: &str, bytes: &[u8]) -> String {
-    let path = tmp(name);
-    std::fs::write(&path, bytes).unwrap();
-    path.display().to_string()
-}
+mod support;
+use support::cli::{chladni, tmp, write_tmp};
 
 /// Runs `chladni flash ARGS` and checks its exit code; returns stderr.
 fn flash_fails(args: &[&str], code: i32) -> String {
@@ -39,7 +21,7 @@ fn flash_fails(args: &[&str], code: i32) -> String {
 }
 
 fn board_elf(name: &str) -> String {
-    write(name, &elf(EM_ARM, Some("stm32l475"), &[Segment::at(0x0800_0000, 256)]))
+    write_tmp("flash", name, elf(EM_ARM, Some("stm32l475"), &[Segment::at(0x0800_0000, 256)]))
 }
 
 /// Builds a firmware image, one board at a time: scripts/firmware.sh links both boards to the
@@ -62,21 +44,22 @@ fn probe_attached() -> bool {
 
 #[test]
 fn a_missing_elf_is_bad_input() {
-    let path = tmp("no-such.elf").display().to_string();
+    let path = tmp("flash", "no-such.elf").display().to_string();
     let err = flash_fails(&["--elf", &path], 2);
     assert!(err.contains(&format!("firmware image {path} does not exist")), "{err}");
 }
 
 #[test]
 fn a_file_that_is_not_an_elf_is_bad_input() {
-    let path = write("firmware.bin", &[0x00, 0x80, 0x01, 0x20, 0xc1, 0x01, 0x00, 0x08]);
+    let path = write_tmp("flash", "firmware.bin", [0x00, 0x80, 0x01, 0x20, 0xc1, 0x01, 0x00, 0x08]);
     let err = flash_fails(&["--elf", &path], 2);
     assert!(err.contains(&format!("{path} is not an ELF file")), "{err}");
 }
 
 #[test]
 fn an_untagged_arm_elf_is_bad_input() {
-    let path = write("untagged.elf", &elf(EM_ARM, None, &[Segment::at(0x0800_0000, 64)]));
+    let path =
+        write_tmp("flash", "untagged.elf", elf(EM_ARM, None, &[Segment::at(0x0800_0000, 64)]));
     let err = flash_fails(&["--elf", &path], 2);
     assert!(err.contains("has no CHLADNI_BOARD symbol"), "{err}");
 }
@@ -93,7 +76,7 @@ fn a_qemu_image_is_refused_with_a_pointer_to_the_emulator() {
 #[test]
 fn an_image_outside_flash_is_bad_input() {
     let in_ram = [Segment::at(0x0800_0000, 64), Segment::at(0x2000_0000, 64)];
-    let path = write("ram.elf", &elf(EM_ARM, Some("stm32l475"), &in_ram));
+    let path = write_tmp("flash", "ram.elf", elf(EM_ARM, Some("stm32l475"), &in_ram));
     let err = flash_fails(&["--elf", &path], 2);
     assert!(
         err.contains("0x20000000..0x20000040 lies outside FLASH 0x08000000..0x08080000"),

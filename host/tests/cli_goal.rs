@@ -1,32 +1,10 @@
 //! `chladni plan --goal-deg/--fix-position/--goal-pos/--minimize` and several parts with
 //! `plan` and `simulate`: exit codes and JSON keys.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn ex(rel: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples").join(rel).display().to_string()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("chladni-goal-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
-fn json(out: &Output) -> serde_json::Value {
-    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
-        panic!(
-            "{e}: {} / {}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        )
-    })
-}
+mod support;
+use support::cli::{chladni, ex, json, tmp};
 
 fn triangle_plan(extra: &[&str]) -> Output {
     let (tri, four) = (ex("parts/triangle.json"), ex("plates/four-lines.toml"));
@@ -92,7 +70,7 @@ fn position_and_minimize_flags() {
 fn two_parts_plan_and_simulate_per_part() {
     let (tri, hole, six) =
         (ex("parts/triangle.json"), ex("parts/plate-with-hole.json"), ex("plates/six-lines.toml"));
-    let file = tmp("two.json");
+    let file = tmp("goal", "two.json");
     let f = file.to_str().unwrap();
     let out = chladni(&["plan", &tri, &hole, "--plate", &six, "--json", "--out", f]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));

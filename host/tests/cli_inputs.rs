@@ -1,22 +1,10 @@
 //! Bad input refused before any work, with exit code 2 and a message naming what is wrong:
 //! outputs that would overwrite an input, figure files of the wrong type, out-of-range options.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn ex(rel: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples").join(rel).display().to_string()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("chladni-inputs-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
+mod support;
+use support::cli::{chladni, ex, tmp};
 
 /// Exit code 2, nothing on stdout (no work done), and `needle` in the message.
 fn refused(out: &Output, needle: &str) {
@@ -28,7 +16,7 @@ fn refused(out: &Output, needle: &str) {
 
 #[test]
 fn plan_refuses_to_overwrite_its_part_or_plate() {
-    let part = tmp("tri.json");
+    let part = tmp("inputs", "tri.json");
     std::fs::copy(ex("parts/triangle.json"), &part).unwrap();
     let before = std::fs::read(&part).unwrap();
     let plate = ex("plates/four-lines.toml");
@@ -37,10 +25,10 @@ fn plan_refuses_to_overwrite_its_part_or_plate() {
     refused(&out, &format!("--out {p} is the part {p}"));
     assert_eq!(std::fs::read(&part).unwrap(), before, "the part was changed");
     // Another spelling of the same file is the same file.
-    let dotted = part.parent().unwrap().join(".").join("tri.json");
+    let dotted = part.parent().unwrap().join(".").join(part.file_name().unwrap());
     let out = chladni(&["plan", p, "--plate", &plate, "--out", dotted.to_str().unwrap()]);
     refused(&out, "is the part");
-    let plate_copy = tmp("plate.toml");
+    let plate_copy = tmp("inputs", "plate.toml");
     std::fs::copy(&plate, &plate_copy).unwrap();
     let q = plate_copy.to_str().unwrap();
     let out = chladni(&["plan", p, "--plate", q, "--plot", q]);
@@ -50,7 +38,7 @@ fn plan_refuses_to_overwrite_its_part_or_plate() {
 
 #[test]
 fn plan_writes_its_file_whole_and_leaves_no_temporary_file() {
-    let dir = tmp("atomic");
+    let dir = tmp("inputs", "atomic");
     std::fs::create_dir_all(&dir).unwrap();
     let out_file = dir.join("plan.json");
     std::fs::write(&out_file, "old").unwrap();
@@ -78,12 +66,12 @@ fn a_figure_of_the_wrong_type_is_refused_before_the_work() {
         "--field",
         "sign",
         "--plot",
-        tmp("x.gif").to_str().unwrap(),
+        tmp("inputs", "x.gif").to_str().unwrap(),
     ]);
     refused(&out, "--plot file must end in .png or .svg");
     let (part, plate) = (ex("parts/triangle.json"), ex("plates/four-lines.toml"));
     let plan = ex("plans/triangle-four-lines.json");
-    let gif = tmp("t.gif");
+    let gif = tmp("inputs", "t.gif");
     let g = gif.to_str().unwrap();
     let out = chladni(&["simulate", &part, "--plate", &plate, "--plan", &plan, "--plot", g]);
     refused(&out, "--plot file must end in .png");
@@ -93,7 +81,7 @@ fn a_figure_of_the_wrong_type_is_refused_before_the_work() {
 
 #[test]
 fn simulate_refuses_a_figure_over_its_plan_and_bad_ranges() {
-    let plan = tmp("p.png");
+    let plan = tmp("inputs", "p.png");
     std::fs::copy(ex("plans/triangle-four-lines.json"), &plan).unwrap();
     let (part, plate) = (ex("parts/triangle.json"), ex("plates/four-lines.toml"));
     let p = plan.to_str().unwrap();
@@ -110,7 +98,7 @@ fn simulate_refuses_a_figure_over_its_plan_and_bad_ranges() {
 
 #[test]
 fn plate_modes_refuses_to_overwrite_its_plate_and_bad_counts() {
-    let plate = tmp("hinged.toml");
+    let plate = tmp("inputs", "hinged.toml");
     std::fs::copy(ex("plate-hinged-rod.toml"), &plate).unwrap();
     let before = std::fs::read(&plate).unwrap();
     let p = plate.to_str().unwrap();
@@ -162,7 +150,7 @@ fn device_plan_slots_names_and_config_values_are_checked_before_connecting() {
         &device(&["config", "set", "max_freq_hz", "9000"]),
         "max_freq_hz: frequency 9000 Hz is outside",
     );
-    let missing = tmp("no-such-plan.json");
+    let missing = tmp("inputs", "no-such-plan.json");
     refused(&device(&["run-file", missing.to_str().unwrap()]), "cannot read plan");
 }
 
@@ -202,7 +190,7 @@ fn drive_levels_sweeps_and_control_keys_are_checked_before_connecting() {
     refused(&sweep(&["--amplitude", "2"]), "--amplitude: amplitude 2 outside 0..=1");
     refused(&sweep(&["--dwell-ms", "5"]), "dwell 5 ms per point: give 10..=10000 ms");
     refused(&sweep(&["--plot", "bode.gif"]), "--plot file must end in .png");
-    let plate = tmp("sweep-plate.toml");
+    let plate = tmp("inputs", "sweep-plate.toml");
     std::fs::write(&plate, "[plate]\nname = \"p\"\n").unwrap();
     let p = plate.to_str().unwrap();
     refused(&sweep(&["--write-modes", p, "--out", p]), "refusing to overwrite an input");

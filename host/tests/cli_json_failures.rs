@@ -4,22 +4,8 @@
 //! Also: research before the device (device limits warn in `plan`/`simulate`, refuse at
 //! `device upload` with the fix), and the messages of issue 25.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn ex(rel: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples").join(rel).display().to_string()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("chladni-json-failures-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
+mod support;
+use support::cli::{chladni, ex, tmp};
 
 /// Exit `code`, and stdout is exactly one JSON object with string `error` and `message`.
 fn one_json_failure(args: &[&str], code: i32) -> serde_json::Value {
@@ -38,7 +24,7 @@ fn one_json_failure(args: &[&str], code: i32) -> serde_json::Value {
 }
 
 fn write(name: &str, text: &str) -> String {
-    let p = tmp(name);
+    let p = tmp("json-failures", name);
     std::fs::write(&p, text).unwrap();
     p.display().to_string()
 }
@@ -61,7 +47,7 @@ fn every_command_answers_its_failures_in_json() {
     let tri = ex("parts/triangle.json");
     let four = ex("plates/four-lines.toml");
     let plan = ex("plans/triangle-four-lines.json");
-    let missing = tmp("missing.json").display().to_string();
+    let missing = tmp("json-failures", "missing.json").display().to_string();
     let port = "tcp://127.0.0.1:1";
     let two = write(
         "two.svg",

@@ -3,22 +3,16 @@
 //! plot is written, and each kind of bad input is refused with its name (exit 2).
 
 use std::path::PathBuf;
-use std::process::{Command, Output};
 
 use chladni::model::part::Part;
 use chladni::vision::synth::{Photo, random_poses, render, sample_parts};
 
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    std::env::temp_dir().join(format!("chladni-locate-{}-{name}", std::process::id()))
-}
+mod support;
+use support::cli::{chladni, json, tmp};
 
 /// Writes a part as the JSON part file format.
 fn part_file(p: &Part) -> PathBuf {
-    let path = tmp(&format!("{}.json", p.name));
+    let path = tmp("locate", &format!("{}.json", p.name));
     let v = serde_json::json!({"name": p.name, "outline": p.outline, "holes": p.holes});
     std::fs::write(&path, v.to_string()).unwrap();
     path
@@ -32,16 +26,6 @@ fn args_with_parts<'a>(photo: &'a str, parts: &'a [String]) -> Vec<&'a str> {
     a
 }
 
-fn json(out: &Output) -> serde_json::Value {
-    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
-        panic!(
-            "{e}: {} / {}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        )
-    })
-}
-
 #[test]
 fn every_pose_comes_back_through_the_json_and_the_plot_is_written() {
     let parts = sample_parts();
@@ -49,9 +33,9 @@ fn every_pose_comes_back_through_the_json_and_the_plot_is_written() {
         parts.iter().map(|p| part_file(p).to_string_lossy().into_owned()).collect();
     let placed = random_poses(&parts, [300.0, 200.0], 5, 1, 6.0, 21);
     let photo = Photo::standard(parts.clone(), placed.clone(), 21);
-    let path = tmp("parts.png");
+    let path = tmp("locate", "parts.png");
     render(&photo).save(&path).unwrap();
-    let plot = tmp("plot.png");
+    let plot = tmp("locate", "plot.png");
     let p = path.to_string_lossy().into_owned();
     let mut a = args_with_parts(&p, &files);
     let plot_s = plot.to_string_lossy().into_owned();
@@ -107,12 +91,12 @@ fn bad_input_is_refused_by_name() {
     let files: Vec<String> =
         parts.iter().map(|p| part_file(p).to_string_lossy().into_owned()).collect();
     // Not a photo.
-    let text = tmp("not-a-photo.png");
+    let text = tmp("locate", "not-a-photo.png");
     std::fs::write(&text, "hello").unwrap();
     let t = text.to_string_lossy().into_owned();
     refused(&args_with_parts(&t, &files), "not_a_photo", "cannot read image");
     // No plate: even noise, nothing to tell the plate from its surroundings.
-    let noise = tmp("noise.png");
+    let noise = tmp("locate", "noise.png");
     let mut rng = chladni::plate::photo::synth::Rng(5);
     image::GrayImage::from_fn(640, 450, |_, _| image::Luma([(rng.uniform() * 255.0) as u8]))
         .save(&noise)
@@ -121,7 +105,7 @@ fn bad_input_is_refused_by_name() {
     refused(&args_with_parts(&n, &files), "no_plate", "no plate found");
     // Corners outside the image.
     let placed = random_poses(&parts, [300.0, 200.0], 3, 0, 6.0, 4);
-    let photo = tmp("three.png");
+    let photo = tmp("locate", "three.png");
     render(&Photo::standard(parts.clone(), placed, 4)).save(&photo).unwrap();
     let ph = photo.to_string_lossy().into_owned();
     let mut a = args_with_parts(&ph, &files);
@@ -146,7 +130,7 @@ fn bad_input_is_refused_by_name() {
     let hg = vec![part_file(&huge).to_string_lossy().into_owned()];
     refused(&args_with_parts(&ph, &hg), "part_too_large", "does not fit");
     // A huge image, refused from its header.
-    let big = tmp("huge.png");
+    let big = tmp("locate", "huge.png");
     let file = std::io::BufWriter::new(std::fs::File::create(&big).unwrap());
     let mut enc = png::Encoder::new(file, 20_000, 20_000);
     enc.set_color(png::ColorType::Grayscale);

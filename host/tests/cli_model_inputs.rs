@@ -1,23 +1,12 @@
 //! Bad inputs a careless user gives `chladni analyze`, `plan` and `simulate`: each exits with
 //! code 2 and a message naming the offending value and the fix.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod support;
+use support::cli::{chladni, ex, write_tmp};
 
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn ex(rel: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples").join(rel).display().to_string()
-}
-
-fn tmp(name: &str, text: &str) -> String {
-    let dir = std::env::temp_dir().join(format!("chladni-inputs-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let p: PathBuf = dir.join(name);
-    std::fs::write(&p, text).unwrap();
-    p.display().to_string()
+/// Writes `text` to this file's scratch file `name`; its path.
+fn file(name: &str, text: &str) -> String {
+    write_tmp("model-inputs", name, text)
 }
 
 /// Runs and expects exit code 2; returns stderr.
@@ -30,16 +19,16 @@ fn refused(args: &[&str]) -> String {
 
 #[test]
 fn part_files_with_nan_or_two_outlines() {
-    let p = tmp("nan.json", r#"{"name": "t", "outline": [[0, 0], [NaN, 1], [1, 1]]}"#);
+    let p = file("nan.json", r#"{"name": "t", "outline": [[0, 0], [NaN, 1], [1, 1]]}"#);
     let e = refused(&["analyze", &p, "--field", "sign"]);
     assert!(e.contains("`NaN`") && e.contains("column") && e.contains("\"outline\""), "{e}");
-    let p = tmp(
+    let p = file(
         "nan.svg",
         r#"<svg xmlns="http://www.w3.org/2000/svg"><polygon points="0,0 10,NaN 5,8"/></svg>"#,
     );
     let e = refused(&["analyze", &p, "--field", "sign"]);
     assert!(e.contains("`NaN`") && e.contains("not a finite number"), "{e}");
-    let p = tmp(
+    let p = file(
         "two.svg",
         r#"<svg xmlns="http://www.w3.org/2000/svg"><path d="M0 0 L10 0 L10 10 Z"/><path d="M20 0 L40 0 L40 10 Z"/></svg>"#,
     );
@@ -49,7 +38,7 @@ fn part_files_with_nan_or_two_outlines() {
 
 #[test]
 fn plate_size_with_three_numbers_is_refused() {
-    let p = tmp(
+    let p = file(
         "three.toml",
         "[plate]\nsize_mm = [300.0, 200.0, 5.0]\n[[mode]]\nfreq_hz = 60.0\nnode = { kind = \"line\", angle_deg = 0.0 }\n",
     );
@@ -59,7 +48,7 @@ fn plate_size_with_three_numbers_is_refused() {
 
 #[test]
 fn frequencies_name_the_drive_range_in_plate_and_plan_files() {
-    let p = tmp(
+    let p = file(
         "fast.toml",
         "[plate]\nsize_mm = [300.0, 200.0]\n[[mode]]\nfreq_hz = 5000.0\nnode = { kind = \"line\", angle_deg = 0.0 }\n",
     );
@@ -69,7 +58,7 @@ fn frequencies_name_the_drive_range_in_plate_and_plan_files() {
         "{e}"
     );
     let plan =
-        tmp("mhz.json", r#"{"steps": [{"freq_hz": 5e6, "duration_ms": 100, "amplitude": 0.5}]}"#);
+        file("mhz.json", r#"{"steps": [{"freq_hz": 5e6, "duration_ms": 100, "amplitude": 0.5}]}"#);
     let e = refused(&[
         "simulate",
         &ex("parts/triangle.json"),
@@ -93,8 +82,8 @@ fn circle(n: usize, r: f64) -> String {
 
 #[test]
 fn parts_too_large_for_the_plate_or_the_planner_are_refused_in_plan_and_simulate() {
-    let big = tmp("big.json", r#"{"name": "big", "outline": [[0, 0], [3000, 0], [1500, 2000]]}"#);
-    let many = tmp("many.json", &circle(chladni::planner::MAX_PLAN_VERTICES + 1, 20.0));
+    let big = file("big.json", r#"{"name": "big", "outline": [[0, 0], [3000, 0], [1500, 2000]]}"#);
+    let many = file("many.json", &circle(chladni::planner::MAX_PLAN_VERTICES + 1, 20.0));
     let plan = ex("plans/triangle-four-lines.json");
     for part in [&big, &many] {
         let e = refused(&["plan", part, "--plate", &ex("plates/four-lines.toml")]);
@@ -112,7 +101,7 @@ fn parts_too_large_for_the_plate_or_the_planner_are_refused_in_plan_and_simulate
 #[test]
 fn a_long_part_name_is_cut_with_a_warning() {
     let name = "n".repeat(100_000);
-    let part = tmp(
+    let part = file(
         "long.json",
         &format!(r#"{{"name": "{name}", "outline": [[0, 0], [60, 0], [20, 40]]}}"#),
     );

@@ -2,23 +2,18 @@
 //! at two drive frequencies) calibrate a plate file mode by mode, and the planner reads it.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use chladni::model::plate::{Node, PlateModel};
 use chladni::plate::photo::synth::{Scene, arc, render};
 
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    std::env::temp_dir().join(format!("chladni-photo-{}-{name}", std::process::id()))
-}
+mod support;
+use support::cli::{chladni, tmp};
 
 /// The standard synthetic photo (360×240 px, 300×200 mm plate) of the given nodes, as PNG.
 fn photo(name: &str, lines: Vec<(f64, f64)>, curves: Vec<Vec<[f64; 2]>>) -> PathBuf {
     let img = render(&Scene::standard(lines, curves, 11));
-    let path = tmp(name);
+    let path = tmp("photo", name);
     img.save(&path).unwrap();
     path
 }
@@ -31,7 +26,7 @@ fn from_photo(img: &Path, extra: &[&str]) -> Output {
 
 #[test]
 fn two_photos_calibrate_a_plate_file_that_the_planner_reads() {
-    let plate = tmp("plate.toml");
+    let plate = tmp("photo", "plate.toml");
     // 120 Hz: a quarter circle about the corner (0, 0), edge to edge.
     let curved = photo("curved.png", vec![], vec![arc([0.0, 0.0], 130.0, 0.0, 90.0, 90)]);
     let out =
@@ -109,7 +104,7 @@ fn bad_arguments_exit_2_with_the_value() {
     assert_eq!(out.status.code(), Some(2), "--append needs --out");
     // A photo with no sand on nodes: exit 1, and no empty plate file left behind.
     let blank = photo("blank.png", vec![], vec![]);
-    let plate = tmp("blank.toml");
+    let plate = tmp("photo", "blank.toml");
     let out = from_photo(&blank, &["--freq-hz", "60", "--out", plate.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("no node found in"));
@@ -130,10 +125,10 @@ fn oblique_photo_is_rectified_by_its_corners() {
     let to_plate =
         Homography::from_points(corners, [[0.0, 240.0], [360.0, 240.0], [360.0, 0.0], [0.0, 0.0]])
             .unwrap();
-    let oblique = tmp("oblique.png");
+    let oblique = tmp("photo", "oblique.png");
     warp(&plate, &to_plate, 500, 420, 90).save(&oblique).unwrap();
     let flat: Vec<String> = corners.iter().flatten().map(|v| v.to_string()).collect();
-    let rectified = tmp("rectified.png");
+    let rectified = tmp("photo", "rectified.png");
     let mut args = vec!["--json", "--save-rectified", rectified.to_str().unwrap(), "--corners"];
     args.extend(flat.iter().map(String::as_str));
     let out = from_photo(&oblique, &args);
@@ -167,7 +162,7 @@ fn oblique_photo_is_rectified_by_its_corners() {
 #[test]
 fn lentil_photo_with_grain_size() {
     let img = render(&Scene::lentils(vec![(90.0, 40.0), (20.0, -30.0)], vec![], 2));
-    let path = tmp("lentils.png");
+    let path = tmp("photo", "lentils.png");
     img.save(&path).unwrap();
     let out = from_photo(&path, &["--grain-mm", "4", "--json"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -188,7 +183,7 @@ fn lentil_photo_with_grain_size() {
 fn noise_png(name: &str, w: u32, h: u32) -> PathBuf {
     let mut rng = chladni::plate::photo::synth::Rng(42);
     let img = image::GrayImage::from_fn(w, h, |_, _| image::Luma([(rng.next_u64() >> 56) as u8]));
-    let path = tmp(name);
+    let path = tmp("photo", name);
     img.save(&path).unwrap();
     path
 }
@@ -200,7 +195,7 @@ fn stderr(out: &Output) -> String {
 // A huge PNG (a few hundred kB, 20 000 × 20 000 px) is refused from its header, at once.
 #[test]
 fn huge_image_is_refused_before_decoding() {
-    let path = tmp("huge.png");
+    let path = tmp("photo", "huge.png");
     let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
     let mut enc = png::Encoder::new(file, 20_000, 20_000);
     enc.set_color(png::ColorType::Grayscale);
@@ -226,7 +221,7 @@ fn huge_image_is_refused_before_decoding() {
 #[test]
 fn random_noise_is_not_a_chladni_figure() {
     let path = noise_png("noise.png", 360, 240);
-    let plate = tmp("noise.toml");
+    let plate = tmp("photo", "noise.toml");
     let out = from_photo(&path, &["--freq-hz", "60", "--out", plate.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stdout));
     let err = stderr(&out);
@@ -259,7 +254,7 @@ fn size_contradicting_the_photo_is_refused() {
 #[test]
 fn frequency_is_checked_before_work_and_needed_for_a_plate_file() {
     let img = photo("freq.png", vec![(90.0, 40.0)], vec![]);
-    let plate = tmp("freq.toml");
+    let plate = tmp("photo", "freq.toml");
     let out = from_photo(&img, &["--freq-hz", "1e9", "--out", plate.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2));
     let err = stderr(&out);
@@ -279,7 +274,7 @@ fn frequency_is_checked_before_work_and_needed_for_a_plate_file() {
 #[test]
 fn png_named_jpg_is_read_by_its_content() {
     let png = photo("named.png", vec![(90.0, 40.0)], vec![]);
-    let jpg = tmp("named.jpg");
+    let jpg = tmp("photo", "named.jpg");
     std::fs::rename(&png, &jpg).unwrap();
     let out = from_photo(&jpg, &["--json"]);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -292,7 +287,7 @@ fn png_named_jpg_is_read_by_its_content() {
 /// same frequency merges into it, and the plan made on the plate holds in simulation.
 #[test]
 fn multi_line_photo_is_one_mode_that_plans_and_simulates_as_planned() {
-    let plate = tmp("lines.toml");
+    let plate = tmp("photo", "lines.toml");
     let plate_s = plate.to_str().unwrap();
     // 60 Hz: vertical lines at x = 80 and x = 190 mm (offset along n̂ = (−1, 0) from x = 150).
     let two = photo("two-lines.png", vec![(90.0, 70.0), (90.0, -40.0)], vec![]);
@@ -313,7 +308,7 @@ fn multi_line_photo_is_one_mode_that_plans_and_simulates_as_planned() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 
     let part = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/parts/rectangle.json");
-    let plan = tmp("lines-plan.json");
+    let plan = tmp("photo", "lines-plan.json");
     let out =
         chladni(&["plan", part, "--plate", plate_s, "--json", "--out", plan.to_str().unwrap()]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));

@@ -1,25 +1,13 @@
 //! `chladni plan` and `chladni simulate` end to end: JSON shape, files, exit codes, plots.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn ex(rel: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples").join(rel).display().to_string()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("chladni-plan-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
+mod support;
+use support::cli::{chladni, ex, tmp};
 
 #[test]
 fn plan_json_is_the_documented_object_and_simulates_to_100_percent() {
-    let out_file = tmp("tri.json");
+    let out_file = tmp("plan", "tri.json");
     let out = chladni(&[
         "plan",
         &ex("parts/triangle.json"),
@@ -62,7 +50,7 @@ fn plan_json_is_the_documented_object_and_simulates_to_100_percent() {
         serde_json::from_str(&std::fs::read_to_string(&out_file).unwrap()).unwrap();
     assert_eq!(file, v);
     // Simulate it.
-    let plot = tmp("tri-sim.png");
+    let plot = tmp("plan", "tri-sim.png");
     let out = simulate_triangle_with(
         &out_file,
         &["--trials", "40", "--seed", "3", "--json", "--plot", plot.to_str().unwrap()],
@@ -73,7 +61,7 @@ fn plan_json_is_the_documented_object_and_simulates_to_100_percent() {
     assert_eq!(s["trials"], 40);
     assert!(s["orientation_error_deg"]["max"].as_f64().unwrap() < 0.5);
     assert!(s["position_error_mm"]["max"].as_f64().unwrap() < 1.0);
-    for p in [plot.clone(), tmp("tri-sim-plan.png")] {
+    for p in [plot.clone(), tmp("plan", "tri-sim-plan.png")] {
         let bytes = std::fs::read(&p).unwrap();
         assert_eq!(&bytes[1..4], b"PNG", "{}", p.display());
     }
@@ -90,7 +78,7 @@ fn plan_without_solution_exits_1_and_says_why() {
 
 #[test]
 fn bad_input_exits_2_with_named_errors() {
-    let plate = tmp("bad.toml");
+    let plate = tmp("plan", "bad.toml");
     std::fs::write(
         &plate,
         "[plate]\nname = \"b\"\nsize_mm = [300.0, 200.0]\n[[mode]]\nfreq_hz = 60.0\nfield = \"cosine\"\nnode = { kind = \"line\", angle_deg = 0.0 }\n",
@@ -110,7 +98,7 @@ fn bad_input_exits_2_with_named_errors() {
     ]);
     assert_eq!(out.status.code(), Some(2));
     // A plan whose frequency is not a mode of the plate.
-    let plan = tmp("p.json");
+    let plan = tmp("plan", "p.json");
     std::fs::write(
         &plan,
         r#"{"steps": [{"freq_hz": 77.0, "duration_ms": 100, "amplitude": 0.5, "ramp_ms": 0}]}"#,
@@ -182,7 +170,7 @@ fn simulate_triangle_with(plan: &std::path::Path, extra: &[&str]) -> std::proces
 // their start poses (JSON) and their range (text).
 #[test]
 fn simulate_lists_the_starts_of_missed_trials() {
-    let plan = tmp("short.json");
+    let plan = tmp("plan", "short.json");
     std::fs::write(
         &plan,
         r#"{"steps": [{"freq_hz": 60.0, "duration_ms": 100, "amplitude": 0.8, "ramp_ms": 0}],

@@ -22,29 +22,24 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-mod support;
-
-use chladni::controller::emulator::{Emulator, EmulatorConfig};
+use chladni::controller::emulator::Emulator;
 use chladni::model::plan_file::PlanFile;
 use chladni_shared::icd::plan::DeviceLimits;
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
+
+mod support;
 use serde_json::Value;
+use support::emu;
 
 /// Two closed-loop steps of 3 s (the plot shows the level change).
 const PLAN: &str = r#"{"name": "cell-http-2step", "repeat": 1, "steps": [
     {"freq_hz": 180, "accel_mps2": 15, "duration_ms": 3000, "ramp_ms": 300},
     {"freq_hz": 185, "accel_mps2": 25, "duration_ms": 3000, "ramp_ms": 300}]}"#;
 
-fn emulator() -> Emulator {
-    let config = EmulatorConfig::scratch("cli-serve-http", Duration::from_secs(120));
-    Emulator::start(&config).expect("start the emulator")
-}
-
 fn upload_plan(emu: &Emulator) {
     let plan = PlanFile::parse(PLAN).unwrap().to_plan(&DeviceLimits::DEFAULT).unwrap();
-    let mut client = emu.connect("cli_serve_http upload").unwrap();
-    let summary = client.upload(&plan, Some(0), |_, _| {}).unwrap();
+    let summary = emu::upload(emu, &plan, 0);
     assert_eq!((summary.slot, summary.steps), (0, 2));
 }
 
@@ -284,7 +279,7 @@ fn token_login_runs_and_stops(emu: &Emulator) -> (Serve, String) {
 #[test]
 fn the_dashboard_runs_a_stored_plan_and_the_api_reports_a_lost_link() {
     require_browser();
-    let mut emu = emulator();
+    let mut emu = emu::emulator_for("cli-serve-http", Duration::from_secs(120));
     upload_plan(&emu);
     let verify = support::photos::serve_args();
     let verify: Vec<&str> = verify.iter().map(String::as_str).collect();

@@ -22,11 +22,13 @@ use std::time::{Duration, Instant};
 mod support;
 
 use chladni::cell::modbus::{CommandResult, FAULT_LINK_DOWN};
-use chladni::controller::emulator::{Emulator, EmulatorConfig};
-use chladni_shared::icd::plan::{Level, Plan, Step};
+use chladni::controller::emulator::Emulator;
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use serde_json::Value;
+
+mod support;
+use support::emu;
 
 const PYTHON: &str = "/usr/bin/python3";
 const SLOT: u8 = 3;
@@ -45,25 +47,6 @@ fn require_pymodbus() {
         "{PYTHON} cannot import pymodbus: run scripts/install-deps.sh (it installs Debian's \
          python3-pymodbus from bookworm-backports)"
     );
-}
-
-fn emulator() -> Emulator {
-    let config = EmulatorConfig::scratch("cli-serve-modbus", Duration::from_secs(120));
-    Emulator::start(&config).expect("start the emulator")
-}
-
-/// Two steps of 1.5 s each, open loop, stored in [`SLOT`].
-fn upload_plan(emu: &Emulator) {
-    let step =
-        |freq_mhz| Step { freq_mhz, level: Level::Drive(8_000), duration_ms: 1_500, ramp_ms: 50 };
-    let plan = Plan {
-        name: heapless::String::try_from("modbus").unwrap(),
-        repeat: 1,
-        steps: heapless::Vec::from_slice(&[step(120_000), step(150_000)]).unwrap(),
-    };
-    let mut client = emu.connect("cli_serve_modbus upload").expect("connect");
-    client.upload(&plan, Some(SLOT), |_, _| {}).expect("upload");
-    // Dropping the client releases ownership, so the cell's session may run the plan.
 }
 
 /// The `chladni serve` process, killed if the test ends early (a panic), so that it never
@@ -220,8 +203,10 @@ fn check_run(out: &Value) {
 #[test]
 fn a_plc_runs_a_plan_through_modbus_while_http_watches_and_both_see_the_link_lost() {
     require_pymodbus();
-    let mut emu = emulator();
-    upload_plan(&emu);
+    let mut emu = emu::emulator_for("cli-serve-modbus", Duration::from_secs(120));
+    // Two steps of 1.5 s each, open loop; the upload's session is gone when it returns, so
+    // the cell's session may run the plan.
+    emu::upload(&emu, &emu::open_loop_plan("modbus", &[120_000, 150_000], 8_000, 1_500), SLOT);
     let (mut serve, address, http) = serve(&emu);
     let stop = Arc::new(AtomicBool::new(false));
     let poller = std::thread::spawn({

@@ -2,27 +2,15 @@
 //! face in simulation (library and `chladni plan/simulate --both-faces`), a part with a mirror
 //! axis needs one face.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
-
 use chladni::model::part::Part;
 use chladni::model::part::mirror;
 use chladni::motion::montecarlo::{self, Setup};
 use chladni::motion::sim::{Body, FieldModel, plan_steps};
 use chladni::planner::{self, Backend, PlanOptions, cdist};
 
-#[path = "support/examples.rs"]
-mod examples;
-
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("chladni-faces-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
+mod support;
+use support::cli::{chladni, tmp};
+use support::examples;
 
 fn sorted_mod(v: &[f64], p: f64) -> Vec<f64> {
     let mut v: Vec<f64> = v.iter().map(|x| x.rem_euclid(p)).collect();
@@ -99,7 +87,7 @@ fn a_plan_for_both_faces_holds_for_each_face_in_simulation() {
 
 #[test]
 fn cli_plans_and_simulates_both_faces_and_reports_each() {
-    let plan = tmp("both.json");
+    let plan = tmp("faces", "both.json");
     let part = examples::root().join("examples/parts/triangle.json");
     let plate = examples::root().join("examples/plates/four-lines.toml");
     let (part, plate) = (part.to_str().unwrap(), plate.to_str().unwrap());

@@ -3,7 +3,6 @@
 //! finds no plan; tracking poses from a known feed region does, and independent simulation
 //! from poses inside that region (not the ones the planner tracked) confirms it.
 
-use std::path::Path;
 use std::process::Command;
 
 use chladni::model::part::Part;
@@ -12,9 +11,8 @@ use chladni::motion::sim::{Body, FieldModel, Pose, simulate_plan};
 use chladni::planner::feed::{FeedRegion, FeedSearch};
 use chladni::planner::{self, PlanFailure, PlanOptions, cdist};
 
-fn root() -> &'static Path {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
-}
+mod support;
+use support::examples::root;
 
 /// The free plate's solver modes 2 and 4 (`chladni plate modes --count 4 --write-modes`).
 fn free_plate_modes_2_and_4() -> PlateModel {

@@ -4,7 +4,6 @@
 //! simulation from many start poses in the mode's reach (x ≥ 150 mm within the planned duration: nearer the clamp
 //! the pull vanishes like x³ and parts drift onto the clamp instead of the node).
 
-use std::path::Path;
 use std::process::Command;
 
 use chladni::model::part::Part;
@@ -12,9 +11,8 @@ use chladni::model::plate::{Node, PlateModel};
 use chladni::motion::sim::{Body, FieldModel, Pose, simulate_plan};
 use chladni::planner::{self, PlanOptions, Problem, cdist};
 
-fn root() -> &'static Path {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
-}
+mod support;
+use support::examples::root;
 
 #[test]
 fn rectangle_plan_on_solver_made_cantilever_modes_holds_in_simulation() {

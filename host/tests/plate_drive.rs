@@ -2,31 +2,16 @@
 //! one the planner takes, a drive point on a node does not excite that mode, a clamped point
 //! is a node, and `suggest` finds a drive point and clamps that give a plan.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use chladni::model::plate::PlateModel;
 use chladni::model::plate_file::PlateFile;
 use chladni::plate::contour::node_lines;
 use chladni::plate::solver;
 
-fn chladni(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chladni")).args(args).output().unwrap()
-}
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn example(rel: &str) -> String {
-    root().join(rel).display().to_string()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("chladni-plate-drive-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
+mod support;
+use support::cli::{chladni, repo, tmp};
+use support::examples::root;
 
 fn text(o: &Output) -> (String, String) {
     (String::from_utf8_lossy(&o.stdout).into(), String::from_utf8_lossy(&o.stderr).into())
@@ -34,8 +19,8 @@ fn text(o: &Output) -> (String, String) {
 
 #[test]
 fn a_square_plates_solver_file_is_one_the_planner_takes_and_plans() {
-    let square = example("examples/plate-square.toml");
-    let out = tmp("square.toml");
+    let square = repo("examples/plate-square.toml");
+    let out = tmp("plate-drive", "square.toml");
     let o = chladni(&[
         "plate",
         "modes",
@@ -51,7 +36,7 @@ fn a_square_plates_solver_file_is_one_the_planner_takes_and_plans() {
     let model = PlateModel::load(&out).expect("the planner loads the solver's own file");
     assert_eq!(model.modes.len(), 3);
     // With the pair in: six modes, pairs 4+5 and 6+7 one resonance each (five).
-    let all = tmp("square6.toml");
+    let all = tmp("plate-drive", "square6.toml");
     let o = chladni(&[
         "plate",
         "modes",
@@ -66,14 +51,14 @@ fn a_square_plates_solver_file_is_one_the_planner_takes_and_plans() {
     let names: Vec<&str> = model.modes.iter().map(|m| m.name.as_str()).collect();
     assert_eq!(names, ["mode 1", "mode 2", "mode 3", "modes 4+5", "modes 6+7"]);
     // The clamped variant `suggest` finds (test below) plans through `chladni plan`.
-    let clamped = tmp("square-clamped.toml");
+    let clamped = tmp("plate-drive", "square-clamped.toml");
     std::fs::write(
         &clamped,
         std::fs::read_to_string(&square).unwrap().replace("[70.0, 45.0]", "[60.0, 74.0]")
             + "clamps_mm = [[20.0, 24.0]]\n",
     )
     .unwrap();
-    let file = tmp("square-clamped-modes.toml");
+    let file = tmp("plate-drive", "square-clamped-modes.toml");
     let o = chladni(&[
         "plate",
         "modes",
@@ -84,7 +69,7 @@ fn a_square_plates_solver_file_is_one_the_planner_takes_and_plans() {
         file.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{:?}", text(&o));
-    let part = example("examples/parts/rectangle.json");
+    let part = repo("examples/parts/rectangle.json");
     let o = chladni(&["plan", &part, "--plate", file.to_str().unwrap(), "--maps", "static"]);
     assert!(o.status.success(), "{:?}", text(&o));
 }
@@ -92,9 +77,9 @@ fn a_square_plates_solver_file_is_one_the_planner_takes_and_plans() {
 #[test]
 fn without_a_drive_point_a_degenerate_pair_refuses_write_modes_naming_it() {
     let square = std::fs::read_to_string(root().join("examples/plate-square.toml")).unwrap();
-    let plain = tmp("square-nodrive.toml");
+    let plain = tmp("plate-drive", "square-nodrive.toml");
     std::fs::write(&plain, square.replace("drive_mm = [70.0, 45.0]\n", "")).unwrap();
-    let out = tmp("never.toml");
+    let out = tmp("plate-drive", "never.toml");
     let o = chladni(&[
         "plate",
         "modes",
@@ -114,7 +99,7 @@ fn without_a_drive_point_a_degenerate_pair_refuses_write_modes_naming_it() {
 fn a_drive_point_on_a_nodal_line_does_not_excite_that_mode() {
     let square = std::fs::read_to_string(root().join("examples/plate-square.toml")).unwrap();
     // Mode 1 of the free square twists about both mid-lines: x = 100 mm is on its node.
-    let on_node = tmp("square-on-node.toml");
+    let on_node = tmp("plate-drive", "square-on-node.toml");
     std::fs::write(&on_node, square.replace("[70.0, 45.0]", "[100.0, 37.0]")).unwrap();
     let o = chladni(&["plate", "modes", on_node.to_str().unwrap(), "--count", "3", "--json"]);
     let (out, err) = text(&o);
@@ -128,17 +113,11 @@ fn a_drive_point_on_a_nodal_line_does_not_excite_that_mode() {
         v["modes"].as_array().unwrap().iter().all(|m| m["excitation"].as_f64().unwrap() >= 0.05)
     );
     // Off the node (the example's drive point) mode 1 is there.
-    let o = chladni(&[
-        "plate",
-        "modes",
-        &example("examples/plate-square.toml"),
-        "--count",
-        "3",
-        "--json",
-    ]);
+    let o =
+        chladni(&["plate", "modes", &repo("examples/plate-square.toml"), "--count", "3", "--json"]);
     assert!(text(&o).0.contains("\"name\":\"mode 1\""), "{:?}", text(&o));
     // A drive point off the plate is refused, naming the key and value.
-    let off = tmp("square-off.toml");
+    let off = tmp("plate-drive", "square-off.toml");
     std::fs::write(&off, square.replace("[70.0, 45.0]", "[70.0, 245.0]")).unwrap();
     let o = chladni(&["plate", "modes", off.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2));
@@ -178,8 +157,8 @@ fn suggest_on_a_symmetric_plate_finds_a_drive_point_that_plans() {
     let o = chladni(&[
         "plate",
         "suggest",
-        &example("examples/plate-square.toml"),
-        &example("examples/parts/rectangle.json"),
+        &repo("examples/plate-square.toml"),
+        &repo("examples/parts/rectangle.json"),
         "--count",
         "3",
         "--budget-s",

@@ -10,12 +10,14 @@ use std::net::{TcpListener, TcpStream};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use chladni::controller::emulator::{Emulator, EmulatorConfig, qemu_command_line};
+use chladni::controller::emulator::qemu_command_line;
 use chladni::controller::firmware;
 use chladni::controller::proxy::FrameSplitter;
 use chladni_shared::icd::link::Board;
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
+
+mod support;
 
 const PROBE: [u8; 5] = [0, 1, 2, 3, 0];
 
@@ -107,17 +109,15 @@ fn qemus_socket_serves_one_client_and_runs_a_waiting_clients_bytes_late() {
 
 #[test]
 fn through_the_proxy_a_second_client_is_answered_at_once() {
-    let config = EmulatorConfig {
-        time_limit: Some(Duration::from_secs(120)),
-        log_file: Some(
-            std::env::temp_dir().join(format!("chladni-proxy-{}.log", std::process::id())),
-        ),
-        ..Default::default()
-    };
-    let emulator = Emulator::start(&config).expect("start the emulator");
+    let emulator = support::emu::emulator_for("qemu-socket-proxy", Duration::from_secs(120));
     let mut a = first_client(emulator.port());
     let mut b = TcpStream::connect(("127.0.0.1", emulator.port())).unwrap();
-    std::thread::sleep(Duration::from_millis(100)); // the proxy takes B on
+    // The proxy takes B on before B's request is timed.
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while emulator.clients() < 2 {
+        assert!(Instant::now() < deadline, "the proxy never took the second client on");
+        std::thread::sleep(Duration::from_millis(2));
+    }
     b.write_all(&PROBE).unwrap();
     let took = answer_within(&mut b, Duration::from_secs(2)).expect("B answered while A is on");
     println!("through the proxy: the second client was answered after {took:?}");

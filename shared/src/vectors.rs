@@ -306,13 +306,25 @@ mod tests {
         }
     }
 
-    /// `cargo test -p chladni-shared print_digests -- --nocapture` prints the host's digests in
-    /// the on-target format, to compare by eye with `scripts/firmware.sh test qemu`.
+    /// What the on-target comparison relies on: each vector gives the same digest every time it
+    /// runs (no state carried between runs, nothing from the clock or a hash map's order), folds
+    /// something in (not the empty digest), and differs from every other vector (two equal
+    /// digests would mean one vector checks nothing of its own). `cargo test -p chladni-shared
+    /// print_digests -- --nocapture` also prints the digests in the on-target format, to compare
+    /// by eye with `scripts/firmware.sh test qemu`.
     #[test]
     fn print_digests() {
+        let mut seen = std::collections::BTreeMap::new();
         for (name, vector) in ALL {
-            std::println!("vector {name} {:016x}", vector().unwrap());
+            let digest = vector().unwrap();
+            std::println!("vector {name} {digest:016x}");
+            assert_eq!(vector().unwrap(), digest, "vector {name} differs from one run to the next");
+            assert_ne!(digest, Digest::new().value(), "vector {name} folds nothing in");
+            if let Some(other) = seen.insert(digest, name) {
+                panic!("vectors {other} and {name} have the same digest {digest:016x}");
+            }
         }
+        assert_eq!(seen.len(), ALL.len());
     }
 
     #[test]

@@ -21,12 +21,12 @@
 //!
 //! Like every front end, this one never talks to the link: it only calls [`Cell`].
 //!
-//! In front of the routes: [`guard`](super::guard) (Host, Origin, JSON bodies, the token),
+//! In front of the routes: [`super::guard`] (Host, Origin, JSON bodies, the token),
 //! `tower-http`'s body limit ([`MAX_BODY`]), body-read timeout and request timeout
 //! ([`REQUEST_TIMEOUT`], 504), and [`json_errors`], which turns any answer of the stack that
 //! is not JSON (413, 408) into `{"error": ...}`. Connections ([`serve`]) are hyper's HTTP/1 with
 //! its header-read timeout, which also closes idle keep-alive connections, and a cap per
-//! [`net::Caps`](super::net::Caps).
+//! [`super::net::Caps`].
 
 use std::convert::Infallible;
 use std::sync::Arc;

@@ -8,7 +8,7 @@
 //! - [`DeviceClient::call`] sends any request of the endpoint table and returns its typed
 //!   reply; the controller's refusals and link errors come back as [`DeviceError`] variants.
 //!   Frames of other sessions, late answers to earlier ids and frames that cannot be decoded
-//!   are skipped, never acted on (see [`link`]).
+//!   are skipped, never acted on (see the private `link` module).
 //! - Helpers wrap the sequences: chunked [`DeviceClient::upload`], paged
 //!   [`DeviceClient::list_plans`], [`DeviceClient::wait_for_run`] (when a plan is done),
 //!   telemetry ([`DeviceClient::subscribe`], [`DeviceClient::next_telemetry`]), sweeps

@@ -255,6 +255,11 @@ impl Emulator {
         self.proxy.port()
     }
 
+    /// Clients connected to the link's port right now (the proxy's count).
+    pub fn clients(&self) -> usize {
+        self.proxy.clients()
+    }
+
     /// QEMU's own serial socket behind the proxy: one client at a time (experiments only).
     pub fn qemu_port(&self) -> u16 {
         self.qemu_port

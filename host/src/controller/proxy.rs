@@ -76,6 +76,10 @@ struct Shared {
     /// Connected clients, for writing QEMU's output to.
     clients: Mutex<Vec<(u64, TcpStream)>>,
     next_client: AtomicU64,
+    /// Bytes read from clients and from QEMU so far: what the proxy has taken in, for tests
+    /// that must know a byte reached it before sending the next.
+    from_clients: AtomicU64,
+    from_qemu: AtomicU64,
 }
 
 /// The proxy's side of QEMU's socket.
@@ -190,6 +194,19 @@ impl Proxy {
         lock(&self.shared.clients).len()
     }
 
+    /// Whether the proxy holds a connection to QEMU right now.
+    pub fn upstream_connected(&self) -> bool {
+        lock(&self.shared.upstream).stream.is_some()
+    }
+
+    /// Bytes the proxy has read from its clients (all of them) and from QEMU so far.
+    pub fn bytes_in(&self) -> (u64, u64) {
+        (
+            self.shared.from_clients.load(Ordering::SeqCst),
+            self.shared.from_qemu.load(Ordering::SeqCst),
+        )
+    }
+
     /// Closes the public port and every connection; waits for the threads.
     pub fn shutdown(&mut self) {
         self.shared.stop.store(true, Ordering::SeqCst);
@@ -243,7 +260,10 @@ fn client_loop(id: u64, mut stream: TcpStream, shared: Arc<Shared>) {
     while !shared.stop.load(Ordering::SeqCst) {
         match stream.read(&mut buf) {
             Ok(0) => break,
-            Ok(n) => splitter.push(&buf[..n], |frame| shared.forward(frame)),
+            Ok(n) => {
+                shared.from_clients.fetch_add(n as u64, Ordering::SeqCst);
+                splitter.push(&buf[..n], |frame| shared.forward(frame));
+            }
             Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
             Err(e) if e.kind() == ErrorKind::Interrupted => {}
             Err(_) => break,
@@ -282,7 +302,10 @@ fn pump(mut stream: TcpStream, shared: &Shared) -> std::io::Result<()> {
     while !shared.stop.load(Ordering::SeqCst) {
         match stream.read(&mut buf) {
             Ok(0) => return Ok(()),
-            Ok(n) => splitter.push(&buf[..n], |frame| shared.broadcast(frame)),
+            Ok(n) => {
+                shared.from_qemu.fetch_add(n as u64, Ordering::SeqCst);
+                splitter.push(&buf[..n], |frame| shared.broadcast(frame));
+            }
             Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
             Err(e) if e.kind() == ErrorKind::Interrupted => {}
             Err(e) => return Err(e),
@@ -330,13 +353,30 @@ mod tests {
         (proxy, upstream)
     }
 
+    /// Polls `condition` until it holds; panics naming `what` after 5 s.
+    fn wait_until(what: &str, mut condition: impl FnMut() -> bool) {
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while !condition() {
+            assert!(Instant::now() < deadline, "gave up waiting for {what}");
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+
+    /// A new client, once the proxy has `expect_clients` clients.
     fn client(proxy: &Proxy, expect_clients: usize) -> TcpStream {
         let stream = TcpStream::connect(("127.0.0.1", proxy.port())).unwrap();
-        let deadline = Instant::now() + Duration::from_secs(5);
-        while proxy.clients() < expect_clients && Instant::now() < deadline {
-            std::thread::sleep(Duration::from_millis(5));
-        }
+        wait_until("the client to be taken on", || proxy.clients() >= expect_clients);
         stream
+    }
+
+    /// Waits until the proxy has read `n` bytes from its clients in all.
+    fn taken_from_clients(proxy: &Proxy, n: u64) {
+        wait_until(&format!("{n} bytes from the clients"), || proxy.bytes_in().0 >= n);
+    }
+
+    /// Waits until the proxy has read `n` bytes from QEMU in all.
+    fn taken_from_qemu(proxy: &Proxy, n: u64) {
+        wait_until(&format!("{n} bytes from QEMU"), || proxy.bytes_in().1 >= n);
     }
 
     #[test]
@@ -357,11 +397,12 @@ mod tests {
         let mut a = client(&proxy, 1);
         let mut b = client(&proxy, 2);
         a.write_all(&[0, 1, 2, 3]).unwrap(); // half a frame
-        std::thread::sleep(Duration::from_millis(100));
+        taken_from_clients(&proxy, 4);
         b.write_all(&[0, 9, 9, 0]).unwrap(); // a whole frame meanwhile
-        std::thread::sleep(Duration::from_millis(100));
+        // B's frame goes on at once, while A's half waits for its end.
+        assert_eq!(read_frames(&mut upstream, 1), [vec![9, 9]]);
         a.write_all(&[4, 5, 0]).unwrap(); // the rest of a's
-        assert_eq!(read_frames(&mut upstream, 2), [vec![9, 9], vec![1, 2, 3, 4, 5]]);
+        assert_eq!(read_frames(&mut upstream, 1), [vec![1, 2, 3, 4, 5]]);
     }
 
     #[test]
@@ -369,11 +410,13 @@ mod tests {
         let (proxy, mut upstream) = proxy_and_upstream();
         let mut a = client(&proxy, 1);
         a.write_all(&[0, 7, 7, 7]).unwrap();
-        std::thread::sleep(Duration::from_millis(100));
+        taken_from_clients(&proxy, 4);
         drop(a);
+        wait_until("A to be gone", || proxy.clients() == 0);
         let mut b = client(&proxy, 1);
         b.write_all(&[0, 8, 0]).unwrap();
-        // Wait for a second frame that must not come.
+        // An absence: A's partial frame must never reach QEMU. Bounded: 1 s for a second
+        // frame to come (a forwarded frame takes well under a millisecond here).
         assert_eq!(read_frames_within(&mut upstream, 2, Duration::from_secs(1)), [vec![8]]);
     }
 
@@ -383,14 +426,14 @@ mod tests {
         let mut a = client(&proxy, 1);
         let mut b = client(&proxy, 2);
         upstream.write_all(&[0, 5, 5]).unwrap();
-        std::thread::sleep(Duration::from_millis(100));
+        taken_from_qemu(&proxy, 3); // the frame's first part read on its own
         upstream.write_all(&[5, 0, 0, 6, 0]).unwrap();
         for stream in [&mut a, &mut b] {
             assert_eq!(read_frames(stream, 2), [vec![5, 5, 5], vec![6]]);
         }
         // A client that arrives while a frame is on its way gets it whole, never a tail.
         upstream.write_all(&[0, 1, 1]).unwrap();
-        std::thread::sleep(Duration::from_millis(100));
+        taken_from_qemu(&proxy, 11);
         let mut c = client(&proxy, 3);
         upstream.write_all(&[1, 0, 0, 2, 0]).unwrap();
         assert_eq!(read_frames(&mut c, 2), [vec![1, 1, 1], vec![2]]);
@@ -404,7 +447,7 @@ mod tests {
         proxy.set_upstream(second.local_addr().unwrap().port());
         drop(first);
         let (mut upstream, _) = second.accept().unwrap();
-        std::thread::sleep(Duration::from_millis(100));
+        wait_until("the connection to the new QEMU", || proxy.upstream_connected());
         a.write_all(&[0, 3, 0]).unwrap();
         assert_eq!(read_frames(&mut upstream, 1), [vec![3]]);
     }
@@ -423,8 +466,17 @@ mod tests {
         let port = proxy.port();
         let mut a = client(&proxy, 1);
         proxy.shutdown();
+        // Closed: end of file or a reset, never the read timeout (still open).
         a.set_read_timeout(Some(Duration::from_secs(2))).unwrap();
-        assert!(matches!(a.read(&mut [0u8; 8]), Ok(0) | Err(_)), "client not closed");
+        match a.read(&mut [0u8; 8]) {
+            Ok(0) => {}
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    ErrorKind::ConnectionReset | ErrorKind::ConnectionAborted
+                ) => {}
+            other => panic!("the client was not closed: {other:?}"),
+        }
         // The port is free again.
         drop(TcpListener::bind(("127.0.0.1", port)).unwrap());
     }

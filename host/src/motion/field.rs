@@ -191,7 +191,7 @@ const TILE: usize = 16;
 /// The table spans the plate and a wide margin, but parts only ever visit a band along the
 /// branch and their paths to it: computing all of its ~300 000 points (a Newton solve each)
 /// took 0.16 s, serially, before the first run could start, more than the runs of a whole
-/// triangle map. Each tile of [`TILE`]² cells is computed on first use instead (its points
+/// triangle map. Each tile of `TILE`² cells is computed on first use instead (its points
 /// exactly as the whole table computed them, so the field is the same bit for bit).
 #[derive(Debug)]
 pub struct DistTable {

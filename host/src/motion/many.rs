@@ -13,7 +13,7 @@
 //! translation) and apart (overlapping pairs pushed apart along their normal, each by its
 //! share of the mobility), so a step's overshoot never accumulates.
 //!
-//! One body is [`integrate::run`], unchanged: a group of one never comes here.
+//! One body is [`integrate::run`](crate::motion::integrate::run), unchanged: a group of one never comes here.
 //!
 //! Units: mm, s, rad.
 

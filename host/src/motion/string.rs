@@ -25,7 +25,7 @@
 //! `ẋ⁺ ≈ β ẋ⁻ + (β + e) w_n sin α`.
 //!
 //! When the rebound is too slow to separate (relative normal velocity below
-//! [`Sim::stick_speed`], or too many impacts within one period: the chattering sequence of
+//! `Sim::stick_speed`, or too many impacts within one period: the chattering sequence of
 //! small e) the particle rides on the string until the string's downward acceleration
 //! exceeds g. In contact the apparent weight `g + ÿ_s` pushes it downhill with
 //! `−(g + ÿ_s) tan α` and Coulomb friction `μ (g + ÿ_s)` opposes sliding. Both scale with
@@ -400,7 +400,7 @@ fn release(p: &StringParams, x: f64, k: usize, members: usize) -> State {
     State { t: t0, x, y: p.amplitude + h, u: 0.0, v: 0.0, riding: false }
 }
 
-/// Trajectories of `members` particles dropped near `x0` (see [`release`]; member k is
+/// Trajectories of `members` particles dropped near `x0` (see `release`; member k is
 /// released at time t0 < T and sampled from t = 0 with x = x0 until then).
 pub fn simulate_ensemble(
     p: &StringParams,
@@ -419,7 +419,7 @@ pub fn simulate_ensemble(
 
 /// Ensemble-averaged drift velocity (m/s) of a particle held at `x`: the horizontal
 /// displacement ∫ẋ dt it would make there, per unit time, averaged over `members` particles
-/// dropped at different drive phases from different heights (see [`release`]), each followed
+/// dropped at different drive phases from different heights (see `release`), each followed
 /// for `duration` seconds after a 10-period transient.
 ///
 /// Why a velocity and not the impulse rate: each impact sticks tangentially (see the module

@@ -42,7 +42,7 @@ use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum MapKind {
     /// The static maps first (checked by simulation), the dynamic ones when those give no
-    /// plan ([`super::fallback`]): the static maps are 10–30× cheaper and a scan of 750
+    /// plan (`planner::fallback`): the static maps are 10–30× cheaper and a scan of 750
     /// problems found no plan the dynamic maps find and they miss (docs/plan.md).
     #[default]
     Auto,

@@ -15,7 +15,7 @@
 //!    Each such sequence of the shortest length is confirmed from scratch: all starts tracked
 //!    without clustering, durations from their settle times
 //!    (× safety + ramp, as [`super::plan_with`]), then the plan run as the simulator runs it
-//!    (fixed durations, [`simulate_plan`]) from interleaved starts (grid shifted half a cell,
+//!    (fixed durations, [`simulate_plan`](crate::motion::sim::simulate_plan)) from interleaved starts (grid shifted half a cell,
 //!    orientations half a step; and from the tracked starts again when some lingered and
 //!    were left out of the durations); every end must lie within the margin of the
 //!    predicted orientation. The fastest confirmed sequence wins.
@@ -572,7 +572,7 @@ fn check(
 }
 
 /// The largest final orientation error (deg, mod the period) of the plan run as the simulator
-/// runs it (fixed step durations, [`simulate_plan`]) from `starts`. Starts go in batches of
+/// runs it (fixed step durations, [`simulate_plan`](crate::motion::sim::simulate_plan)) from `starts`. Starts go in batches of
 /// 64 (each batch in parallel); after a batch with an error above `bound` the rest are
 /// skipped, so a rejected plan costs less (the result then exceeds `bound` but need not be
 /// the largest).

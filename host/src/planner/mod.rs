@@ -39,6 +39,9 @@
 //! With a feed region ([`PlanOptions::feed`]) planning tracks poses instead ([`feed`]): on
 //! plates with several curved node lines the rest depends on the start position, which the
 //! orientation-set search can only treat as ambiguity.
+//!
+//! For bulk feeding (`plan --copies N`) [`copies`] ranks the planner's candidate plans by how
+//! many of N copies dropped together each orients per minute.
 
 use crate::model::part::Part;
 use crate::model::plate::{Node, PlateModel};
@@ -46,6 +49,7 @@ use crate::motion::sim::Body;
 
 mod cluster;
 mod confirm;
+pub mod copies;
 pub mod dynamic;
 mod failure;
 pub mod feed;
@@ -155,7 +159,7 @@ impl Problem {
 /// Plans: maps, search, durations, position ([`plan_parts`] for one part, its goal
 /// [`PlanOptions::goal_deg`]); with a feed region, by tracking poses from it ([`feed::plan`], no
 /// progress shown). When the maps of [`PlanOptions::maps`] give no plan, the other maps are
-/// tried before giving up ([`fallback`]).
+/// tried before giving up (`fallback`).
 pub fn plan(part: &Part, plate: &PlateModel, opt: &PlanOptions) -> Result<Synthesis, PlanFailure> {
     if let Some(region) = &opt.feed {
         return feed::plan(part, plate, opt, region, &indicatif::ProgressBar::hidden());

@@ -41,7 +41,7 @@ pub struct Synthesis {
     /// Final orientations that plans of at most `max_steps` steps reach (deg; empty for
     /// feed-region plans).
     pub reachable_deg: Vec<f64>,
-    /// The longest plan considered: the shortest plan's steps + [`PlanOptions::extra_steps`].
+    /// The longest plan considered: the shortest plan's steps + [`PlanOptions::extra_steps`](crate::planner::PlanOptions::extra_steps).
     pub max_steps: usize,
     /// With `fix_position` / `goal_pos_mm`: the largest distance (mm) of a simulated final
     /// centroid from the predicted position.

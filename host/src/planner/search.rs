@@ -6,10 +6,10 @@
 //! state where every set is a single orientation ends a plan.
 //!
 //! Two passes, because the user may ask for more than "the first plan found":
-//! 1. **Reach** ([`Search::reach`]): breadth-first over states, each visited once, down to one
+//! 1. **Reach** (`Search::reach`): breadth-first over states, each visited once, down to one
 //!    step more than the shortest plan ([`PlanOptions::extra_steps`]): which final
 //!    orientations can be reached at all (what an unreachable `--goal-deg` is answered with).
-//! 2. **Select** ([`Search::select`]): a uniform-cost search over (state, last mode, depth)
+//! 2. **Select** (`Search::select`): a uniform-cost search over (state, last mode, depth)
 //!    down to the same depth, the cost being 1 per step ([`Minimize::Steps`]: breadth-first,
 //!    today's behaviour) or the step's duration ([`Minimize::Time`]); the first plan in cost
 //!    order that meets the goal orientations (and a fixed position when asked) wins, or with a

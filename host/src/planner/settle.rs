@@ -35,7 +35,7 @@ pub(crate) fn start_points(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<
 pub struct Settle {
     /// The slowest start (s), lingering ones left out.
     pub settle_s: f64,
-    /// Starts set apart by a gap in the settle times ([`slowest_settled`]): they linger near
+    /// Starts set apart by a gap in the settle times (`slowest_settled`): they linger near
     /// an unstable rest (metastable; their time is unbounded in the model).
     pub lingering: usize,
     /// Start points simulated.
@@ -58,7 +58,7 @@ pub(crate) fn settle_params(mode: &Mode, plate: &PlateModel) -> SimParams {
 }
 
 /// Simulated settle time of a step from the given orientations (deg), from the start points
-/// of [`start_points`]: the slowest start, except lingering ones and those that end on the
+/// of `start_points`: the slowest start, except lingering ones and those that end on the
 /// plate edge (see [`Settle`]).
 pub fn settle_time(body: &Body, mode: &Mode, plate: &PlateModel, orientations: &[f64]) -> Settle {
     let field = FieldModel::new(mode, plate);
@@ -86,7 +86,7 @@ pub fn settle_time(body: &Body, mode: &Mode, plate: &PlateModel, orientations: &
 }
 
 /// Ratio between consecutive sorted settle times, above the median, beyond which the slower
-/// starts count as lingering (see [`slowest_settled`]).
+/// starts count as lingering (see `slowest_settled`).
 pub const LINGER_GAP: f64 = 3.0;
 
 /// The slowest of some settle times (s) and how many were left out as lingering: those above

@@ -65,7 +65,7 @@ pub struct PhotoParams {
     /// `simplify_px`) zig-zag through scattered grains.
     pub min_radius: f64,
     /// Grain diameter (pixels): above 2 px the grains (lentils) are found as bands of
-    /// separate disks ([`coarse`]) instead of by threshold and skeleton.
+    /// separate disks (`coarse`) instead of by threshold and skeleton.
     pub grain_px: f64,
 }
 

@@ -58,7 +58,7 @@ pub fn write(path: &Path, data: &PlotData) -> Result<(), PlotError> {
     write_chart(path, data)
 }
 
-/// The file types [`write`] can draw.
+/// The file types [`write()`] can draw.
 pub const EXTENSIONS: [&str; 2] = super::FIGURE_EXTENSIONS;
 
 impl Figure for PlotData {

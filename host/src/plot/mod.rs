@@ -6,9 +6,9 @@
 //! `epaint_default_fonts` crate and rendered by plotters' `ab_glyph` backend, registered once
 //! as "sans-serif" by [`ensure_font`] (so plotting needs no system fonts or fontconfig). One
 //! error type, [`PlotError`]. Every figure is written atomically through
-//! [`crate::output::write_with`]. One choice of backend, [`write_chart`]: the file's extension
+//! [`crate::output::write_with`]. One choice of backend, `write_chart`: the file's extension
 //! picks plotters' SVG backend (`.svg`) or its bitmap backend (`.png`), so every figure that
-//! implements [`Figure`] is drawn by the same code in both formats.
+//! implements `Figure` is drawn by the same code in both formats.
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -98,7 +98,7 @@ pub(crate) fn write_figure<E: std::fmt::Display>(
     })
 }
 
-/// The file types every [`Figure`] can be written as.
+/// The file types every `Figure` can be written as.
 pub const FIGURE_EXTENSIONS: [&str; 2] = ["png", "svg"];
 
 /// A figure drawn by the same code on any plotters backend (see [`write_chart`]).

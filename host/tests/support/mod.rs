@@ -1,8 +1,10 @@
-//! The one support module of the host's integration tests: example files, CLI runs, ELF fixtures.
-//! A test file includes it with `mod support;` and uses what it needs.
+//! The one support module of the host's integration tests: example files, CLI runs, the
+//! emulated controller, ELF fixtures. A test file includes it with `mod support;` and uses what
+//! it needs.
 #![allow(dead_code)]
 
 pub mod cli;
 pub mod elf;
+pub mod emu;
 pub mod examples;
 pub mod photos;

@@ -14,6 +14,8 @@
 //! - [`units`]: the one conversion for each pair of units: Hz ↔ mHz ([`units::MilliHz`]),
 //!   amplitude ↔ Q15 ([`units::Q15`]), fixed point and binary angles ↔ `f64`.
 
+#[cfg(test)]
+mod doc_examples;
 pub mod frame;
 pub mod link;
 pub mod plan;
