@@ -20,6 +20,8 @@
 
 use serde::Serialize;
 
+pub mod photos;
+
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
 use crate::motion::contact::Rim;
