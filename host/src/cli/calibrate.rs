@@ -68,6 +68,9 @@ pub struct CalibrateArgs {
     json: bool,
 }
 
+/// What a fit runs on: the parts, the observations and (from photos) the sightings.
+type Series = (Vec<CalPart>, Vec<calibrate::Observation>, Vec<Sighting>);
+
 /// A failure and its `--json` name.
 struct Failure {
     kind: &'static str,
@@ -115,7 +118,7 @@ impl CalibrateArgs {
             )));
         };
         let (cal, obs, sightings) = match &self.photos {
-            Some(dir) => self.from_photos(&plate, dir)?,
+            Some(dir) => self.photo_series(&plate, dir)?,
             None => {
                 let (parts, obs) = self.observations(&plate)?;
                 (parts.iter().map(CalPart::new).collect(), obs, Vec::new())
@@ -167,11 +170,7 @@ impl CalibrateArgs {
 
     /// The one part, its observations and sightings from the photos in `dir` (every problem
     /// bad input, named by [`PhotoSeriesError::name`]).
-    fn from_photos(
-        &self,
-        plate: &PlateModel,
-        dir: &Path,
-    ) -> Result<(Vec<CalPart>, Vec<calibrate::Observation>, Vec<Sighting>), Failure> {
+    fn photo_series(&self, plate: &PlateModel, dir: &Path) -> Result<Series, Failure> {
         let [path] = &self.part[..] else {
             return Err(bad(format!(
                 "--photos needs exactly one --part (the part photographed), got {}",
