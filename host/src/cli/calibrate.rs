@@ -10,6 +10,7 @@ use chladni::model::part::Part;
 use chladni::model::plate::PlateModel;
 use chladni::model::plate_edit;
 use chladni::output::write_atomic;
+use chladni::vision::series::{self as photos, PhotoSeriesError, Sighting};
 use chladni::plate::calibrate::{self, CalPart, DEFAULT_WITHIN_MM, Fit, FitError};
 use clap::Args;
 use serde_json::json;
@@ -26,10 +27,33 @@ pub struct CalibrateArgs {
     #[arg(long, value_name = "NAME")]
     mode: String,
     /// Observations (CSV: part,x_mm,y_mm,theta_deg,t_s[,end_x_mm,end_y_mm,end_theta_deg]).
-    #[arg(long, value_name = "obs.csv")]
-    observations: PathBuf,
+    #[arg(
+        long,
+        value_name = "obs.csv",
+        required_unless_present = "photos",
+        conflicts_with = "photos"
+    )]
+    observations: Option<PathBuf>,
+    /// Instead of a CSV: a directory of timestamped photos (PNG, the time in each file name,
+    /// e.g. t012.500.png or run_12500ms.png) of one part (--part) moving on the plate.
+    #[arg(long, value_name = "DIR")]
+    photos: Option<PathBuf>,
+    /// With --photos: the plate's size W H in the photos (mm); default the plate file's.
+    #[arg(long, num_args = 2, value_names = ["W", "H"], requires = "photos")]
+    size_mm: Option<Vec<f64>>,
+    /// With --photos: the plate's corners in every photo (px, as `chladni locate` takes them);
+    /// found in each photo when not given.
+    #[arg(
+        long,
+        num_args = 8,
+        allow_negative_numbers = true,
+        requires = "photos",
+        value_names = ["X0", "Y0", "X1", "Y1", "X2", "Y2", "X3", "Y3"]
+    )]
+    corners: Option<Vec<f64>>,
     /// Part files the CSV's `part` column may name (by path, file name or part name); other
-    /// names are part files relative to the CSV's directory.
+    /// names are part files relative to the CSV's directory. With --photos: the one part
+    /// photographed.
     #[arg(long, value_name = "P.json", num_args = 1..)]
     part: Vec<PathBuf>,
     /// A part counts as on the node when its centroid is this close to where it comes to
@@ -43,6 +67,9 @@ pub struct CalibrateArgs {
     #[arg(long)]
     json: bool,
 }
+
+/// What a fit runs on: the parts, the observations and (from photos) the sightings.
+type Series = (Vec<CalPart>, Vec<calibrate::Observation>, Vec<Sighting>);
 
 /// A failure and its `--json` name.
 struct Failure {
@@ -90,8 +117,13 @@ impl CalibrateArgs {
                 names.join(", ")
             )));
         };
-        let (parts, obs) = self.observations(&plate)?;
-        let cal: Vec<CalPart> = parts.iter().map(CalPart::new).collect();
+        let (cal, obs, sightings) = match &self.photos {
+            Some(dir) => self.photo_series(&plate, dir)?,
+            None => {
+                let (parts, obs) = self.observations(&plate)?;
+                (parts.iter().map(CalPart::new).collect(), obs, Vec::new())
+            }
+        };
         let fit = calibrate::fit(&cal, &plate, mode, &obs, self.within_mm).map_err(fit_failure)?;
         let m = &plate.modes[mode];
         let written =
@@ -103,9 +135,11 @@ impl CalibrateArgs {
                     "previous_speed_mm_s": m.speed_mm_s, "within_mm": self.within_mm,
                     "speed_mm_s": fit.speed_mm_s, "method": fit.method,
                     "rms_time_s": fit.rms_time_s, "rms_pose_mm": fit.rms_pose_mm,
-                    "residuals": fit.residuals, "written": written})
+                    "residuals": fit.residuals, "written": written,
+                    "photos": self.photos.is_some().then_some(&sightings)})
             );
         } else {
+            print_sightings(&sightings);
             self.print(&plate, mode, &fit, written.as_deref());
         }
         Ok(ExitCode::SUCCESS)
@@ -116,7 +150,10 @@ impl CalibrateArgs {
         &self,
         plate: &PlateModel,
     ) -> Result<(Vec<Part>, Vec<calibrate::Observation>), Failure> {
-        let label = self.observations.display();
+        let Some(csv) = &self.observations else {
+            return Err(bad("give --observations obs.csv or --photos DIR".into()));
+        };
+        let label = csv.display();
         let given = (self.part.iter())
             .map(|p| {
                 Part::load(p)
@@ -124,12 +161,38 @@ impl CalibrateArgs {
                     .map_err(|e| bad(format!("--part {}: {e}", p.display())))
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let rows =
-            observations::load(&self.observations).map_err(|e| bad(format!("{label}: {e}")))?;
+        let rows = observations::load(csv).map_err(|e| bad(format!("{label}: {e}")))?;
         observations::check_on_plate(&rows, plate.size_mm)
             .map_err(|e| bad(format!("{label}: {e}")))?;
-        let dir = self.observations.parent().unwrap_or(Path::new("."));
+        let dir = csv.parent().unwrap_or(Path::new("."));
         observations::resolve(&rows, dir, &given).map_err(|e| bad(format!("{label}: {e}")))
+    }
+
+    /// The one part, its observations and sightings from the photos in `dir` (every problem
+    /// bad input, named by [`PhotoSeriesError::name`]).
+    fn photo_series(&self, plate: &PlateModel, dir: &Path) -> Result<Series, Failure> {
+        let [path] = &self.part[..] else {
+            return Err(bad(format!(
+                "--photos needs exactly one --part (the part photographed), got {}",
+                self.part.len()
+            )));
+        };
+        let part = Part::load(path).map_err(|e| bad(format!("--part {}: {e}", path.display())))?;
+        let size = self.size_mm.as_deref().map_or(plate.size_mm, |s| [s[0], s[1]]);
+        let corners = self
+            .corners
+            .as_deref()
+            .map(|c| [[c[0], c[1]], [c[2], c[3]], [c[4], c[5]], [c[6], c[7]]]);
+        let series = |e: PhotoSeriesError| Failure {
+            kind: e.name(),
+            error: InputError(e.to_string()).into(),
+        };
+        let files = photos::list(dir).map_err(series)?;
+        let sightings = photos::locate_all(&files, &part, size, corners).map_err(series)?;
+        let flipped = sightings.first().is_some_and(|s| s.located.flipped);
+        let mut cal = CalPart::new(&if flipped { part.mirrored() } else { part.clone() });
+        cal.name = part.name.clone();
+        Ok((vec![cal], photos::observations(&sightings), sightings))
     }
 
     /// Writes the speed into the plate file (atomically; everything else kept).
@@ -185,5 +248,22 @@ impl CalibrateArgs {
             Some(path) => println!("written    {path} (speed_mm_s of mode \"{}\")", m.name),
             None => println!("written    nothing (--dry-run)"),
         }
+    }
+}
+
+/// The photos' sightings (nothing for a CSV): the residuals' `line` is the photo's number.
+fn print_sightings(sightings: &[Sighting]) {
+    for (k, s) in sightings.iter().enumerate() {
+        let l = &s.located;
+        println!(
+            "photo {:<4} {:>9.3} s  x {:7.2} mm  y {:7.2} mm  θ {:7.2}°  score {:.2}  {}",
+            k + 1,
+            s.t_s,
+            l.x_mm,
+            l.y_mm,
+            l.theta_deg,
+            l.score,
+            s.file.display()
+        );
     }
 }

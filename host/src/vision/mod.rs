@@ -30,6 +30,7 @@ pub mod corners;
 pub mod fit;
 pub mod plot;
 mod split;
+pub mod series;
 pub mod synth;
 #[cfg(test)]
 mod tests;
