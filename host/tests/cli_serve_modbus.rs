@@ -19,8 +19,6 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-mod support;
-
 use chladni::cell::modbus::{CommandResult, FAULT_LINK_DOWN};
 use chladni::controller::emulator::Emulator;
 use nix::sys::signal::{Signal, kill};
