@@ -10,8 +10,8 @@ use chladni::model::part::Part;
 use chladni::model::plate::PlateModel;
 use chladni::model::plate_edit;
 use chladni::output::write_atomic;
-use chladni::vision::series::{self as photos, PhotoSeriesError, Sighting};
 use chladni::plate::calibrate::{self, CalPart, DEFAULT_WITHIN_MM, Fit, FitError};
+use chladni::vision::series::{self as photos, PhotoSeriesError, Sighting};
 use clap::Args;
 use serde_json::json;
 

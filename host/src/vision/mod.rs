@@ -29,8 +29,8 @@ use crate::plate::photo::rectify::RectifyError;
 pub mod corners;
 pub mod fit;
 pub mod plot;
-mod split;
 pub mod series;
+mod split;
 pub mod synth;
 #[cfg(test)]
 mod tests;

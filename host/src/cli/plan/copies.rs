@@ -1,9 +1,9 @@
 //! `chladni plan --copies N`: the planner's candidates ranked by oriented parts per minute of
 //! N copies dropped together ([`chladni::planner::copies`]); the CLI only wires and prints.
 
-use chladni::planner::copies::{self as bulk_plan, RANK_DROPS, RANK_SEED, RANK_TOL_DEG, Ranked};
 use chladni::model::part::Part;
 use chladni::model::plate::PlateModel;
+use chladni::planner::copies::{self as bulk_plan, RANK_DROPS, RANK_SEED, RANK_TOL_DEG, Ranked};
 use chladni::planner::{PlanOptions, Synthesis};
 
 use super::{PlanArgs, bad};
