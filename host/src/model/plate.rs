@@ -148,7 +148,7 @@ pub struct PlateModel {
 }
 
 /// What is wrong with a `[[mode]]` entry (or the plate as a whole, for planning).
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, thiserror::Error)]
 pub enum ModelError {
     /// A key is wrong; names the mode, key, value and a fix.
     #[error("[[mode]] {index} ({name}): {key} = {value}: {fix}")]
@@ -204,9 +204,17 @@ pub enum ModelError {
         /// Why they cannot be merged.
         why: String,
     },
+    /// A `[[mode]]` table in hand that is not a mode entry (unknown key, wrong type).
+    #[error("[[mode]] {index}: {source}")]
+    Entry {
+        /// 1-based index of the entry.
+        index: usize,
+        /// The deserialiser's message (key, type, position).
+        source: toml::de::Error,
+    },
     /// The file is not a plate file (syntax, types, unknown `[plate]` keys).
-    #[error("{0}")]
-    File(String),
+    #[error(transparent)]
+    File(#[from] PlateFileError),
 }
 
 /// Why [`PlateModel::load`] failed: the file (unreadable, not a plate file) or its modes.
@@ -320,7 +328,7 @@ pub fn check_mode(index: usize, e: &ModeEntry, size_mm: [f64; 2]) -> Result<Mode
 pub fn parse_mode(index: usize, t: &toml::Table, size_mm: [f64; 2]) -> Result<Mode, ModelError> {
     use serde::Deserialize;
     let e = ModeEntry::deserialize(toml::Value::Table(t.clone()))
-        .map_err(|e| ModelError::File(format!("[[mode]] {index}: {e}")))?;
+        .map_err(|source| ModelError::Entry { index, source })?;
     check_mode(index, &e, size_mm)
 }
 
@@ -591,7 +599,7 @@ impl PlateModel {
 
     /// Parses and types a plate file's text (`label` names it in messages).
     pub fn parse(text: &str, label: &str) -> Result<PlateModel, ModelError> {
-        let file = PlateFile::parse(text, label).map_err(|e| ModelError::File(e.to_string()))?;
+        let file = PlateFile::parse(text, label)?;
         PlateModel::from_file(&file)
     }
 
@@ -750,6 +758,6 @@ node = { kind = "grid", nx = 2, ny = 2, values = [1.0, -1.0, 0.5, -0.5] }
             "[[mode]]\nfreq_hz = 50.0\nnode = { kind = \"line\", angle_deg = 0.0, offset_mm = 900.0 }",
         );
         assert!(e.contains("misses the plate"), "{e}");
-        assert_eq!(model("").unwrap_err(), ModelError::NoModes);
+        assert!(matches!(model("").unwrap_err(), ModelError::NoModes));
     }
 }

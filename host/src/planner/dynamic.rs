@@ -32,7 +32,7 @@ use std::sync::{Mutex, OnceLock};
 use rayon::prelude::*;
 
 use super::cluster::{CLUSTER_DEG, Clusters};
-use super::{Backend, StepMap, cdist, line_map};
+use super::{Backend, MapError, StepMap, cdist, line_map};
 use crate::model::field::Law;
 use crate::model::part::Part;
 use crate::model::plate::{Mode, Node, PlateModel};
@@ -161,7 +161,7 @@ impl MapCache {
         period: f64,
         backend: Backend,
         set: DynSettings,
-    ) -> Result<StepMap, String> {
+    ) -> Result<StepMap, MapError> {
         let key = cache_key(part, mode, plate, period, backend, set);
         // A poisoned lock only means another thread panicked while inserting: the map
         // itself is still consistent (inserts are single calls).
@@ -268,7 +268,7 @@ pub fn dynamic_line_map(
     period: f64,
     backend: Backend,
     set: DynSettings,
-) -> Result<StepMap, String> {
+) -> Result<StepMap, MapError> {
     let statics = line_map(part, mode, backend)?;
     // Every orientation at rest (statically) also means no moment while crossing.
     if statics.neutral {

@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use chladni_shared::analysis::field::Field;
 use chladni_shared::analysis::fx::Fx;
 use chladni_shared::analysis::geometry::Pt;
-use chladni_shared::analysis::rest::Analyzer;
+use chladni_shared::analysis::rest::{AnalysisError, Analyzer};
 use chladni_shared::icd::units::deg_from_bam;
 
 use super::cluster::{CLUSTER_DEG, Clusters};
@@ -152,10 +152,37 @@ pub fn rim_line(radius: f64, mode: &Mode, plate: &PlateModel) -> bool {
     d.iter().all(|&x| x > 0.0) || d.iter().all(|&x| x < 0.0)
 }
 
+/// Why a straight-node map could not be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MapError {
+    /// The mode's node is not a straight line (curved and grid nodes are mapped by simulation).
+    #[error("{mode}: not a line node")]
+    NotALine {
+        /// The mode's name.
+        mode: String,
+    },
+    /// The fixed-point analysis refused the part (outline, normalisation) for this mode.
+    #[error("{mode}: cannot analyse: {error:?}")]
+    Refused {
+        /// The mode's name.
+        mode: String,
+        /// The shared analysis' error.
+        error: AnalysisError,
+    },
+    /// The fixed-point analysis started but could not finish (no root bracketed, overflow).
+    #[error("{mode}: analysis failed: {error:?}")]
+    Failed {
+        /// The mode's name.
+        mode: String,
+        /// The shared analysis' error.
+        error: AnalysisError,
+    },
+}
+
 /// A straight-node map from the shared fixed-point analysis or the f64 reference.
-pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, String> {
+pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, MapError> {
     let Node::Line { angle_deg, .. } = mode.node else {
-        return Err("not a line node".into());
+        return Err(MapError::NotALine { mode: mode.name.clone() });
     };
     let to_plate = |d: f64| (d + angle_deg - 90.0).rem_euclid(360.0);
     let (mut stable, mut boundaries, neutral) = (Vec::new(), Vec::new(), false);
@@ -170,8 +197,10 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, S
                 gain_right: Fx::from_f64(mode.gain_right),
             };
             let an = Analyzer::new(&slices, field)
-                .map_err(|e| format!("{}: cannot analyse: {e:?}", mode.name))?;
-            let a = an.analyze().map_err(|e| format!("{}: analysis failed: {e:?}", mode.name))?;
+                .map_err(|error| MapError::Refused { mode: mode.name.clone(), error })?;
+            let a = an
+                .analyze()
+                .map_err(|error| MapError::Failed { mode: mode.name.clone(), error })?;
             if a.neutral {
                 return Ok(StepMap::neutral());
             }

@@ -72,7 +72,7 @@ pub use crate::model::angle::cdist;
 pub use confirm::{confirm, confirm_any};
 pub use failure::PlanFailure;
 pub use input::{MAX_PLAN_VERTICES, PlanInputError, check_input, plan_name};
-pub use maps::{StepMap, line_map, map_starts, rim_line, sampled_map};
+pub use maps::{MapError, StepMap, line_map, map_starts, rim_line, sampled_map};
 pub(crate) use maps::{balance_offset, on_plate_edge};
 pub use options::{Backend, PlanOptions};
 pub use result::{PlannedStep, Synthesis};
@@ -121,7 +121,7 @@ impl Problem {
             .inspect(|(k, _)| progress(&format!("{}: step maps", part.name), *k, n))
             .map(|(_, mode)| match mode.node {
                 Node::Line { .. } => line_map_of(part, mode, plate, period, opt, opt.maps)
-                    .map_err(PlanFailure::Model),
+                    .map_err(|e| PlanFailure::Model(e.to_string())),
                 _ => Ok(sampled_map(&body, mode, plate, opt.sim_starts, period)),
             })
             .collect::<Result<Vec<_>, _>>()?;
@@ -214,7 +214,7 @@ pub(crate) fn remapped(
             _ => Ok(map.clone()),
         })
         .collect::<Result<Vec<_>, _>>()
-        .map_err(PlanFailure::Model)?;
+        .map_err(|e| PlanFailure::Model(e.to_string()))?;
     Ok(Problem { maps, ..problem.clone() })
 }
 
@@ -228,7 +228,7 @@ fn line_map_of(
     period: f64,
     opt: &PlanOptions,
     kind: MapKind,
-) -> Result<StepMap, String> {
+) -> Result<StepMap, MapError> {
     let body = Body::with_samples(part, 160);
     if rim_line(body.radius, mode, plate) {
         return Ok(sampled_map(&body, mode, plate, opt.sim_starts, period));

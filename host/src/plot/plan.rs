@@ -139,7 +139,7 @@ where
 pub type Example = Vec<Pose>;
 
 /// The plan figure: `examples[r][k]` is the pose before step k (and `[steps]` the end).
-/// PNG or SVG by the extension of `path` (see [`super::write_chart`]).
+/// PNG or SVG by the extension of `path` (see `plot::write_chart`).
 pub fn plan_figure(
     path: &Path,
     title: &str,

@@ -7,7 +7,7 @@
 //! as parts that are not verified; blobs that match no part are listed and not counted.
 //!
 //! The judgement is [`Check::judge`], pure data: the CLI and the cell load the plan and the
-//! parts once ([`Check::new`]) and judge each photo's [`Report`](super::Report).
+//! parts once ([`Check::new`]) and judge each photo's [`Report`].
 
 use image::{GrayImage, Rgb, RgbImage};
 use imageproc::drawing::draw_line_segment_mut;
