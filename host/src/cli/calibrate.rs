@@ -72,10 +72,7 @@ pub struct CalibrateArgs {
 type Series = (Vec<CalPart>, Vec<calibrate::Observation>, Vec<Sighting>);
 
 /// A failure and its `--json` name.
-struct Failure {
-    kind: &'static str,
-    error: anyhow::Error,
-}
+use super::Failure;
 
 fn bad(msg: String) -> Failure {
     Failure { kind: "bad_input", error: InputError(msg).into() }
@@ -95,14 +92,7 @@ fn fit_failure(e: FitError) -> Failure {
 
 impl CalibrateArgs {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
-        self.calibrate().map_err(|f| {
-            if self.json {
-                super::print_failure_value(
-                    json!({"error": f.kind, "message": format!("{:#}", f.error)}),
-                );
-            }
-            f.error
-        })
+        self.calibrate().map_err(|f| f.report(self.json))
     }
 
     fn calibrate(&self) -> Result<ExitCode, Failure> {

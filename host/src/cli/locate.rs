@@ -8,7 +8,6 @@ use chladni::model::part::Part;
 use chladni::plate::photo;
 use chladni::vision::{self, Report, Template};
 use clap::Args;
-use serde_json::json;
 
 use super::{InputError, check_plot, output_error};
 
@@ -41,11 +40,7 @@ pub struct LocateArgs {
     plot: Option<PathBuf>,
 }
 
-/// A failure and its `--json` name.
-pub(crate) struct Failure {
-    pub kind: &'static str,
-    pub error: anyhow::Error,
-}
+pub(crate) use super::Failure;
 
 pub(crate) fn bad(kind: &'static str, msg: String) -> Failure {
     Failure { kind, error: InputError(msg).into() }
@@ -94,14 +89,7 @@ pub(crate) fn write_plot(path: &std::path::Path, seen: &Seen, h_mm: f64) -> Resu
 
 impl LocateArgs {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
-        self.locate().map_err(|f| {
-            if self.json {
-                super::print_failure_value(
-                    json!({"error": f.kind, "message": format!("{:#}", f.error)}),
-                );
-            }
-            f.error
-        })
+        self.locate().map_err(|f| f.report(self.json))
     }
 
     fn locate(&self) -> Result<ExitCode, Failure> {

@@ -84,6 +84,24 @@ pub fn print_failure_value(value: serde_json::Value) {
     println!("{value}");
 }
 
+/// A command's failure and its `--json` name (`locate`, `verify`, `plate calibrate-speed`).
+pub(crate) struct Failure {
+    pub kind: &'static str,
+    pub error: anyhow::Error,
+}
+
+impl Failure {
+    /// The error for `main`, after printing the one `--json` failure object when asked.
+    pub(crate) fn report(self, json: bool) -> anyhow::Error {
+        if json {
+            print_failure_value(
+                serde_json::json!({"error": self.kind, "message": format!("{:#}", self.error)}),
+            );
+        }
+        self.error
+    }
+}
+
 /// Has a failure object been printed already?
 pub fn failure_json_printed() -> bool {
     FAILURE_JSON_PRINTED.load(std::sync::atomic::Ordering::Relaxed)

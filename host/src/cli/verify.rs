@@ -12,7 +12,6 @@ use chladni::model::plate::PlateModel;
 use chladni::motion::steps::{PlanStepsError, plan_steps};
 use chladni::vision::verify::{self, Check, Outcome, Verification};
 use clap::Args;
-use serde_json::json;
 
 use super::check_plot;
 use super::locate::{Failure, bad, see};
@@ -62,14 +61,7 @@ const SIZE_AGREEMENT_MM: f64 = 0.5;
 
 impl VerifyArgs {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
-        self.verify().map_err(|f| {
-            if self.json {
-                super::print_failure_value(
-                    json!({"error": f.kind, "message": format!("{:#}", f.error)}),
-                );
-            }
-            f.error
-        })
+        self.verify().map_err(|f| f.report(self.json))
     }
 
     /// The plate's size (checked against --size-mm) and the check of the plan for the parts.
