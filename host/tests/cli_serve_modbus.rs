@@ -117,10 +117,22 @@ fn post_photo(address: SocketAddr) {
     assert!(response.starts_with("HTTP/1.1 200"), "{response}");
 }
 
-/// Polls `/api/status` every 50 ms until `stop`; every answer's (state, last_run, device run).
+/// Polls `/api/status` every 50 ms until `stop`, and after `stop` until the cell no longer says
+/// busy (the PLC may see done a poll before HTTP does; 5 s at most): every answer's (state,
+/// last_run, device run).
 fn poll_http(address: SocketAddr, stop: Arc<AtomicBool>) -> Vec<(String, u64, u64)> {
-    let mut seen = Vec::new();
-    while !stop.load(Ordering::Relaxed) {
+    let mut seen: Vec<(String, u64, u64)> = Vec::new();
+    let mut stopped_at = None;
+    loop {
+        if stopped_at.is_none() && stop.load(Ordering::Relaxed) {
+            stopped_at = Some(Instant::now());
+        }
+        if let Some(at) = stopped_at {
+            let settled = seen.last().is_some_and(|s| s.0 != "busy");
+            if settled || at.elapsed() > Duration::from_secs(5) {
+                return seen;
+            }
+        }
         let (code, status) = http_status(address);
         assert_eq!(code, 200, "{status}");
         let state = status["state"].as_str().unwrap_or_default().to_owned();
@@ -129,7 +141,6 @@ fn poll_http(address: SocketAddr, stop: Arc<AtomicBool>) -> Vec<(String, u64, u6
         seen.push((state, last_run, device_run));
         std::thread::sleep(Duration::from_millis(50));
     }
-    seen
 }
 
 /// What the HTTP client saw while the PLC ran the plan: the same run, busy then done, and the
