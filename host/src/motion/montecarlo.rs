@@ -333,7 +333,12 @@ mod tests {
         let report = Report::new(&stats, &plan, 8, 3, 5.0);
         let v = serde_json::to_value(&report).unwrap();
         let keys: Vec<&str> = v.as_object().unwrap().keys().map(String::as_str).collect();
-        assert_eq!(keys.len(), 12);
+        assert_eq!(keys.len(), 14);
+        // The simulated final pose: at the node, at the predicted orientation.
+        let (t, p) = plan.final_orientation_deg.zip(plan.period_deg).unwrap();
+        let mean = v["mean_final_orientation_deg"].as_f64().unwrap();
+        assert!(crate::model::angle::signed_diff(mean, t, p).abs() < 1.0, "{v}");
+        assert!((v["mean_final_position_mm"][0].as_f64().unwrap() - 150.0).abs() < 0.5, "{v}");
         assert_eq!(v["lost"], 0);
         assert_eq!(v["missed"], 0);
         assert!(v["position_error_mm"].is_null());
