@@ -115,3 +115,25 @@ fn a_long_part_name_is_cut_with_a_warning() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["name"].as_str().unwrap(), "n".repeat(32));
 }
+
+#[test]
+fn a_part_that_fits_the_plate_in_no_orientation_is_refused() {
+    // 400 × 30 mm: narrower than the 300 × 200 mm plate, longer than its diagonal (361 mm).
+    let long = file(
+        "fits-nowhere.json",
+        r#"{"name": "long", "outline": [[0,0],[400,0],[400,30],[0,30]]}"#,
+    );
+    // 320 × 20 mm fits only turned (about 30°): simulated, not refused.
+    let turned =
+        file("turned.json", r#"{"name": "turned", "outline": [[0,0],[320,0],[320,20],[0,20]]}"#);
+    let (plate, plan) = (ex("plates/four-lines.toml"), ex("plans/triangle-four-lines.json"));
+    let err = refused(&["plan", &long, "--plate", &plate]);
+    assert!(err.contains("part long fits the 300 × 200 mm plate in no orientation"), "{err}");
+    let sim = |part: &str| {
+        ["simulate", part, "--plate", &plate, "--plan", &plan, "--trials", "2"].map(String::from)
+    };
+    let err = refused(&sim(&long).each_ref().map(String::as_str));
+    assert!(err.contains("even turned by"), "{err}");
+    let out = chladni(&sim(&turned).each_ref().map(String::as_str));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}

@@ -1,7 +1,7 @@
 //! The f64 reference for the rest analysis of `chladni_shared::analysis::rest`, written independently
 //! on purpose: explicit Sutherland–Hodgman clipping of every ring at the node, side
 //! integrals by Gauss–Legendre quadrature of Green's boundary integrals (exact for the
-//! polynomial laws, ~1e-15 for the sine law), balance by plain bisection, roots by dense
+//! polynomial laws, ~1e-15 for the sine law), balance by false position on a bracket, roots by dense
 //! sampling (0.5°) over the full turn and bisection. Slow and simple; used by the tests to
 //! check the fixed-point code (agreement within 0.05° on stable orientations).
 
@@ -114,18 +114,42 @@ impl Reference {
         (force, moment)
     }
 
-    /// Balance offset and t(θ) (bisection).
+    /// Balance offset and t(θ): F is decreasing in s, positive with the part wholly left of
+    /// the node and negative wholly right of it, so the root is bracketed in ±R. Illinois
+    /// false position on that bracket (a secant step, the end kept twice in a row has its
+    /// value halved), down to 10⁻¹² R: a few tens of evaluations where plain bisection took
+    /// sixty; the fixed-point code's own method is Newton on its exact ∂F/∂s.
     pub fn balance(&self, deg: f64) -> (f64, f64) {
         let (mut lo, mut hi) = (-self.radius * 1.001, self.radius * 1.001);
-        for _ in 0..60 {
-            let mid = 0.5 * (lo + hi);
-            if self.force_moment(deg, mid).0 > 0.0 {
-                lo = mid;
+        let (mut f_lo, mut f_hi) = (self.force_moment(deg, lo).0, self.force_moment(deg, hi).0);
+        let tol = 1e-12 * self.radius;
+        let mut kept = 0i8; // which end was kept last: −1 lo, 1 hi
+        let mut s = 0.5 * (lo + hi);
+        for _ in 0..200 {
+            let secant = (lo * f_hi - hi * f_lo) / (f_hi - f_lo);
+            s = if secant > lo && secant < hi { secant } else { 0.5 * (lo + hi) };
+            let f = self.force_moment(deg, s).0;
+            if f == 0.0 {
+                break;
+            }
+            if f > 0.0 {
+                (lo, f_lo) = (s, f);
+                if kept == 1 {
+                    f_hi *= 0.5;
+                }
+                kept = 1;
             } else {
-                hi = mid;
+                (hi, f_hi) = (s, f);
+                if kept == -1 {
+                    f_lo *= 0.5;
+                }
+                kept = -1;
+            }
+            if hi - lo <= tol {
+                s = 0.5 * (lo + hi);
+                break;
             }
         }
-        let s = 0.5 * (lo + hi);
         (s, self.force_moment(deg, s).1)
     }
 

@@ -222,6 +222,7 @@ impl PlanArgs {
         let plate = load_plate(&self.plate)?;
         for part in &given {
             planner::check_input(part, &plate).map_err(|e| bad(e.to_string()))?;
+            check_fits(part, &plate)?;
         }
         let name = given.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join("+");
         let faces = mirror::faces(&given, self.both_faces);
@@ -329,6 +330,24 @@ impl PlanArgs {
             }
         }
     }
+}
+
+/// A part that fits the plate in no orientation is refused: the model cannot hold it (the
+/// rim would pinch it on opposite sides) and no plan moves it ([`Rim::best_fit`]).
+///
+/// [`Rim::best_fit`]: chladni::motion::contact::Rim::best_fit
+fn check_fits(part: &Part, plate: &PlateModel) -> anyhow::Result<()> {
+    let rim = chladni::motion::contact::Rim::of(plate);
+    let (deg, over) = rim.best_fit(&Body::new(part));
+    if over > 0.0 {
+        let [w, h] = plate.size_mm;
+        return Err(bad(format!(
+            "part {} fits the {w} × {h} mm plate in no orientation: even turned by {deg}° its \
+             bounding box is {over:.1} mm too large (a smaller part, or a larger plate)",
+            part.name
+        )));
+    }
+    Ok(())
 }
 
 /// Device limits apply at `device upload`: here they are a warning (research first).
@@ -547,6 +566,7 @@ impl SimulateArgs {
         let plate = load_plate(&self.plate)?;
         for part in &given {
             planner::check_input(part, &plate).map_err(|e| bad(e.to_string()))?;
+            check_fits(part, &plate)?;
         }
         let faces = mirror::faces(&given, self.both_faces);
         if self.plot.is_some() && faces.parts.len() > 1 {

@@ -43,6 +43,30 @@ impl Rim {
         Rim { size_mm: plate.size_mm, edge: plate.edge, friction: plate.friction }
     }
 
+    /// The orientation (degrees, 0.5° apart) at which the part's bounding box is least
+    /// over the plate, and by how much (mm, the larger of the two overshoots; ≤ 0 when the
+    /// part fits inside the plate there). A part with no orientation that fits can never lie
+    /// on the plate: the wall would have to hold it on two opposite sides at once.
+    pub fn best_fit(&self, body: &Body) -> (f64, f64) {
+        let [w, h] = self.size_mm;
+        let over = |deg: f64| {
+            let (s, c) = deg.to_radians().sin_cos();
+            let mut lo = [f64::INFINITY; 2];
+            let mut hi = [f64::NEG_INFINITY; 2];
+            for p in body.rings.iter().flatten() {
+                let q = [c * p[0] - s * p[1], s * p[0] + c * p[1]];
+                for k in 0..2 {
+                    (lo[k], hi[k]) = (lo[k].min(q[k]), hi[k].max(q[k]));
+                }
+            }
+            (hi[0] - lo[0] - w).max(hi[1] - lo[1] - h)
+        };
+        (0..360)
+            .map(|k| (k as f64 * 0.5, over(k as f64 * 0.5)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .unwrap_or((0.0, 0.0))
+    }
+
     /// Is the part's bounding circle clear of every edge by more than the contact gap?
     /// (Then nothing touches: the free path.)
     fn clear(&self, body: &Body, q: Pose) -> bool {
@@ -188,6 +212,22 @@ mod tests {
 
     fn rim(friction: f64) -> Rim {
         Rim { size_mm: [W, H], edge: Edge::Wall, friction }
+    }
+
+    #[test]
+    fn a_part_fits_when_some_turn_of_its_box_fits_the_plate() {
+        let bar = |l: f64, t: f64| {
+            let ring = vec![[0.0, 0.0], [l, 0.0], [l, t], [0.0, t]];
+            Body::new(&crate::model::part::Part::new("bar".into(), ring, vec![]).unwrap())
+        };
+        let r = rim(0.3);
+        // On 300 × 200 mm: 290 × 30 fits lying along x, 320 × 20 only turned, 340 × 30 and
+        // 400 × 30 (longer than the 361 mm diagonal) never.
+        assert!(r.best_fit(&bar(290.0, 30.0)).1 <= 0.0);
+        assert!(r.best_fit(&bar(340.0, 30.0)).1 > 0.0);
+        let (deg, over) = r.best_fit(&bar(320.0, 20.0));
+        assert!(over <= 0.0 && deg > 0.0 && deg < 90.0, "{deg} {over}");
+        assert!(r.best_fit(&bar(400.0, 30.0)).1 > 0.0);
     }
 
     fn params(r: Option<Rim>) -> SimParams {

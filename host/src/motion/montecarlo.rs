@@ -152,6 +152,9 @@ pub struct Stats {
     pub position_error_mm: Option<RmsMax>,
     /// Mean final centroid (mm).
     pub mean_position_mm: [f64; 2],
+    /// Circular mean of the final orientations modulo the plan's period (360° when it
+    /// predicts none), in [0, period) degrees.
+    pub mean_orientation_deg: f64,
     /// RMS distance of the final centroids from their mean (mm).
     pub position_spread_mm: f64,
     /// Start poses of the trials that missed the predicted orientation: where a plan's reach
@@ -171,6 +174,7 @@ pub fn statistics(trials: &Trials, plan: &PlanFile, tol_deg: f64) -> Stats {
         orientation_error_deg: None,
         position_error_mm: None,
         mean_position_mm: [0.0; 2],
+        mean_orientation_deg: circular_mean_deg(finals, plan.period_deg.unwrap_or(360.0)),
         position_spread_mm: 0.0,
         misses: Vec::new(),
         lost: trials.lost.iter().filter(|&&l| l).count(),
@@ -201,6 +205,18 @@ pub fn statistics(trials: &Trials, plan: &PlanFile, tol_deg: f64) -> Stats {
     stats
 }
 
+/// The circular mean of the orientations of `poses` modulo `period_deg` (degrees, in
+/// [0, period)): each θ mapped to the angle 360° · θ / period on the circle, averaged as unit
+/// vectors, mapped back; 0 for no poses (or a mean vector of length 0).
+fn circular_mean_deg(poses: &[Pose], period_deg: f64) -> f64 {
+    let k = 360.0 / period_deg;
+    let (s, c) = poses.iter().fold((0.0, 0.0), |(s, c), q| {
+        let (a, b) = (k * q.theta).sin_cos();
+        (s + a, c + b)
+    });
+    (s.atan2(c).to_degrees() / k).rem_euclid(period_deg)
+}
+
 /// Rounds to 1e-6 (the report's resolution).
 fn r6(v: f64) -> f64 {
     (v * 1e6).round() / 1e6
@@ -213,6 +229,10 @@ pub struct Report {
     pub final_orientation_deg: Option<f64>,
     /// Trials that fell off an open edge (always 0 with a wall; also counted as missed).
     pub lost: usize,
+    /// The simulated final orientation: the circular mean of the trials' modulo the period.
+    pub mean_final_orientation_deg: f64,
+    /// The simulated final position: the mean of the trials' final centroids (mm).
+    pub mean_final_position_mm: [f64; 2],
     /// Number of trials that missed.
     pub missed: usize,
     /// The first [`MAX_LISTED_MISSES`] missed trials' start poses: `[x_mm, y_mm, θ_deg]`.
@@ -242,6 +262,8 @@ impl Report {
         Report {
             final_orientation_deg: target.map(|t| t.0),
             lost: stats.lost,
+            mean_final_orientation_deg: r6(stats.mean_orientation_deg),
+            mean_final_position_mm: stats.mean_position_mm.map(r6),
             missed: stats.misses.len(),
             missed_starts: (stats.misses.iter().take(MAX_LISTED_MISSES))
                 .map(|q| [r6(q.x), r6(q.y), r6(q.theta.to_degrees())])
@@ -311,7 +333,12 @@ mod tests {
         let report = Report::new(&stats, &plan, 8, 3, 5.0);
         let v = serde_json::to_value(&report).unwrap();
         let keys: Vec<&str> = v.as_object().unwrap().keys().map(String::as_str).collect();
-        assert_eq!(keys.len(), 12);
+        assert_eq!(keys.len(), 14);
+        // The simulated final pose: at the node, at the predicted orientation.
+        let (t, p) = plan.final_orientation_deg.zip(plan.period_deg).unwrap();
+        let mean = v["mean_final_orientation_deg"].as_f64().unwrap();
+        assert!(crate::model::angle::signed_diff(mean, t, p).abs() < 1.0, "{v}");
+        assert!((v["mean_final_position_mm"][0].as_f64().unwrap() - 150.0).abs() < 0.5, "{v}");
         assert_eq!(v["lost"], 0);
         assert_eq!(v["missed"], 0);
         assert!(v["position_error_mm"].is_null());

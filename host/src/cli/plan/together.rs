@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use chladni::model::feed_region::FeedRegion;
 use chladni::model::part::Part;
-use chladni::model::part::mirror::Faces;
+use chladni::model::part::mirror::{Face, Faces};
 use chladni::model::plan_file::PlanFile;
 use chladni::model::plate::PlateModel;
 use chladni::motion::bulk::{self, BulkReport, CannotPlace, Drop, Drops};
@@ -39,8 +39,13 @@ fn drop_bar(n: u32, hidden: bool) -> indicatif::ProgressBar {
 }
 
 impl SimulateArgs {
-    /// The drops of `bodies` from the seed, each a run of the plan with contacts.
-    fn drops(&self, bodies: &[&Body], sim: &Sim<'_>) -> Result<Drops, CannotPlace> {
+    /// `n` drops of `bodies` from `seed`, each a run of the plan with contacts.
+    fn drops(
+        &self,
+        bodies: &[&Body],
+        sim: &Sim<'_>,
+        (n, seed): (u32, u64),
+    ) -> Result<Drops, CannotPlace> {
         let pieces: Vec<Pieces> = bodies.iter().map(|b| Pieces::of(b)).collect();
         let refs: Vec<&Pieces> = pieces.iter().collect();
         let d = Drop {
@@ -51,8 +56,8 @@ impl SimulateArgs {
             steps: sim.steps,
             feed: sim.feed,
         };
-        let bar = drop_bar(self.trials, self.json);
-        let out = bulk::run_drops(&d, self.trials, self.seed, || bar.inc(1));
+        let bar = drop_bar(n, self.json);
+        let out = bulk::run_drops(&d, n, seed, || bar.inc(1));
         bar.finish_and_clear();
         out
     }
@@ -69,31 +74,54 @@ impl SimulateArgs {
         bad(e.to_string())
     }
 
-    /// A plan for several parts, none of them on both faces: every trial drops all of them
-    /// together (one each); each part's trials, in the plan's order. `None`: one part, or
-    /// faces (a part lands on one face or the other, so its faces run as separate trials).
+    /// A plan for several parts: every trial drops all of them together (one each, contacts
+    /// between them); each face's trials, in the plan's order. A part planned on both faces
+    /// lies face up in the first ⌈N/2⌉ drops and flipped in the other ⌊N/2⌋ (the seeds of
+    /// [`face_trials`](super::face_trials)), every other part in all N. `None`: one part
+    /// (on one face or on both: its faces never meet, so they run as separate trials).
     pub(super) fn together(
         &self,
         parts: &[Part],
         faces: &Faces,
         sim: &Sim<'_>,
     ) -> anyhow::Result<Option<Vec<Trials>>> {
-        if parts.len() < 2 || faces.of.iter().any(|o| o.face.is_some()) {
+        let sources = faces.of.iter().map(|o| o.source + 1).max().unwrap_or(0);
+        if sources < 2 {
             return Ok(None);
         }
-        let bodies: Vec<Body> = parts.iter().map(Body::new).collect();
-        let refs: Vec<&Body> = bodies.iter().collect();
-        let drops = self.drops(&refs, sim).map_err(|e| self.cannot_place(&e))?;
+        let runs = super::face_trials(faces, self.trials, self.seed);
+        let mut out = vec![Trials::default(); parts.len()];
+        let mut overlap: f64 = 0.0;
+        for (face, (n, seed)) in face_groups(faces, &runs) {
+            // The entries on the plate in this group: the parts that do not flip, and the
+            // flipping parts on this face.
+            let on: Vec<usize> =
+                (0..parts.len()).filter(|&i| faces.of[i].face.is_none_or(|f| f == face)).collect();
+            let bodies: Vec<Body> = on.iter().map(|&i| Body::new(&parts[i])).collect();
+            let refs: Vec<&Body> = bodies.iter().collect();
+            let drops = self.drops(&refs, sim, (n, seed)).map_err(|e| self.cannot_place(&e))?;
+            overlap = overlap.max(drops.max_overlap_mm);
+            for (&i, t) in on.iter().zip(drops.per_body) {
+                append(&mut out[i], t);
+            }
+        }
         if !self.json {
+            let split = if faces.of.iter().any(|o| o.face.is_some()) {
+                format!(
+                    " (parts on both faces: face up in {}, flipped in {})",
+                    self.trials.div_ceil(2),
+                    self.trials / 2
+                )
+            } else {
+                String::new()
+            };
             println!(
-                "together   {} parts in each of {} trials, seed {}; deepest final overlap {:.4} mm",
-                parts.len(),
-                self.trials,
-                self.seed,
-                drops.max_overlap_mm
+                "together   {sources} parts in each of {} trials, seed {}{split}; deepest final \
+                 overlap {overlap:.4} mm",
+                self.trials, self.seed,
             );
         }
-        Ok(Some(drops.per_body))
+        Ok(Some(out))
     }
 
     /// `--copies N`: N copies of one part in each of `--trials` drops.
@@ -117,7 +145,9 @@ impl SimulateArgs {
         }
         let body = Body::new(part);
         let bodies = vec![&body; n as usize];
-        let drops = self.drops(&bodies, sim).map_err(|e| self.cannot_place(&e))?;
+        let drops = self
+            .drops(&bodies, sim, (self.trials, self.seed))
+            .map_err(|e| self.cannot_place(&e))?;
         let report = BulkReport::new(&drops, view, sim.steps, self.seed, self.tol_deg);
         if self.json {
             println!("{}", serde_json::to_string(&report)?);
@@ -143,5 +173,29 @@ impl SimulateArgs {
         println!("lost       {} copies off an open edge", report.lost);
         println!("overlap    deepest final {:.4} mm", report.max_overlap_mm);
         Ok(ExitCode::SUCCESS)
+    }
+}
+
+/// The groups of drops of a plan for several parts: with no part on both faces one group,
+/// every part in all the trials; else the face-up group and the flipped group, each with
+/// the trials and seed of that face (`runs`: [`face_trials`](super::face_trials)).
+fn face_groups(faces: &Faces, runs: &[(u32, u64)]) -> Vec<(Face, (u32, u64))> {
+    let of = |face: Face| faces.of.iter().position(|o| o.face == Some(face)).map(|i| runs[i]);
+    match (of(Face::Up), of(Face::Flipped)) {
+        (Some(up), Some(flipped)) => vec![(Face::Up, up), (Face::Flipped, flipped)],
+        _ => vec![(Face::Up, runs.first().copied().unwrap_or_default())],
+    }
+}
+
+/// Appends `more` trials to `to` (starts, finals, lost and poses at steps; a group's drops
+/// keep no traces).
+fn append(to: &mut Trials, more: Trials) {
+    to.starts.extend(more.starts);
+    to.finals.extend(more.finals);
+    to.lost.extend(more.lost);
+    to.examples.extend(more.examples);
+    to.traces.extend(more.traces);
+    if to.step_ends.is_empty() {
+        to.step_ends = more.step_ends;
     }
 }
