@@ -37,8 +37,20 @@ fn a_part_on_both_faces_is_simulated_together_with_the_other_part_per_face() {
     let (other, plate_path) = (ex("parts/plate-with-hole.json"), ex("plates/six-lines.toml"));
     let plan = tmp("faces-together", "plan.json");
     let plan_s = plan.to_str().unwrap();
-    let out = chladni(&["plan", &tri_path, &other, "--plate", &plate_path, "--out", plan_s]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out =
+        chladni(&["plan", &tri_path, &other, "--plate", &plate_path, "--out", plan_s, "--json"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    // The planner sends both parts to one node crossing: their predicted ends overlap, and
+    // the plan says so (the simulation below keeps them apart).
+    let printed: serde_json::Value = serde_json::from_slice(&out.stdout).expect("plan --json");
+    let overlaps = printed["end_overlaps"].as_array().expect("end_overlaps");
+    assert!(
+        overlaps.iter().any(|o| o["parts"] == serde_json::json!(["triangle", "plate with hole"])
+            && o["depth_mm"].as_f64().is_some_and(|d| d > 1.0)),
+        "{printed}"
+    );
+    assert!(stderr.contains("predicted to end overlapping"), "{stderr}");
     let file = PlanFile::parse(&std::fs::read_to_string(&plan).unwrap()).unwrap();
     let faces: Vec<_> = file.parts.as_ref().unwrap().iter().map(|p| p.face).collect();
     assert_eq!(faces.len(), 3, "triangle up, triangle flipped, plate with hole");

@@ -7,10 +7,12 @@ use std::process::ExitCode;
 use chladni::model::part::Part;
 use chladni::model::part::mirror::{self, Face, Faces};
 use chladni::model::plan_file::PlanFile;
+use chladni::model::plan_file::r4;
 use chladni::model::plate::PlateModel;
 use chladni::motion::montecarlo::{self, Report, Setup, Stats, Trials};
 use chladni::motion::sim::{self, Body, FieldModel, Pose};
 use chladni::output::write_atomic;
+use chladni::planner::collide::EndOverlap;
 use chladni::planner::feed::{self, FeedRegion};
 use chladni::planner::{self, MapKind, Minimize, PlanFailure, PlanOptions, Synthesis};
 use chladni::plot::plan as plan_plot;
@@ -257,10 +259,14 @@ impl PlanArgs {
             }
         }
         warn_device_limits(&file).map_err(|e| anyhow::anyhow!("planned steps refused: {e}"))?;
-        let json = file.to_json();
+        let overlaps = collisions(&parts, &faces, &syn);
+        let mut json = file.to_json();
         if let Some(out) = &self.out {
             write_atomic(out, (serde_json::to_string_pretty(&json)? + "\n").as_bytes())
                 .map_err(output_error)?;
+        }
+        if syn.parts.len() > 1 {
+            json["end_overlaps"] = overlaps_json(&parts, &overlaps);
         }
         if self.json {
             println!("{}", copies::with_bulk(json, &bulk));
@@ -330,6 +336,35 @@ impl PlanArgs {
             }
         }
     }
+}
+
+/// The planned parts whose predicted end poses overlap (parts from different files: two faces
+/// of one part are never on the plate together), each said on stderr: the planner plans each
+/// part alone, the motion model keeps them apart, so those predictions cannot both hold.
+fn collisions(parts: &[Part], faces: &Faces, syn: &Synthesis) -> Vec<EndOverlap> {
+    let meet = |i: usize, j: usize| faces.of[i].source != faces.of[j].source;
+    let found = planner::collide::end_overlaps(parts, &syn.parts, meet);
+    for o in &found {
+        eprintln!(
+            "warning: {} and {} are predicted to end overlapping by {:.1} mm: the plan predicts \
+             each part as if it were alone, and parts never pass through each other, so they \
+             collide there and these predictions do not hold; `chladni simulate` drops them \
+             together and measures what happens",
+            parts[o.a].name, parts[o.b].name, o.depth_mm
+        );
+    }
+    found
+}
+
+/// `end_overlaps` of a plan for several parts: `[{"parts": [a, b], "depth_mm"}]`.
+fn overlaps_json(parts: &[Part], found: &[EndOverlap]) -> serde_json::Value {
+    let list = found.iter().map(|o| {
+        serde_json::json!({
+            "parts": [parts[o.a].name, parts[o.b].name],
+            "depth_mm": r4(o.depth_mm),
+        })
+    });
+    serde_json::Value::Array(list.collect())
 }
 
 /// A part that fits the plate in no orientation is refused: the model cannot hold it (the

@@ -48,6 +48,7 @@ use crate::model::plate::{Node, PlateModel};
 use crate::motion::sim::Body;
 
 mod cluster;
+pub mod collide;
 mod confirm;
 pub mod copies;
 pub mod dynamic;
