@@ -19,7 +19,7 @@
 
 use std::time::Instant;
 
-use chladni::motion::body::{Body, Pose};
+use chladni::motion::body::Pose;
 use chladni::motion::bulk::{BulkReport, Drops, place};
 use chladni::motion::contact::Rim;
 use chladni::motion::many::{Group, simulate_plan_many};

@@ -1,5 +1,5 @@
-//! What `chladni device` prints: the JSON shapes (documented in docs/drive.md; keys in
-//! alphabetical order, as printed) and the tables for people.
+//! What `chladni device` prints: the JSON shapes of [`chladni::controller::json`] (documented
+//! in docs/device.md; keys in alphabetical order, as printed) and the tables for people.
 
 use std::process::ExitCode;
 
