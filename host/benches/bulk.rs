@@ -10,98 +10,55 @@
 
 use std::hint::black_box;
 
-use chladni::model::part::Part;
-use chladni::model::plan_file::PlanFile;
-use chladni::model::plate::PlateModel;
-use chladni::motion::body::Body;
-use chladni::motion::bulk::{BulkReport, Drop, run_drops};
-use chladni::motion::field::FieldModel;
-use chladni::motion::shape::Pieces;
-use chladni::motion::sim::{SimStep, plan_steps};
+use chladni::motion::bulk::{BulkReport, run_drops};
 use chladni::planner::{self, PlanOptions};
 use criterion::{Criterion, criterion_group, criterion_main};
 
+#[path = "support/drop_case.rs"]
+mod drop_case;
 #[path = "../tests/support/examples.rs"]
 mod examples;
+
+use drop_case::DropCase;
 
 /// Drops per bulk number.
 const DROPS: u32 = 5;
 
-/// One case: a part, its plate and plan, and what a drop needs.
-struct Case {
-    name: &'static str,
-    plate: PlateModel,
-    plan: PlanFile,
-    steps: Vec<SimStep>,
-    fields: Vec<FieldModel>,
-    body: Body,
-    pieces: Pieces,
-}
-
-impl Case {
-    fn new(name: &'static str, part: Part, plate: PlateModel, plan: PlanFile) -> Case {
-        let steps = plan_steps(&plan, &plate).expect("the plan runs on its plate");
-        let fields = plate.modes.iter().map(|m| FieldModel::new(m, &plate)).collect();
-        let body = Body::new(&part);
-        let pieces = Pieces::of(&body);
-        Case { name, plate, plan, steps, fields, body, pieces }
-    }
-
-    /// Prints the bulk numbers of `n` copies over [`DROPS`] drops, seed 1.
-    fn report(&self, n: usize) {
-        let (b, p) = (vec![&self.body; n], vec![&self.pieces; n]);
-        let d = self.drop(&b, &p);
-        let t = std::time::Instant::now();
-        let drops = run_drops(&d, DROPS, 1, || ()).expect("the copies fit");
-        let wall = t.elapsed().as_secs_f64();
-        let r = BulkReport::new(&drops, &self.plan, &self.steps, 1, 5.0);
-        eprintln!(
-            "bulk: {n} × {}, {DROPS} drops (plan {:.2} s): oriented {:?}, {:?} parts/min, lost {}, \
-             deepest overlap {} mm, {:.2} s wall per drop",
-            self.name,
-            r.plan_s,
-            r.oriented,
-            r.parts_per_min,
-            r.lost,
-            r.max_overlap_mm,
-            wall / f64::from(DROPS)
-        );
-    }
-
-    fn drop<'a>(&'a self, b: &'a [&'a Body], p: &'a [&'a Pieces]) -> Drop<'a> {
-        Drop {
-            bodies: b,
-            pieces: p,
-            plate: &self.plate,
-            fields: &self.fields,
-            steps: &self.steps,
-            feed: None,
-        }
-    }
+/// Prints the bulk numbers of `n` copies of `case` over [`DROPS`] drops, seed 1.
+fn report(case: &DropCase, n: usize) {
+    let (b, p) = (vec![&case.body; n], vec![&case.pieces; n]);
+    let d = case.drop(&b, &p);
+    let t = std::time::Instant::now();
+    let drops = run_drops(&d, DROPS, 1, || ()).expect("the copies fit");
+    let wall = t.elapsed().as_secs_f64();
+    let r = BulkReport::new(&drops, &case.plan, &case.steps, 1, 5.0);
+    eprintln!(
+        "bulk: {n} × {}, {DROPS} drops (plan {:.2} s): oriented {:?}, {:?} parts/min, lost {}, \
+         deepest overlap {} mm, {:.2} s wall per drop",
+        case.name,
+        r.plan_s,
+        r.oriented,
+        r.parts_per_min,
+        r.lost,
+        r.max_overlap_mm,
+        wall / f64::from(DROPS)
+    );
 }
 
 /// The rectangle planned on the hinged-rod solver plate.
-fn solver_case() -> Case {
+fn solver_case() -> DropCase {
     let part = examples::part("rectangle.json");
     let plate = examples::plate("hinged-rod-solver.toml");
     let syn = planner::plan(&part, &plate, &PlanOptions::default())
         .unwrap_or_else(|e| panic!("the rectangle gets no plan on hinged-rod-solver: {e}"));
     let plan = syn.to_file(&plate, &part.name);
-    Case::new("rectangle on hinged-rod-solver", part, plate, plan)
-}
-
-fn four_lines_case() -> Case {
-    let path = examples::root().join("examples/plans/triangle-four-lines.json");
-    let text = std::fs::read_to_string(path).expect("example plan");
-    let plan = PlanFile::parse(&text).expect("example plan");
-    let (part, plate) = (examples::part("triangle.json"), examples::plate("four-lines.toml"));
-    Case::new("triangle on four-lines", part, plate, plan)
+    DropCase::new("rectangle on hinged-rod-solver", part, plate, plan)
 }
 
 fn bench(c: &mut Criterion) {
-    let cases = [four_lines_case(), solver_case()];
+    let cases = [DropCase::triangle_four_lines(), solver_case()];
     for case in &cases {
-        case.report(10);
+        report(case, 10);
     }
     let mut group = c.benchmark_group("bulk");
     group.sample_size(10);

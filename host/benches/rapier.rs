@@ -19,21 +19,21 @@
 
 use std::time::Instant;
 
-use chladni::model::plan_file::PlanFile;
-use chladni::model::plate::PlateModel;
-use chladni::motion::body::{Body, Pose};
-use chladni::motion::bulk::{BulkReport, Drop, Drops, place};
+use chladni::motion::body::Pose;
+use chladni::motion::bulk::{BulkReport, Drops, place};
 use chladni::motion::contact::Rim;
-use chladni::motion::field::FieldModel;
 use chladni::motion::many::{Group, simulate_plan_many};
 use chladni::motion::montecarlo::Trials;
-use chladni::motion::shape::{self, Pieces};
-use chladni::motion::sim::{SimStep, plan_steps};
+use chladni::motion::shape;
 use chladni::rng::Rng;
 use rapier2d_f64::prelude::*;
 
+#[path = "support/drop_case.rs"]
+mod drop_case;
 #[path = "../tests/support/examples.rs"]
 mod examples;
+
+use drop_case::DropCase;
 
 /// rapier's damping (1/s): the model's missing inertia lasts 1/C.
 const DAMPING: f64 = 1e4;
@@ -41,14 +41,7 @@ const DAMPING: f64 = 1e4;
 const REPEAT: u32 = 3;
 
 /// The same drop for both solvers.
-struct Setup {
-    plate: PlateModel,
-    plan: PlanFile,
-    steps: Vec<SimStep>,
-    fields: Vec<FieldModel>,
-    body: Body,
-    pieces: Pieces,
-}
+type Setup = DropCase;
 
 /// Final poses of one drop by rapier with time step `dt` (s).
 fn rapier_drop(s: &Setup, start: &[Pose], dt: f64) -> Vec<Pose> {
@@ -176,24 +169,10 @@ fn agreement(a: &[Pose], b: &[Pose]) -> ([f64; 2], [f64; 2]) {
 }
 
 fn main() {
-    let path = examples::root().join("examples/plans/triangle-four-lines.json");
-    let plan = PlanFile::parse(&std::fs::read_to_string(path).unwrap()).unwrap();
-    let plate = examples::plate("four-lines.toml");
-    let steps = plan_steps(&plan, &plate).unwrap();
-    let fields = plate.modes.iter().map(|m| FieldModel::new(m, &plate)).collect();
-    let body = Body::new(&examples::part("triangle.json"));
-    let pieces = Pieces::of(&body);
-    let s = Setup { plate, plan, steps, fields, body, pieces };
+    let s = DropCase::triangle_four_lines();
     for n in [2usize, 10] {
         let (b, p) = (vec![&s.body; n], vec![&s.pieces; n]);
-        let d = Drop {
-            bodies: &b,
-            pieces: &p,
-            plate: &s.plate,
-            fields: &s.fields,
-            steps: &s.steps,
-            feed: None,
-        };
+        let d = s.drop(&b, &p);
         let start = place(&mut Rng::seeded(1), &d).expect("the copies fit");
         let (t_own, own) = timed(|| own_drop(&s, &start));
         let (o_own, ov_own) = judged(&s, &start, &own);

@@ -35,6 +35,7 @@ use serde::Serialize;
 use crate::controller::client::{DeviceClient, DeviceError};
 use crate::controller::emulator::{Emulator, EmulatorConfig, EmulatorError};
 use crate::controller::firmware;
+use crate::controller::json::FaultJson;
 use crate::model::part::Part;
 use crate::model::plan_file::{PlanFile, PlanFileError, StepJson};
 use crate::model::plate::PlateModel;
@@ -552,7 +553,24 @@ pub struct Stored {
     pub crc: u32,
 }
 
-/// The demo's summary (`--json` prints it, with the fault rendered by the CLI).
+/// The `chladni demo --json` object: the summary's keys and the run's fault
+/// (`{"cause","value","unit","at_s"}`, as `chladni device status --json`), null when none.
+#[derive(Debug, Serialize)]
+pub struct SummaryJson<'a> {
+    #[serde(flatten)]
+    pub summary: &'a Summary,
+    pub fault: Option<FaultJson>,
+}
+
+impl<'a> SummaryJson<'a> {
+    /// Of a summary, its fault in the controller's JSON shape.
+    pub fn of(summary: &'a Summary) -> Self {
+        let fault = summary.run.fault.map(|f| FaultJson::of(&f, summary.run.sample_rate));
+        SummaryJson { summary, fault }
+    }
+}
+
+/// The demo's summary (`--json` prints it as [`SummaryJson`], with the fault).
 #[derive(Debug, Clone, Serialize)]
 pub struct Summary {
     /// The part's name.

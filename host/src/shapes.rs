@@ -16,6 +16,11 @@ use crate::planner::PlanFailure;
 
 pub use crate::analysis::samples::TurnSample;
 
+pub mod analyze;
+pub mod failure;
+pub mod plan;
+pub mod plate;
+
 /// A pose in the plate's frame.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 pub struct PoseJson {

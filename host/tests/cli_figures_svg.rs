@@ -8,7 +8,7 @@ mod support;
 
 use std::path::Path;
 
-use support::cli::{chladni, ex, tmp};
+use support::cli::{chladni, ex, tmp, triangle_on_four_lines};
 
 /// An SVG figure read back: its size, its texts (with their x and anchor), and how many
 /// elements of each drawing kind it has.
@@ -66,18 +66,11 @@ fn ok(out: &std::process::Output) {
 #[test]
 fn simulate_writes_the_traces_and_the_plan_figure_as_svg() {
     let traces = tmp("figsvg", "sim.svg");
-    let out = chladni(&[
+    let plan_file = ex("plans/triangle-four-lines.json");
+    let out = triangle_on_four_lines(
         "simulate",
-        &ex("parts/triangle.json"),
-        "--plate",
-        &ex("plates/four-lines.toml"),
-        "--plan",
-        &ex("plans/triangle-four-lines.json"),
-        "--trials",
-        "6",
-        "--plot",
-        traces.to_str().unwrap(),
-    ]);
+        &["--plan", &plan_file, "--trials", "6", "--plot", traces.to_str().unwrap()],
+    );
     ok(&out);
     let plan = traces
         .with_file_name(format!("{}-plan.svg", traces.file_stem().unwrap().to_str().unwrap()));
@@ -105,14 +98,7 @@ fn simulate_writes_the_traces_and_the_plan_figure_as_svg() {
 #[test]
 fn plan_writes_its_figure_as_svg() {
     let fig = tmp("figsvg", "plan.svg");
-    let out = chladni(&[
-        "plan",
-        &ex("parts/triangle.json"),
-        "--plate",
-        &ex("plates/four-lines.toml"),
-        "--plot",
-        fig.to_str().unwrap(),
-    ]);
+    let out = triangle_on_four_lines("plan", &["--plot", fig.to_str().unwrap()]);
     ok(&out);
     let p = Svg::read(&fig);
     p.has_prefix("step 1: ");

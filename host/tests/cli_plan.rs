@@ -3,20 +3,12 @@
 use std::path::Path;
 
 mod support;
-use support::cli::{chladni, ex, tmp};
+use support::cli::{chladni, ex, tmp, triangle_on_four_lines};
 
 #[test]
 fn plan_json_is_the_documented_object_and_simulates_to_100_percent() {
     let out_file = tmp("plan", "tri.json");
-    let out = chladni(&[
-        "plan",
-        &ex("parts/triangle.json"),
-        "--plate",
-        &ex("plates/four-lines.toml"),
-        "--json",
-        "--out",
-        out_file.to_str().unwrap(),
-    ]);
+    let out = triangle_on_four_lines("plan", &["--json", "--out", out_file.to_str().unwrap()]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let mut keys: Vec<&str> = v.as_object().unwrap().keys().map(String::as_str).collect();
@@ -88,14 +80,7 @@ fn bad_input_exits_2_with_named_errors() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("field = \"cosine\"") && err.contains("sign"), "{err}");
-    let out = chladni(&[
-        "plan",
-        &ex("parts/triangle.json"),
-        "--plate",
-        &ex("plates/four-lines.toml"),
-        "--margin-deg",
-        "-1",
-    ]);
+    let out = triangle_on_four_lines("plan", &["--margin-deg", "-1"]);
     assert_eq!(out.status.code(), Some(2));
     // A plan whose frequency is not a mode of the plate.
     let plan = tmp("plan", "p.json");
@@ -138,13 +123,7 @@ fn example_plans_parse_as_device_plans_and_match_the_planner() {
     }
     assert!(n >= 4, "{n} example plans");
     // The triangle example is exactly what the planner writes today.
-    let out = chladni(&[
-        "plan",
-        &ex("parts/triangle.json"),
-        "--plate",
-        &ex("plates/four-lines.toml"),
-        "--json",
-    ]);
+    let out = triangle_on_four_lines("plan", &["--json"]);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let file: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(dir.join("triangle-four-lines.json")).unwrap(),

@@ -4,22 +4,14 @@
 
 mod support;
 
-use support::cli::{chladni, ex, tmp};
+use support::cli::{tmp, triangle_on_four_lines};
 
 /// `simulate` of the triangle on the four-line plate with a plan file of `steps`.
 fn simulate_steps(name: &str, steps: &str) -> std::process::Output {
     let plan = tmp("steps", name);
     std::fs::write(&plan, format!(r#"{{"name": "n", "steps": [{steps}]}}"#)).unwrap();
-    let out = chladni(&[
-        "simulate",
-        &ex("parts/triangle.json"),
-        "--plate",
-        &ex("plates/four-lines.toml"),
-        "--plan",
-        plan.to_str().unwrap(),
-        "--trials",
-        "2",
-    ]);
+    let out =
+        triangle_on_four_lines("simulate", &["--plan", plan.to_str().unwrap(), "--trials", "2"]);
     std::fs::remove_file(plan).unwrap();
     out
 }

@@ -24,3 +24,15 @@ pub mod ratelog;
 pub mod verify;
 
 pub use owner::{Cell, CellError, CellState, CellStatus, POLL_PERIOD, RunStarted};
+
+/// The line `chladni serve --json` prints when a front end listens: `{"<front end>":
+/// address}`, with `"login"` (the URL carrying the token) for an HTTP front end behind one.
+/// Keys in alphabetical order, as printed; a script waits for this line.
+pub fn listening_json(front_end: &str, address: &str, login: Option<&str>) -> serde_json::Value {
+    let mut line = serde_json::Map::new();
+    line.insert(front_end.to_string(), address.into());
+    if let Some(login) = login {
+        line.insert("login".to_string(), login.into());
+    }
+    serde_json::Value::Object(line)
+}

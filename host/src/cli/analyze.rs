@@ -3,16 +3,16 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use chladni::analysis::samples::{TurnSample, deg, offset_mm, turn_samples};
+use chladni::analysis::samples::{deg, offset_mm, turn_samples};
 use chladni::model::field::{LawError, MAX_WAVELENGTH_MM};
 use chladni::model::part::Part;
 use chladni::plot::analysis::{self, PlotData};
+use chladni::shapes::analyze::AnalyzeJson;
 use chladni::shapes::write_csv;
 use chladni_shared::analysis::field::Field;
 use chladni_shared::analysis::fx::Fx;
 use chladni_shared::analysis::rest::{Analysis, AnalysisError, Analyzer};
 use clap::Args;
-use serde::Serialize;
 
 use super::parse::{FieldArg, f64_where, usize_in};
 use super::part::PartArgs;
@@ -53,19 +53,6 @@ pub struct AnalyzeArgs {
 
 /// Samples of t(θ) and a(θ) written by `--csv` unless `--samples` says how many.
 const CSV_SAMPLES: usize = 721;
-
-/// The `--json` object (keys in alphabetical order, as printed).
-#[derive(Debug, Serialize)]
-struct Report<'a> {
-    field: &'static str,
-    neutral: bool,
-    part: &'a str,
-    period_deg: f64,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    samples: Option<Vec<TurnSample>>,
-    stable_deg: Vec<f64>,
-    unstable_deg: Vec<f64>,
-}
 
 /// A field gain: a number in (0, 1e6].
 fn gain(
@@ -131,7 +118,7 @@ impl AnalyzeArgs {
             analysis.rests.iter().filter(|r| !r.stable).map(|r| deg(r.angle)).collect();
         let period = 360.0 / analysis.order as f64;
         if self.json {
-            let report = Report {
+            let report = AnalyzeJson {
                 field: self.field.name(),
                 neutral: analysis.neutral,
                 part: &part.name,

@@ -11,9 +11,9 @@ use chladni::model::plate::PlateModel;
 use chladni::model::plate_edit;
 use chladni::output::write_atomic;
 use chladni::plate::calibrate::{self, CalPart, DEFAULT_WITHIN_MM, Fit, FitError};
+use chladni::shapes::plate::{Calibrated, calibrate_json};
 use chladni::vision::series::{self as photos, PhotoSeriesError, Sighting};
 use clap::Args;
-use serde_json::json;
 
 use super::parse::positive;
 use super::{InputError, output_error};
@@ -119,15 +119,15 @@ impl CalibrateArgs {
         let written =
             if self.dry_run { None } else { Some(self.write(m.freq_hz, fit.speed_mm_s)?) };
         if self.json {
-            println!(
-                "{}",
-                json!({"plate": self.plate, "mode": m.name, "freq_hz": m.freq_hz,
-                    "previous_speed_mm_s": m.speed_mm_s, "within_mm": self.within_mm,
-                    "speed_mm_s": fit.speed_mm_s, "method": fit.method,
-                    "rms_time_s": fit.rms_time_s, "rms_pose_mm": fit.rms_pose_mm,
-                    "residuals": fit.residuals, "written": written,
-                    "photos": self.photos.is_some().then_some(&sightings)})
-            );
+            let calibrated = Calibrated {
+                plate: &self.plate,
+                mode: m,
+                within_mm: self.within_mm,
+                fit: &fit,
+                written: written.as_deref(),
+                photos: self.photos.is_some().then_some(&sightings),
+            };
+            println!("{}", calibrate_json(&calibrated));
         } else {
             print_sightings(&sightings);
             self.print(&plate, mode, &fit, written.as_deref());

@@ -11,11 +11,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use chladni::demo::{self, DemoConfig, DemoError, DemoStep, Prepared, Summary};
+use chladni::shapes::failure::FailureJson;
 use chladni_shared::icd::link::Telemetry;
 use chladni_shared::icd::units::{MilliHz, MmPerS2, ms_from_samples};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use serde::Serialize;
 
 use super::device::render::{FaultJson, print_json, telemetry_line};
 use super::device::watch::{EXIT_INTERRUPTED, interrupt_flag};
@@ -81,7 +81,7 @@ impl DemoArgs {
             Ok(code) => Ok(code),
             Err(e) => {
                 if self.json {
-                    print_json(&serde_json::json!({"error": e.name(), "message": e.to_string()}))?;
+                    print_json(&FailureJson { error: e.name(), message: e.to_string() })?;
                 }
                 eprintln!("error: {e}");
                 Ok(ExitCode::from(e.exit_code()))
@@ -128,8 +128,7 @@ impl DemoArgs {
         let summary = Summary::new(&prepared, config, &controller, &stored, report?);
         show_summary(say, &summary);
         if self.json {
-            let fault = summary.run.fault.map(|f| FaultJson::of(&f, summary.run.sample_rate));
-            print_json(&SummaryJson { summary: &summary, fault })
+            print_json(&demo::SummaryJson::of(&summary))
                 .map_err(|e| DemoError::Input(e.to_string()))?;
         }
         Ok(exit_code(&summary))
@@ -154,15 +153,6 @@ fn upload(
 
 fn style(template: &str) -> ProgressStyle {
     ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar())
-}
-
-/// The `--json` object: the summary's keys and the fault (`{"cause","value","unit","at_s"}`,
-/// as `chladni device status --json`), null when none.
-#[derive(Serialize)]
-struct SummaryJson<'a> {
-    #[serde(flatten)]
-    summary: &'a Summary,
-    fault: Option<FaultJson>,
 }
 
 /// What was computed before the controller: plan, simulation, levels, time scale, files.

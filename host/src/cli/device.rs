@@ -26,7 +26,7 @@ use clap::{Args, Subcommand};
 use super::InputError;
 use super::parse::{drive_accel, drive_amplitude, drive_freq};
 use chladni::controller::config_keys::{ConfigKey, ConfigValueError, config_key, config_refusal};
-use render::{PlanJson, print_json};
+use render::{DeletedJson, PlanJson, print_json};
 use values::{plan_name, plan_target, slot};
 
 /// Where the controller is.
@@ -297,7 +297,7 @@ impl DeviceCommand {
             DeviceCommand::Delete { port, plan, json } => {
                 let deleted = port.open("delete")?.delete(plan.clone())?;
                 if *json {
-                    print_json(&serde_json::json!({ "deleted": PlanJson::from(&deleted) }))?;
+                    print_json(&DeletedJson { deleted: PlanJson::from(&deleted) })?;
                 } else {
                     println!("deleted '{}' from slot {}", deleted.name, deleted.slot);
                 }

@@ -5,6 +5,7 @@ use std::process::ExitCode;
 use std::sync::mpsc;
 
 use chladni::controller::emulator::{EmulatedSpeed, Emulator, EmulatorConfig, EmulatorError};
+use chladni::controller::json::EmulatorJson;
 
 use super::InputError;
 use clap::Args;
@@ -74,13 +75,13 @@ impl EmulatorArgs {
             e => e.into(),
         })?;
         if self.json {
-            let mut ready =
-                serde_json::json!({ "port": emulator.address(), "pid": emulator.pid() });
-            if let Some(speed) = self.mips {
-                ready["mips"] = speed.mips().into();
-                ready["icount_shift"] = speed.shift.into();
-            }
-            println!("{ready}");
+            let ready = EmulatorJson {
+                icount_shift: self.mips.map(|s| s.shift),
+                mips: self.mips.map(|s| s.mips()),
+                pid: emulator.pid(),
+                port: emulator.address(),
+            };
+            println!("{}", serde_json::to_string(&ready)?);
         } else {
             println!("controller ready on {}", emulator.address());
             if let Some(speed) = self.mips {

@@ -3,7 +3,8 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use chladni::controller::flash::{self, CheckedImage, FlashError, FlashReport, ProbeSelector};
+use chladni::controller::flash::{self, FlashError, ProbeSelector};
+use chladni::controller::json::FlashJson;
 use chladni_shared::icd::link::Board;
 use clap::Args;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
@@ -64,7 +65,7 @@ impl FlashArgs {
             bars.update(event)
         })?;
         if self.json {
-            println!("{}", summary_json(&image, &chip, &probe, &report));
+            println!("{}", serde_json::to_string(&FlashJson::of(&image, &chip, &probe, &report))?);
         } else {
             let secs = report.duration.as_secs_f64();
             let verified = if report.verified { ", verified" } else { "" };
@@ -75,24 +76,6 @@ impl FlashArgs {
         }
         Ok(ExitCode::SUCCESS)
     }
-}
-
-fn summary_json(
-    image: &CheckedImage,
-    chip: &str,
-    probe: &str,
-    report: &FlashReport,
-) -> serde_json::Value {
-    serde_json::json!({
-        "elf": image.path.display().to_string(),
-        "board": image.board,
-        "chip": chip,
-        "probe": probe,
-        "bytes": report.bytes,
-        "segments": image.segments.len(),
-        "verified": report.verified,
-        "seconds": report.duration.as_secs_f64(),
-    })
 }
 
 /// One progress bar per operation (erase, program, verify), created as probe-rs announces them.

@@ -6,6 +6,7 @@ use std::process::ExitCode;
 
 use chladni::output::{OutputError, OutputGuard};
 use chladni::plot::{PlotError, check_extension};
+use chladni::shapes::failure::FailureJson;
 use clap::{Parser, Subcommand};
 
 mod analyze;
@@ -75,7 +76,7 @@ pub fn wants_json(args: impl Iterator<Item = std::ffi::OsString>) -> bool {
 
 /// Prints a failure's one JSON object on stdout, `{"error": kind, "message": …}`.
 pub fn print_failure_json(kind: &str, message: &str) {
-    print_failure_value(serde_json::json!({"error": kind, "message": message.trim_end()}));
+    print_failure_value(serde_json::json!(FailureJson::new(kind, message)));
 }
 
 /// Prints a command's own failure object (with its data) on stdout; `main` then prints none.
@@ -94,9 +95,8 @@ impl Failure {
     /// The error for `main`, after printing the one `--json` failure object when asked.
     pub(crate) fn report(self, json: bool) -> anyhow::Error {
         if json {
-            print_failure_value(
-                serde_json::json!({"error": self.kind, "message": format!("{:#}", self.error)}),
-            );
+            let message = format!("{:#}", self.error);
+            print_failure_value(serde_json::json!(FailureJson { error: self.kind, message }));
         }
         self.error
     }

@@ -1,5 +1,6 @@
 //! `chladni plan PART --plate P` and `chladni simulate PART --plate P --plan PLAN`.
 
+use chladni::shapes::plan::PartReport;
 use chladni::shapes::{self, SimulateReport, TraceLine};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -556,17 +557,6 @@ pub struct SimulateArgs {
     animate: Option<PathBuf>,
 }
 
-/// One part's `chladni simulate --json` entry in a plan for several parts (or faces).
-#[derive(serde::Serialize)]
-struct PartReport<'a> {
-    /// The face, for a part simulated on both faces.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    face: Option<Face>,
-    part: &'a str,
-    #[serde(flatten)]
-    report: SimulateReport,
-}
-
 /// The trials and seed of each face: a part dropped on both faces lands face up in the
 /// first ⌈N/2⌉ trials and flipped in the other ⌊N/2⌋, each face from its own seed (drawn
 /// from `seed`), so the faces' start poses are independent; any other part runs all N.
@@ -690,7 +680,7 @@ impl SimulateArgs {
             .zip(reports)
             .map(|((p, o), report)| PartReport { face: o.face, part: &p.name, report })
             .collect();
-        println!("{}", serde_json::json!({ "parts": entries }));
+        println!("{}", shapes::plan::parts_json(&entries));
         Ok(())
     }
 

@@ -6,7 +6,6 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use serde_json::json;
 
 use super::parse::usize_in;
 use super::{InputError, check_output, output_error, plot_error};
@@ -17,7 +16,7 @@ use chladni::plate::contour::{line_count, node_lines, total_length};
 use chladni::plate::photo::job::{PhotoGrid, PhotoRequest};
 use chladni::plate::{drive, photo, rocking, solver, suggest};
 use chladni::plot::plate as plot;
-use serde::Serialize;
+use chladni::shapes::plate::{ModeJson, ModesJson, photo_json, suggest_json};
 
 #[derive(Debug, Subcommand)]
 pub enum PlateCommand {
@@ -278,23 +277,6 @@ fn plot_modes(dir: &Path, ext: &str, plate: &Plate, shown: &Shown) -> anyhow::Re
     Ok(())
 }
 
-/// The `--json` object of `plate modes`.
-#[derive(Debug, Serialize)]
-struct ModesJson {
-    modes: Vec<ModeJson>,
-}
-
-/// One mode in [`ModesJson`]: its name ("mode 4", or "modes 4+5" for a degenerate pair
-/// driven at `drive_mm`) and, with a drive point, its excitation.
-#[derive(Debug, Serialize)]
-struct ModeJson {
-    #[serde(skip_serializing_if = "Option::is_none")]
-    excitation: Option<f64>,
-    freq_hz: f64,
-    lambda: f64,
-    name: String,
-}
-
 /// Writes a text file atomically.
 fn write(path: &Path, text: &str) -> anyhow::Result<()> {
     write_atomic(path, text.as_bytes()).map_err(output_error)
@@ -462,34 +444,6 @@ fn write_output(path: &Path, save: impl FnOnce(&Path) -> anyhow::Result<()>) -> 
         .map_err(output_error)
 }
 
-fn photo_json(found: &photo::Found, grid: Option<&PhotoGrid>) -> serde_json::Value {
-    let lines: Vec<_> = found
-        .lines
-        .iter()
-        .map(|l| {
-            json!({"angle_deg": l.angle_deg, "offset_mm": l.offset_mm, "rms_mm": l.rms_mm,
-                   "length_mm": l.length_mm, "pixels": l.pixels, "ends_mm": l.ends_mm})
-        })
-        .collect();
-    let curves: Vec<_> = found
-        .curves
-        .iter()
-        .map(|c| {
-            json!({"points": c.points, "length_mm": c.length_mm, "rms_mm": c.rms_mm,
-                   "pixels": c.pixels})
-        })
-        .collect();
-    let grid = match grid {
-        None => serde_json::Value::Null,
-        Some(Ok(f)) => json!({"nx": f.grid.nx, "ny": f.grid.ny, "signed": f.signed,
-                              "regions": f.regions, "note": f.note}),
-        Some(Err(e)) => json!({"error": e.to_string()}),
-    };
-    json!({"threshold": found.threshold, "sand_is_dark": found.sand_is_dark,
-           "skeleton_pixels": found.skeleton_pixels, "unexplained_pixels": found.unexplained_pixels,
-           "lines": lines, "curves": curves, "grid": grid})
-}
-
 fn print_photo(found: &photo::Found, grid: Option<&PhotoGrid>) {
     println!(
         "threshold {} ({} sand), {} skeleton pixels, {} on no line or curve",
@@ -592,7 +546,7 @@ impl SuggestArgs {
         bar.finish_and_clear();
         let found = rows.iter().filter(|r| matches!(r.outcome, suggest::Outcome::Plan(_))).count();
         if self.json {
-            println!("{}", json!({"part": part.name, "plate": plate.name, "rows": rows}));
+            println!("{}", suggest_json(&part.name, &plate.name, &rows));
         } else {
             print_suggest(&rows);
         }

@@ -26,7 +26,7 @@ use chladni::cell::guard::{self, Access};
 use chladni::cell::modbus::{self, Registers};
 use chladni::cell::net::{self, Caps, Cidr};
 use chladni::cell::verify::{Setup, Verifier};
-use chladni::cell::{Cell, http};
+use chladni::cell::{self, Cell, http};
 use clap::Args;
 use tokio::net::TcpListener;
 use tokio::task::JoinSet;
@@ -209,9 +209,8 @@ impl ServeArgs {
     fn announce(&self, name: &str, address: String, login: Option<String>) -> anyhow::Result<()> {
         let mut out = std::io::stdout().lock();
         match (self.json, login) {
-            (true, None) => writeln!(out, "{}", serde_json::json!({ name: address }))?,
-            (true, Some(login)) => {
-                writeln!(out, "{}", serde_json::json!({ name: address, "login": login }))?;
+            (true, login) => {
+                writeln!(out, "{}", cell::listening_json(name, &address, login.as_deref()))?;
             }
             (false, login) => {
                 writeln!(out, "{name} listening on {}", login.unwrap_or(address))?;

@@ -1,7 +1,10 @@
 //! The JSON shapes of the controller's answers: info, pings, status, telemetry, stored plans,
 //! drive, runs and the `{run}` of stop and clear-fault, as `chladni device --json` prints them
 //! and `chladni serve` answers them (keys in alphabetical order; documented in docs/device.md).
-//! One home, so the CLI and the cell's HTTP API never disagree.
+//! One home, so the CLI and the cell's HTTP API never disagree. The other outputs of the
+//! controller commands live here too: the serial ports (`device list`), a sweep, a deleted
+//! plan, the configuration (`device config`), the emulator's ready line (`chladni emulator`)
+//! and a flash summary (`chladni flash`).
 
 use chladni_shared::icd::link::{DeviceInfo, RunNumber, StatusReport, Telemetry};
 use chladni_shared::icd::plan::Level;
@@ -9,6 +12,13 @@ use chladni_shared::icd::sense::Fault;
 use chladni_shared::icd::store::PlanSummary;
 use chladni_shared::icd::units::{MilliDeg, MilliHz, MmPerS2, Q15, s_from_samples};
 use serde::Serialize;
+use serialport::{SerialPortInfo, SerialPortType};
+
+use crate::controller::config_keys::ConfigKey;
+use crate::controller::flash::{CheckedImage, FlashReport};
+use crate::controller::ports;
+use crate::controller::sweep::{Resonance, SweepSample};
+use chladni_shared::icd::store::DeviceConfig;
 
 /// The `status --json` object: the keys of protocol v1's status; `fault`, `plan`,
 /// `remaining_ms`, `run` (v3); the sensing and control keys `accel_mps2`, `phase_deg`,
@@ -248,4 +258,167 @@ pub struct RunJson {
     pub slot: Option<u8>,
     /// The last status seen (with `--wait`).
     pub status: Option<StatusJson>,
+}
+
+/// The `delete --json` object: the plan removed.
+#[derive(Debug, Clone, Serialize)]
+pub struct DeletedJson {
+    pub deleted: PlanJson,
+}
+
+/// The `config get|set --json` object: each key asked for with its value in user units
+/// (keys in alphabetical order, as printed).
+pub fn config_json(
+    config: &DeviceConfig,
+    keys: &[ConfigKey],
+) -> serde_json::Map<String, serde_json::Value> {
+    keys.iter().map(|k| (k.name().to_string(), k.get(config).to_json())).collect()
+}
+
+/// The `sweep --json` object: every point measured and the resonances found.
+#[derive(Debug, Serialize)]
+pub struct SweepJson<'a> {
+    pub points: &'a [SweepSample],
+    pub resonances: &'a [Resonance],
+}
+
+/// The ready line of `chladni emulator --json`: where the link listens and QEMU's process id;
+/// with `--mips`, the emulated speed and its `-icount` shift.
+#[derive(Debug, Clone, Serialize)]
+pub struct EmulatorJson {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub icount_shift: Option<u8>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mips: Option<f64>,
+    pub pid: u32,
+    pub port: String,
+}
+
+/// The `chladni flash --json` summary: what was written, where, and how long it took.
+#[derive(Debug, Clone, Serialize)]
+pub struct FlashJson {
+    pub board: String,
+    pub bytes: u64,
+    pub chip: String,
+    /// The ELF file's path.
+    pub elf: String,
+    pub probe: String,
+    pub seconds: f64,
+    /// Loadable segments written.
+    pub segments: usize,
+    pub verified: bool,
+}
+
+impl FlashJson {
+    /// Of the image, the chip and probe named, and the flash's report.
+    pub fn of(image: &CheckedImage, chip: &str, probe: &str, report: &FlashReport) -> Self {
+        FlashJson {
+            board: image.board.clone(),
+            bytes: report.bytes,
+            chip: chip.to_string(),
+            elf: image.path.display().to_string(),
+            probe: probe.to_string(),
+            seconds: report.duration.as_secs_f64(),
+            segments: image.segments.len(),
+            verified: report.verified,
+        }
+    }
+}
+
+/// The `list --json` object: the serial ports.
+#[derive(Debug, Clone, Serialize)]
+pub struct PortsJson {
+    pub ports: Vec<PortJson>,
+}
+
+/// One port as `list --json` prints it.
+#[derive(Debug, Clone, Serialize)]
+pub struct PortJson {
+    pub kind: &'static str,
+    pub manufacturer: Option<String>,
+    pub name: String,
+    /// USB product id, 4 hex digits.
+    pub pid: Option<String>,
+    pub product: Option<String>,
+    /// `controller` (the link), `debug_console` (the ST-LINK VCP), or null.
+    pub role: Option<&'static str>,
+    pub serial_number: Option<String>,
+    /// USB vendor id, 4 hex digits.
+    pub vid: Option<String>,
+}
+
+impl PortJson {
+    /// A port of kind `kind` with no USB details.
+    pub fn plain(name: &str, kind: &'static str) -> Self {
+        PortJson {
+            kind,
+            manufacturer: None,
+            name: name.to_string(),
+            pid: None,
+            product: None,
+            role: None,
+            serial_number: None,
+            vid: None,
+        }
+    }
+
+    /// A USB port: ids, their role, and the strings the device gives.
+    pub fn usb(name: &str, vid: u16, pid: u16, strings: [Option<String>; 3]) -> Self {
+        let [manufacturer, product, serial_number] = strings;
+        PortJson {
+            vid: Some(format!("{vid:04x}")),
+            pid: Some(format!("{pid:04x}")),
+            role: ports::role(vid, pid),
+            manufacturer,
+            product,
+            serial_number,
+            ..Self::plain(name, "usb")
+        }
+    }
+}
+
+impl From<&SerialPortInfo> for PortJson {
+    fn from(p: &SerialPortInfo) -> Self {
+        let name = p.port_name.as_str();
+        match &p.port_type {
+            SerialPortType::UsbPort(usb) => {
+                let strings =
+                    [usb.manufacturer.clone(), usb.product.clone(), usb.serial_number.clone()];
+                PortJson::usb(name, usb.vid, usb.pid, strings)
+            }
+            SerialPortType::PciPort => PortJson::plain(name, "pci"),
+            SerialPortType::BluetoothPort => PortJson::plain(name, "bluetooth"),
+            SerialPortType::Unknown => PortJson::plain(name, "unknown"),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serialport::SerialPortType;
+
+    fn usb(name: &str, vid: u16, pid: u16) -> PortJson {
+        let strings = [Some("Chladni".into()), Some("Chladni feeder controller".into()), None];
+        PortJson::usb(name, vid, pid, strings)
+    }
+
+    #[test]
+    fn ours_and_the_stlink_console_are_marked() {
+        let ours = serde_json::to_value(usb("/dev/ttyACM0", 0x1209, 0x0001)).unwrap();
+        assert_eq!(ours["role"], "controller");
+        assert_eq!((ours["vid"].as_str(), ours["pid"].as_str()), (Some("1209"), Some("0001")));
+        assert_eq!(
+            (ours["kind"].as_str(), ours["name"].as_str()),
+            (Some("usb"), Some("/dev/ttyACM0"))
+        );
+        assert_eq!(ours.as_object().unwrap().len(), 8);
+        assert_eq!(usb("/dev/ttyACM1", 0x0483, 0x374b).role, Some("debug_console"));
+        assert_eq!(usb("/dev/ttyUSB0", 0x0403, 0x6001).role, None);
+        let pci = PortJson::from(&SerialPortInfo {
+            port_name: "/dev/ttyS0".into(),
+            port_type: SerialPortType::PciPort,
+        });
+        assert_eq!((pci.kind, pci.vid), ("pci", None));
+    }
 }

@@ -1,6 +1,7 @@
 //! The controller seen from the host: the link client, the QEMU emulator that runs the
 //! firmware as a controller (behind a proxy that lets several clients share its serial
-//! socket), building firmware images, and flashing the board (probe-rs).
+//! socket), building firmware images, flashing the board (probe-rs), the serial ports of this
+//! machine, and the JSON shapes of what the controller commands print.
 
 pub mod client;
 pub mod config_keys;
@@ -8,5 +9,6 @@ pub mod emulator;
 pub mod firmware;
 pub mod flash;
 pub mod json;
+pub mod ports;
 pub mod proxy;
 pub mod sweep;

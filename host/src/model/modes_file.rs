@@ -111,11 +111,31 @@ pub enum Added {
     Merged(usize),
 }
 
+/// Why [`add_entry`] refused an entry: an entry already holds its frequency and the two cannot
+/// merge (only straight-node entries that agree on every other key do).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error(
+    "[[mode]] {} ({existing}) is already at {freq_hz} Hz and cannot take the lines of {added} (only \
+     straight-node entries with the same other keys merge): one drive frequency is one mode; \
+     remove that entry first, or write to another file",
+    index + 1
+)]
+pub struct ModeClash {
+    /// The entry already at the frequency (0-based index into the file's `[[mode]]`s).
+    pub index: usize,
+    /// Its name ("unnamed" without one).
+    pub existing: String,
+    /// Its frequency (Hz).
+    pub freq_hz: f64,
+    /// The refused entry's name ("unnamed" without one).
+    pub added: String,
+}
+
 /// Adds `entry` to `modes`, keeping one mode per frequency: a straight-node entry at the
 /// frequency of a straight-node entry that agrees on every other key is merged into it; an
-/// entry at an existing frequency that cannot be merged is refused (`Err` names both, the
-/// frequency and the fix).
-pub fn add_entry(modes: &mut Vec<ModeEntry>, entry: ModeEntry) -> Result<Added, String> {
+/// entry at an existing frequency that cannot be merged is refused ([`ModeClash`] names both,
+/// the frequency and the fix).
+pub fn add_entry(modes: &mut Vec<ModeEntry>, entry: ModeEntry) -> Result<Added, ModeClash> {
     let same = |m: &ModeEntry| match (m.freq_hz, entry.freq_hz) {
         (Some(a), Some(b)) => (a - b).abs() < SAME_FREQ_HZ,
         _ => false,
@@ -134,15 +154,12 @@ pub fn add_entry(modes: &mut Vec<ModeEntry>, entry: ModeEntry) -> Result<Added, 
             old.node = Some(NodeEntry::Lines { lines: Some(lines) });
             Ok(Added::Merged(k))
         }
-        _ => Err(format!(
-            "[[mode]] {} ({}) is already at {} Hz and cannot take the lines of {} (only \
-             straight-node entries with the same other keys merge): one drive frequency is \
-             one mode; remove that entry first, or write to another file",
-            k + 1,
-            name(old),
-            old.freq_hz.unwrap_or_default(),
-            name(&entry)
-        )),
+        _ => Err(ModeClash {
+            index: k,
+            existing: name(old),
+            freq_hz: old.freq_hz.unwrap_or_default(),
+            added: name(&entry),
+        }),
     }
 }
 
@@ -217,6 +234,8 @@ mod tests {
         let grid =
             Grid { nx: 2, ny: 2, size_mm: [300.0, 200.0], values: vec![1.0, -1.0, 1.0, -1.0] };
         let e = add_entry(&mut modes, sampled_mode("g", Some(60.0), &grid)).unwrap_err();
+        assert_eq!((e.index, e.existing.as_str(), e.added.as_str()), (0, "a", "g"));
+        let e = e.to_string();
         assert!(
             e.contains("[[mode]] 1 (a)") && e.contains("60 Hz") && e.contains("lines of g"),
             "{e}"

@@ -316,73 +316,17 @@ impl Part {
     ) -> Result<Part, PartError> {
         let mut rings: Vec<Vec<[f64; 2]>> = Some(outline).into_iter().chain(holes).collect();
         for (i, ring) in rings.iter_mut().enumerate() {
-            let which = Ring::of(i);
-            for (index, p) in ring.iter().enumerate() {
-                for value in *p {
-                    if !value.is_finite() {
-                        return Err(PartError::NotFinite { ring: which, index, value });
-                    }
-                    if value.abs() > MAX_COORD_MM {
-                        return Err(PartError::TooLarge { ring: which, index, value });
-                    }
-                }
-            }
-            // A closing vertex equal to the first is common (SVG, GeoJSON habits): drop it.
-            if ring.len() > 1 && ring.first() == ring.last() {
-                ring.pop();
-            }
-            if ring.len() < 3 {
-                return Err(PartError::TooFewVertices { ring: which, count: ring.len() });
-            }
-            if ring.len() > MAX_VERTICES {
-                return Err(PartError::TooManyVertices { ring: which, count: ring.len() });
-            }
-            for index in 1..ring.len() {
-                if ring[index] == ring[index - 1] {
-                    return Err(PartError::DuplicateVertex { ring: which, index });
-                }
-            }
+            check_ring(Ring::of(i), ring)?;
         }
         let (lo, hi) = geometry::bounds(rings.iter().flatten());
         let size = (hi[0] - lo[0]).max(hi[1] - lo[1]);
         if size < MIN_SIZE_MM {
             return Err(PartError::TooSmall { size });
         }
-        // All vertices on one line: a zero-area ring (before the crossing test, which would
-        // call it a fold-back).
-        for (i, ring) in rings.iter().enumerate() {
-            let far = ring.iter().copied().max_by(|p, q| {
-                let d = |v: &[f64; 2]| (v[0] - ring[0][0]).hypot(v[1] - ring[0][1]);
-                d(p).total_cmp(&d(q))
-            });
-            let far = far.unwrap_or(ring[0]);
-            if ring.iter().all(|&v| orient(ring[0], far, v).abs() <= 1e-12 * size * size) {
-                return Err(PartError::ZeroArea { ring: Ring::of(i) });
-            }
-        }
+        check_not_flat(&rings, size)?;
         check_intersections(&rings)?;
-        // Winding: outline counter-clockwise, holes clockwise; zero area is an error.
-        for (i, ring) in rings.iter_mut().enumerate() {
-            let a = signed_area(ring);
-            // Relative to the part's size: a "polygon" thinner than 1e-9 of it is a line.
-            if a.abs() <= 1e-9 * size * size {
-                return Err(PartError::ZeroArea { ring: Ring::of(i) });
-            }
-            if (i == 0) != (a > 0.0) {
-                ring.reverse();
-            }
-        }
-        // Containment: every hole inside the outline, no hole inside another.
-        for (h, hole) in rings.iter().enumerate().skip(1) {
-            if !inside(hole[0], &rings[0]) {
-                return Err(PartError::HoleOutside { hole: h - 1, index: 0 });
-            }
-            for (g, other) in rings.iter().enumerate().skip(1) {
-                if g != h && inside(hole[0], other) {
-                    return Err(PartError::HolesOverlap { a: h - 1, index: 0, b: g - 1 });
-                }
-            }
-        }
+        wind(&mut rings, size)?;
+        check_containment(&rings)?;
         let area: f64 = rings.iter().map(|r| signed_area(r)).sum();
         let min = MIN_AREA_FRACTION * size * size;
         if area < min {
@@ -418,6 +362,83 @@ impl Part {
             .map(|r| r.iter().map(|p| Pt::new(Fx::from_f64(p[0]), Fx::from_f64(p[1]))).collect())
             .collect()
     }
+}
+
+/// One ring's vertices: finite, within [`MAX_COORD_MM`], a closing duplicate of the first
+/// dropped, 3 to [`MAX_VERTICES`] of them, no two neighbours equal.
+fn check_ring(which: Ring, ring: &mut Vec<[f64; 2]>) -> Result<(), PartError> {
+    for (index, p) in ring.iter().enumerate() {
+        for value in *p {
+            if !value.is_finite() {
+                return Err(PartError::NotFinite { ring: which, index, value });
+            }
+            if value.abs() > MAX_COORD_MM {
+                return Err(PartError::TooLarge { ring: which, index, value });
+            }
+        }
+    }
+    // A closing vertex equal to the first is common (SVG, GeoJSON habits): drop it.
+    if ring.len() > 1 && ring.first() == ring.last() {
+        ring.pop();
+    }
+    if ring.len() < 3 {
+        return Err(PartError::TooFewVertices { ring: which, count: ring.len() });
+    }
+    if ring.len() > MAX_VERTICES {
+        return Err(PartError::TooManyVertices { ring: which, count: ring.len() });
+    }
+    for index in 1..ring.len() {
+        if ring[index] == ring[index - 1] {
+            return Err(PartError::DuplicateVertex { ring: which, index });
+        }
+    }
+    Ok(())
+}
+
+/// All vertices of a ring on one line: a zero-area ring (checked before the crossing test,
+/// which would call it a fold-back). `size` is the part's larger extent (mm).
+fn check_not_flat(rings: &[Vec<[f64; 2]>], size: f64) -> Result<(), PartError> {
+    for (i, ring) in rings.iter().enumerate() {
+        let far = ring.iter().copied().max_by(|p, q| {
+            let d = |v: &[f64; 2]| (v[0] - ring[0][0]).hypot(v[1] - ring[0][1]);
+            d(p).total_cmp(&d(q))
+        });
+        let far = far.unwrap_or(ring[0]);
+        if ring.iter().all(|&v| orient(ring[0], far, v).abs() <= 1e-12 * size * size) {
+            return Err(PartError::ZeroArea { ring: Ring::of(i) });
+        }
+    }
+    Ok(())
+}
+
+/// Winding: outline counter-clockwise, holes clockwise; zero area is an error.
+fn wind(rings: &mut [Vec<[f64; 2]>], size: f64) -> Result<(), PartError> {
+    for (i, ring) in rings.iter_mut().enumerate() {
+        let a = signed_area(ring);
+        // Relative to the part's size: a "polygon" thinner than 1e-9 of it is a line.
+        if a.abs() <= 1e-9 * size * size {
+            return Err(PartError::ZeroArea { ring: Ring::of(i) });
+        }
+        if (i == 0) != (a > 0.0) {
+            ring.reverse();
+        }
+    }
+    Ok(())
+}
+
+/// Containment: every hole inside the outline (`rings[0]`), no hole inside another.
+fn check_containment(rings: &[Vec<[f64; 2]>]) -> Result<(), PartError> {
+    for (h, hole) in rings.iter().enumerate().skip(1) {
+        if !inside(hole[0], &rings[0]) {
+            return Err(PartError::HoleOutside { hole: h - 1, index: 0 });
+        }
+        for (g, other) in rings.iter().enumerate().skip(1) {
+            if g != h && inside(hole[0], other) {
+                return Err(PartError::HolesOverlap { a: h - 1, index: 0, b: g - 1 });
+            }
+        }
+    }
+    Ok(())
 }
 
 /// A JSON syntax error, or the named NaN/Infinity error when the offending token is one.

@@ -2,7 +2,7 @@
 //! without one.
 
 use super::Problem;
-use super::maps::StepMap;
+use super::maps::{MapError, StepMap};
 use super::options::PlanOptions;
 use super::symmetry::symmetry_note;
 use crate::model::angle::cdist;
@@ -13,9 +13,9 @@ pub enum PlanFailure {
     /// Exhaustive search ended without a single orientation.
     #[error("no plan with these modes: {0}")]
     NoPlan(String),
-    /// A mode cannot be analysed for this part.
-    #[error("{0}")]
-    Model(String),
+    /// A mode cannot be analysed for this part (its straight-node map could not be made).
+    #[error(transparent)]
+    Model(#[from] MapError),
     /// No plan of at most `max_steps` steps ends at the goal orientation.
     #[error(
         "{part}: no plan of at most {max_steps} steps ends at {goal_deg}° (mod {period_deg}°, \

@@ -122,7 +122,7 @@ impl Problem {
             .inspect(|(k, _)| progress(&format!("{}: step maps", part.name), *k, n))
             .map(|(_, mode)| match mode.node {
                 Node::Line { .. } => line_map_of(part, mode, plate, period, opt, opt.maps)
-                    .map_err(|e| PlanFailure::Model(e.to_string())),
+                    .map_err(PlanFailure::Model),
                 _ => Ok(sampled_map(&body, mode, plate, opt.sim_starts, period)),
             })
             .collect::<Result<Vec<_>, _>>()?;
@@ -215,7 +215,7 @@ pub(crate) fn remapped(
             _ => Ok(map.clone()),
         })
         .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| PlanFailure::Model(e.to_string()))?;
+        .map_err(PlanFailure::Model)?;
     Ok(Problem { maps, ..problem.clone() })
 }
 

@@ -18,6 +18,15 @@ pub fn chladni(args: &[&str]) -> Output {
     command().args(args).output().unwrap()
 }
 
+/// `chladni COMMAND` (`plan`, `simulate`) of the example triangle on the four-lines plate, then
+/// `more` (`--plan F`, `--trials N`, …): the case most CLI tests run.
+pub fn triangle_on_four_lines(command: &str, more: &[&str]) -> Output {
+    let (part, plate) = (ex("parts/triangle.json"), ex("plates/four-lines.toml"));
+    let mut args = vec![command, &part, "--plate", &plate];
+    args.extend_from_slice(more);
+    chladni(&args)
+}
+
 /// `examples/PATH` as a string argument.
 pub fn ex(path: &str) -> String {
     repo(&format!("examples/{path}"))

@@ -1,5 +1,5 @@
-//! What `chladni device` prints: the JSON shapes (documented in docs/drive.md; keys in
-//! alphabetical order, as printed) and the tables for people.
+//! What `chladni device` prints: the JSON shapes of [`chladni::controller::json`] (documented
+//! in docs/device.md; keys in alphabetical order, as printed) and the tables for people.
 
 use std::process::ExitCode;
 
@@ -9,11 +9,12 @@ use chladni_shared::icd::store::{DeviceConfig, PlanSummary};
 use serde::Serialize;
 
 pub use chladni::controller::json::{
-    DriveJson, FaultJson, InfoJson, PingsJson, PlanJson, PlansJson, RunJson, RunNumberJson,
-    StatusJson, TelemetryJson,
+    DeletedJson, DriveJson, FaultJson, InfoJson, PingsJson, PlanJson, PlansJson, RunJson,
+    RunNumberJson, StatusJson, TelemetryJson,
 };
 
 use chladni::controller::config_keys::{CONFIG_KEYS, ConfigKey, ConfigValue};
+use chladni::controller::json::config_json;
 
 /// Prints one JSON value on one line.
 pub fn print_json(value: &impl Serialize) -> anyhow::Result<()> {
@@ -208,9 +209,7 @@ pub fn config(
 ) -> anyhow::Result<ExitCode> {
     let keys: Vec<ConfigKey> = key.map_or(CONFIG_KEYS.to_vec(), |k| vec![k]);
     if json {
-        let map: serde_json::Map<String, serde_json::Value> =
-            keys.iter().map(|k| (k.name().to_string(), k.get(config).to_json())).collect();
-        print_json(&map)?;
+        print_json(&config_json(config, &keys))?;
         return Ok(ExitCode::SUCCESS);
     }
     for k in keys {

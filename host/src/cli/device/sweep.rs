@@ -23,12 +23,12 @@ use chladni::model::plate_file::{PlateFile, PlateTable};
 use chladni_shared::icd::link::{RunNumber, Sweep};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use serde::Serialize;
 
 use super::PortArg;
 use super::render::{fault_text, print_json};
 use super::watch::{EXIT_INTERRUPTED, interrupt_flag};
 use crate::cli::{InputError, check_output, check_plot, output_error, plot_error};
+use chladni::controller::json::SweepJson;
 
 /// `device sweep`.
 #[derive(Debug, Args)]
@@ -63,13 +63,6 @@ pub struct SweepArgs {
     /// (fill the node from `chladni plate modes` or a photo before planning with it).
     #[arg(long = "write-modes", value_name = "PLATE.toml")]
     write_modes: Option<PathBuf>,
-}
-
-/// The `sweep --json` object.
-#[derive(Debug, Serialize)]
-struct SweepJson<'a> {
-    points: &'a [SweepSample],
-    resonances: &'a [Resonance],
 }
 
 impl SweepArgs {

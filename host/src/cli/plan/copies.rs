@@ -57,28 +57,8 @@ impl PlanArgs {
     }
 }
 
-/// The plan's JSON with the chosen candidate's bulk numbers (`copies`, `oriented`, `lost`,
-/// `parts_per_min`) and every candidate's.
-pub(super) fn with_bulk(mut json: serde_json::Value, ranked: &Option<Ranked>) -> serde_json::Value {
-    let Some(r) = ranked else { return json };
-    let c = &r.candidates[r.chosen].report;
-    json["copies"] = serde_json::json!(c.copies);
-    json["oriented"] = serde_json::json!(c.oriented);
-    json["lost"] = serde_json::json!(c.lost);
-    json["parts_per_min"] = serde_json::json!(c.parts_per_min);
-    json["candidates"] = r
-        .candidates
-        .iter()
-        .map(|s| {
-            serde_json::json!({
-                "final_orientation_deg": s.file.final_orientation_deg,
-                "plan_s": s.report.plan_s, "oriented": s.report.oriented,
-                "lost": s.report.lost, "parts_per_min": s.report.parts_per_min,
-            })
-        })
-        .collect();
-    json
-}
+/// The plan's JSON with the bulk numbers: its shape is the library's.
+pub(super) use chladni::shapes::plan::with_bulk;
 
 /// The candidates as lines under the plan table.
 pub(super) fn print_bulk(ranked: &Option<Ranked>) {

@@ -65,11 +65,7 @@ impl SimulateArgs {
     /// A refused drop: the named error (and its JSON object with --json), exit 2.
     fn cannot_place(&self, e: &CannotPlace) -> anyhow::Error {
         if self.json {
-            let v = serde_json::json!({
-                "error": "cannot_place", "parts": e.parts, "placed": e.placed,
-                "attempts": e.attempts, "message": e.to_string(),
-            });
-            crate::cli::print_failure_value(v);
+            crate::cli::print_failure_value(chladni::shapes::plan::cannot_place_json(e));
         }
         bad(e.to_string())
     }

@@ -1,0 +1,59 @@
+//! The `--json` objects of `chladni plan` and `chladni simulate` beyond the plan file and the
+//! simulate report: the bulk numbers of `plan --copies N` ([`with_bulk`]), one entry per part
+//! of a several-part simulation ([`PartReport`], [`parts_json`]) and a refused drop of parts
+//! together ([`cannot_place_json`]). Keys in alphabetical order, as printed.
+
+use serde::Serialize;
+use serde_json::{Value, json};
+
+use crate::model::part::mirror::Face;
+use crate::motion::bulk::CannotPlace;
+use crate::planner::copies::Ranked;
+use crate::shapes::SimulateReport;
+
+/// The plan's JSON with the chosen candidate's bulk numbers (`copies`, `oriented`, `lost`,
+/// `parts_per_min`) and every candidate's (`candidates`); unchanged without `--copies`.
+pub fn with_bulk(mut json: Value, ranked: &Option<Ranked>) -> Value {
+    let Some(r) = ranked else { return json };
+    let c = &r.candidates[r.chosen].report;
+    json["copies"] = json!(c.copies);
+    json["oriented"] = json!(c.oriented);
+    json["lost"] = json!(c.lost);
+    json["parts_per_min"] = json!(c.parts_per_min);
+    json["candidates"] = r
+        .candidates
+        .iter()
+        .map(|s| {
+            json!({
+                "final_orientation_deg": s.file.final_orientation_deg,
+                "plan_s": s.report.plan_s, "oriented": s.report.oriented,
+                "lost": s.report.lost, "parts_per_min": s.report.parts_per_min,
+            })
+        })
+        .collect();
+    json
+}
+
+/// One part's `chladni simulate --json` entry in a plan for several parts (or faces).
+#[derive(Debug, Serialize)]
+pub struct PartReport<'a> {
+    /// The face, for a part simulated on both faces.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub face: Option<Face>,
+    pub part: &'a str,
+    #[serde(flatten)]
+    pub report: SimulateReport,
+}
+
+/// `simulate --json` for several parts or faces: `{"parts": [{"part", "face"?, …report}]}`.
+pub fn parts_json(entries: &[PartReport<'_>]) -> Value {
+    json!({ "parts": entries })
+}
+
+/// The `--json` failure of a drop that could not place every part (`cannot_place`).
+pub fn cannot_place_json(e: &CannotPlace) -> Value {
+    json!({
+        "error": "cannot_place", "parts": e.parts, "placed": e.placed,
+        "attempts": e.attempts, "message": e.to_string(),
+    })
+}
