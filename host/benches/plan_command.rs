@@ -3,7 +3,14 @@
 //! start, file reads, maps, search, dynamic check, durations, JSON out). Also `--maps static`
 //! and `chladni --version` (the process start alone). Prints min, median and max (ms).
 //!
-//! `cargo bench -p chladni-host --bench plan_command` (N = 30; `CHLADNI_BENCH_RUNS=N`).
+//! Then the planning time on a solver's plate (docs/plan.md, "Planning time"): `chladni plan
+//! PART --plate examples/plates/cantilever-6-modes.toml --json` once per part of
+//! `examples/parts/ordinary/` and the example parts, with `--max-time-s 60`: the wall time and
+//! the outcome (steps, or the failure's name).
+//!
+//! `cargo bench -p chladni-host --bench plan_command` (N = 30; `CHLADNI_BENCH_RUNS=N`;
+//! `CHLADNI_BENCH_GRID=0` leaves the solver plate out, `CHLADNI_BENCH_PARTS=key,gear` keeps
+//! the parts whose file name contains one of these).
 
 use std::process::Command;
 use std::time::Instant;
@@ -27,6 +34,52 @@ fn times(args: &[&str], n: usize) -> Vec<f64> {
         .collect();
     t.sort_by(f64::total_cmp);
     t
+}
+
+/// One `chladni plan` run: wall time (s) and outcome (steps, or the failure's `error` name).
+fn plan_once(args: &[&str]) -> (f64, String) {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let start = Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_chladni"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("chladni runs");
+    let s = start.elapsed().as_secs_f64();
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap_or_default();
+    let outcome = match (v["steps"].as_array(), v["error"].as_str()) {
+        (Some(st), _) => format!("{} steps", st.len()),
+        (None, Some(e)) => e.to_string(),
+        _ => format!("no JSON (exit {:?})", out.status.code()),
+    };
+    (s, outcome)
+}
+
+/// The parts planned on the solver plate (paths).
+fn grid_parts() -> Vec<String> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/parts");
+    let keep = std::env::var("CHLADNI_BENCH_PARTS").unwrap_or_default();
+    let mut parts: Vec<String> = ["ordinary", "."]
+        .iter()
+        .flat_map(|sub| std::fs::read_dir(dir.join(sub)).into_iter().flatten().flatten())
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "json"))
+        .map(|p| p.display().to_string())
+        .filter(|p| keep.is_empty() || keep.split(',').any(|k| p.contains(k)))
+        .collect();
+    parts.sort();
+    parts
+}
+
+/// `chladni plan` on the cantilever's solver modes, one run per part.
+fn solver_plate() {
+    let plate = "../examples/plates/cantilever-6-modes.toml";
+    for part in grid_parts() {
+        let args = ["plan", &part, "--plate", plate, "--max-time-s", "60", "--json"];
+        let (s, outcome) = plan_once(&args);
+        let name = part.rsplit('/').next().unwrap_or(&part);
+        println!("cantilever-6-modes, {name}: {s:.2} s, {outcome}");
+    }
 }
 
 fn main() {
@@ -53,5 +106,8 @@ fn main() {
             t[n / 2],
             t[n - 1]
         );
+    }
+    if std::env::var("CHLADNI_BENCH_GRID").as_deref() != Ok("0") {
+        solver_plate();
     }
 }

@@ -168,6 +168,9 @@ pub fn plan_failure_json(e: &PlanFailure) -> serde_json::Value {
             "error": "parts_apart", "searched": searched,
             "apart": apart.iter().map(|(n, d, p)| json!({"part": n, "orientations_deg": d,
                 "period_deg": p})).collect::<Vec<_>>()}),
+        PlanFailure::OutOfTime { limit_s, stage } => {
+            json!({"error": "out_of_time", "max_time_s": limit_s, "stage": stage})
+        }
     };
     v["message"] = json!(e.to_string());
     v

@@ -161,6 +161,15 @@ pub struct PlanArgs {
     /// per minute (docs/motion.md, "Bulk feeding"); one part on one face.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1000))]
     copies: Option<u32>,
+    /// Give up after this many seconds of planning (failure `out_of_time`, naming the stage
+    /// reached); a plan may overrun it by one step map at most.
+    #[arg(long, value_name = "S", default_value_t = 120.0,
+          value_parser = f64_where("max-time-s", "in (0, 86400]", |v| v > 0.0 && v <= 86400.0))]
+    max_time_s: f64,
+    /// Most orientation sets the search expands (a failure says when it stopped there).
+    #[arg(long, value_name = "N", default_value_t = 200_000,
+          value_parser = clap::value_parser!(u32).range(1..=50_000_000))]
+    max_states: u32,
 }
 
 /// `--maps`: which step maps straight-node modes use ([`MapKind`]).
@@ -306,6 +315,8 @@ impl PlanArgs {
             goal_deg: goals.first().copied().flatten(),
             fix_position: self.fix_position,
             goal_pos_mm: self.goal_pos.as_ref().map(|g| [g[0], g[1]]),
+            deadline: Some(planner::Deadline::after_s(self.max_time_s)),
+            max_states: self.max_states as usize,
             ..Default::default()
         }
     }

@@ -510,7 +510,8 @@ pub struct SuggestArgs {
     /// Robustness margin of the plans (deg, as `plan --margin-deg`).
     #[arg(long, default_value_t = 3.0, value_parser = super::parse::f64_where("margin-deg", "in [0, 30]", |v| (0.0..=30.0).contains(&v)))]
     margin_deg: f64,
-    /// No new candidate starts after this many seconds (the rest are reported "not tried").
+    /// No new candidate starts after this many seconds (the rest are reported "not tried"),
+    /// and the plan under way stops there (its row says so; not the first candidate's).
     #[arg(long, default_value_t = 60, value_parser = usize_in("budget-s", 1, 3600))]
     budget_s: usize,
     /// Print the rows as JSON.

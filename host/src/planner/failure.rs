@@ -82,6 +82,17 @@ pub enum PlanFailure {
         /// States searched.
         searched: usize,
     },
+    /// The time limit ([`super::Deadline`], `--max-time-s`) ran out before an answer.
+    #[error(
+        "no answer within {limit_s} s (--max-time-s {limit_s}): stopped at {stage}; give it \
+         longer with a larger --max-time-s"
+    )]
+    OutOfTime {
+        /// The limit (s).
+        limit_s: f64,
+        /// What the planner was doing.
+        stage: String,
+    },
 }
 
 /// `a°, b°, …` (two decimals).

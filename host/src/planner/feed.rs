@@ -420,6 +420,9 @@ pub fn plan(
     let mut level = vec![Node { seq: Vec::new(), poses: starts.clone() }];
     let mut rejected = Vec::new();
     for depth in 1..=s.depth {
+        super::deadline::check(opt.deadline, || {
+            format!("the feed-region search, {depth}-step sequences")
+        })?;
         bar.set_length((level.len() * plate.modes.len()) as u64);
         bar.set_position(0);
         bar.set_message(format!("feed plan: {depth}-step sequences"));

@@ -18,7 +18,7 @@ use super::position::{self, POSITION_TOL_MM};
 use super::search::{Minimize, Path, Reach, Search, State, Target};
 use super::{
     PlanFailure, PlanOptions, PlannedStep, Problem, Progress, Settle, Synthesis, cdist,
-    confirm_any, settle_time, slowest_settled, start_points, step_duration_ms,
+    confirm_any, deadline, settle_time, slowest_settled, start_points, step_duration_ms,
 };
 
 /// One part of a plan for several parts: its predictions.
@@ -169,6 +169,7 @@ pub fn plan_parts_with(
     let (path, reachable, max_steps) = loop {
         let search = Search::new(problems, opt, &forbidden);
         let found = find(&search, parts, plate, opt, goals, &mut durations)?;
+        deadline::check(opt.deadline, || "the dynamic check of the plan found".into())?;
         let bad: Vec<Vec<(f64, usize)>> = (0..parts.len())
             .map(|i| unconfirmed(&bodies[i], plate, problems[i], &found.0, i, opt))
             .collect();
@@ -179,6 +180,7 @@ pub fn plan_parts_with(
             f.extend(b);
         }
     };
+    deadline::check(opt.deadline, || "the step durations".into())?;
     let steps = planned_steps(&bodies, plate, problems, &path, opt);
     let mut per_part = Vec::new();
     for (i, part) in parts.iter().enumerate() {
@@ -314,6 +316,7 @@ fn find(
     durations: &mut Durations<'_>,
 ) -> Result<(Path, Vec<Vec<f64>>, usize), PlanFailure> {
     let reach = search.reach();
+    reach.in_time(opt)?;
     let Some(shortest) = reach.shortest else {
         return Err(no_plan(search, &reach, parts, durations.problems, opt));
     };
@@ -343,7 +346,10 @@ fn find(
     };
     match search.select(&target, max_steps, &mut cost, &mut position) {
         Some(path) => Ok((path, reachable, max_steps)),
-        None => Err(unmet(search, &reach, &target, parts, max_steps)),
+        None => {
+            deadline::check(opt.deadline, || "choosing among the plans found".into())?;
+            Err(unmet(search, &reach, &target, parts, max_steps))
+        }
     }
 }
 
@@ -427,7 +433,8 @@ fn no_plan(
     if parts.len() == 1 {
         let nodes: Vec<(Vec<usize>, usize, usize)> =
             reach.nodes.iter().map(|n| (n.0[0].clone(), n.1, n.2)).collect();
-        return PlanFailure::NoPlan(problems[0].explain(&nodes, &search.unis[0].vals, opt));
+        let why = problems[0].explain(&nodes, &search.unis[0].vals, opt);
+        return PlanFailure::NoPlan(why + &reach.bound_note(opt));
     }
     for (i, problem) in problems.iter().enumerate() {
         let alone = Search::new(&[*problem], opt, &[]);

@@ -2,6 +2,8 @@
 //! the static straight-node map ([`line_map`]) and the simulated map of curved and grid
 //! nodes ([`sampled_map`]); dynamic straight-node maps are [`super::dynamic`].
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use rayon::prelude::*;
 
 use chladni_shared::analysis::field::Field;
@@ -299,22 +301,24 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
     // Every start point's runs at once, in parallel (no wait for the slowest run of each
     // point), collected in order: the map does not depend on the thread count. Start poses
     // on the rim are pushed against its wall.
-    let poses: Vec<Pose> = map_starts(body, mode, plate)
+    let starts = map_starts(body, mode, plate);
+    let poses: Vec<(usize, Pose)> = starts
         .iter()
-        .flat_map(|s| {
-            thetas[..distinct]
-                .iter()
-                .map(|th| rim.project(body, Pose { x: s[0], y: s[1], theta: th.to_radians() }))
+        .enumerate()
+        .flat_map(|(j, s)| {
+            thetas[..distinct].iter().map(move |th| {
+                (j, rim.project(body, Pose { x: s[0], y: s[1], theta: th.to_radians() }))
+            })
         })
         .collect();
-    let all: Vec<(Pose, bool)> = poses
-        .par_iter()
-        .map(|&q| {
-            let r = sim::run(body, &field, p, q);
-            (r.pose, r.rested && !r.lost)
-        })
-        .collect();
+    let all = simulate_starts(body, mode, plate, &field, p, &poses, starts.len());
     for simulated in all.chunks(distinct.max(1)) {
+        // A skipped run (`None`) belongs to a start point outside the mode's reach.
+        let Some(simulated) = simulated.iter().copied().collect::<Option<Vec<(Pose, bool)>>>()
+        else {
+            dead_starts += 1;
+            continue;
+        };
         // (end pose, rested) for each of the n start orientations.
         let runs = (0..n).map(|i| {
             let (q, rested) = simulated[i % distinct];
@@ -361,6 +365,37 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
         dead_starts,
         dynamic: None,
     }
+}
+
+/// The runs of [`sampled_map`] from `poses` (start point index, start pose), in order, in
+/// parallel: (end pose, rested). A start point is dropped whole once one of its runs ends
+/// outside the mode's reach ([`outside_reach`]), so its runs not yet begun are skipped
+/// (`None`): near a cantilever's clamp the pull vanishes and a run can creep for its whole
+/// step budget. Which runs are skipped depends on the thread timing, the map does not: a
+/// skipped run belongs to a dropped point.
+fn simulate_starts(
+    body: &Body,
+    mode: &Mode,
+    plate: &PlateModel,
+    field: &FieldModel,
+    p: SimParams,
+    poses: &[(usize, Pose)],
+    points: usize,
+) -> Vec<Option<(Pose, bool)>> {
+    let dead: Vec<AtomicBool> = (0..points).map(|_| AtomicBool::new(false)).collect();
+    poses
+        .par_iter()
+        .map(|&(j, q)| {
+            if dead[j].load(Ordering::Relaxed) {
+                return None;
+            }
+            let r = sim::run(body, field, p, q);
+            if outside_reach(body, mode, plate, r.pose) {
+                dead[j].store(true, Ordering::Relaxed);
+            }
+            Some((r.pose, r.rested && !r.lost))
+        })
+        .collect()
 }
 
 /// Is a run that ended at `q` under a grid mode outside the mode's reach: the part ended on

@@ -40,6 +40,10 @@
 //! plates with several curved node lines the rest depends on the start position, which the
 //! orientation-set search can only treat as ambiguity.
 //!
+//! Planning stops at [`PlanOptions::deadline`] (`plan --max-time-s`, [`Deadline`]) with a
+//! failure naming the stage reached, and the search expands at most
+//! [`PlanOptions::max_states`] sets (`--max-states`; a failure says when it stopped there).
+//!
 //! For bulk feeding (`plan --copies N`) [`copies`] ranks the planner's candidate plans by how
 //! many of N copies dropped together each orients per minute.
 
@@ -51,6 +55,7 @@ mod cluster;
 pub mod collide;
 mod confirm;
 pub mod copies;
+mod deadline;
 pub mod dynamic;
 mod failure;
 pub mod feed;
@@ -71,6 +76,7 @@ pub use dynamic::{DynSettings, MapCache, MapKind};
 
 pub use crate::model::angle::cdist;
 pub use confirm::{confirm, confirm_any};
+pub use deadline::Deadline;
 pub use failure::PlanFailure;
 pub use input::{MAX_PLAN_VERTICES, PlanInputError, check_input, plan_name};
 pub use maps::{MapError, StepMap, line_map, map_starts, rim_line, sampled_map};
@@ -120,10 +126,15 @@ impl Problem {
             .iter()
             .enumerate()
             .inspect(|(k, _)| progress(&format!("{}: step maps", part.name), *k, n))
-            .map(|(_, mode)| match mode.node {
-                Node::Line { .. } => line_map_of(part, mode, plate, period, opt, opt.maps)
-                    .map_err(PlanFailure::Model),
-                _ => Ok(sampled_map(&body, mode, plate, opt.sim_starts, period)),
+            .map(|(k, mode)| {
+                deadline::check(opt.deadline, || {
+                    format!("{}: step map {} of {n} ({})", part.name, k + 1, mode.name)
+                })?;
+                match mode.node {
+                    Node::Line { .. } => line_map_of(part, mode, plate, period, opt, opt.maps)
+                        .map_err(PlanFailure::Model),
+                    _ => Ok(sampled_map(&body, mode, plate, opt.sim_starts, period)),
+                }
             })
             .collect::<Result<Vec<_>, _>>()?;
         progress(&format!("{}: search, check, step durations", part.name), n, n);
@@ -145,10 +156,12 @@ impl Problem {
         let one = PlanOptions { minimize: Minimize::Steps, extra_steps: 0, ..*opt };
         let s = search::Search::new(&[self], &one, &[forbidden.to_vec()]);
         let reach = s.reach();
+        reach.in_time(opt)?;
         let Some(steps) = reach.shortest else {
             let nodes: Vec<(Vec<usize>, usize, usize)> =
                 reach.nodes.iter().map(|n| (n.0[0].clone(), n.1, n.2)).collect();
-            return Err(PlanFailure::NoPlan(self.explain(&nodes, &s.unis[0].vals, opt)));
+            let why = self.explain(&nodes, &s.unis[0].vals, opt) + &reach.bound_note(opt);
+            return Err(PlanFailure::NoPlan(why));
         };
         let path = s
             .select(&search::Target::default(), steps, &mut |_, _| 1, &mut |_| Vec::new())
@@ -185,7 +198,7 @@ pub(crate) fn fallback(opt: &PlanOptions) -> Option<MapKind> {
 /// fixing the position) is tried again over the [`fallback`] maps: only when a straight node
 /// is there to map differently.
 pub(crate) fn falls_back(e: &PlanFailure, plate: &PlateModel, opt: &PlanOptions) -> bool {
-    !matches!(e, PlanFailure::Model(_))
+    !matches!(e, PlanFailure::Model(_) | PlanFailure::OutOfTime { .. })
         && fallback(opt).is_some()
         && plate.modes.iter().any(|m| matches!(m.node, Node::Line { .. }))
 }
@@ -210,12 +223,17 @@ pub(crate) fn remapped(
         .modes
         .iter()
         .zip(&problem.maps)
-        .map(|(mode, map)| match mode.node {
-            Node::Line { .. } => line_map_of(part, mode, plate, problem.period, opt, kind),
-            _ => Ok(map.clone()),
+        .map(|(mode, map)| {
+            deadline::check(opt.deadline, || {
+                format!("{}: dynamic map of {}", part.name, mode.name)
+            })?;
+            match mode.node {
+                Node::Line { .. } => line_map_of(part, mode, plate, problem.period, opt, kind)
+                    .map_err(PlanFailure::Model),
+                _ => Ok(map.clone()),
+            }
         })
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(PlanFailure::Model)?;
+        .collect::<Result<Vec<_>, _>>()?;
     Ok(Problem { maps, ..problem.clone() })
 }
 

@@ -1,5 +1,6 @@
 //! Planner settings ([`PlanOptions`]) and the straight-node model choice ([`Backend`]).
 
+use super::deadline::Deadline;
 use super::dynamic::{DynSettings, MapKind};
 use super::feed;
 use super::search::Minimize;
@@ -49,6 +50,8 @@ pub struct PlanOptions {
     pub fix_position: bool,
     /// Among plans that fix the position, the one ending nearest to this (mm).
     pub goal_pos_mm: Option<[f64; 2]>,
+    /// Stop with [`super::PlanFailure::OutOfTime`] after this ([`Deadline`]); `None`: no limit.
+    pub deadline: Option<Deadline>,
 }
 
 impl Default for PlanOptions {
@@ -69,6 +72,7 @@ impl Default for PlanOptions {
             goal_deg: None,
             fix_position: false,
             goal_pos_mm: None,
+            deadline: None,
         }
     }
 }

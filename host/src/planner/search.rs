@@ -19,7 +19,7 @@
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap, VecDeque};
 
-use super::{PlanOptions, Problem, StepMap, cdist};
+use super::{PlanFailure, PlanOptions, Problem, StepMap, cdist, deadline};
 
 /// What the plan should be shortest in.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -90,7 +90,38 @@ pub(crate) struct Reach {
     pub(crate) shortest: Option<usize>,
     /// Final orientations (one per part) of the plans of at most `shortest + extra_steps`.
     pub(crate) finals: Vec<Vec<f64>>,
+    /// The search stopped at [`PlanOptions::deadline`].
+    pub(crate) out_of_time: bool,
+    /// Sets were left unexpanded at [`PlanOptions::max_states`].
+    pub(crate) capped: bool,
 }
+
+impl Reach {
+    /// `Err(OutOfTime)` when the search stopped at the deadline.
+    pub(crate) fn in_time(&self, opt: &PlanOptions) -> Result<(), PlanFailure> {
+        match opt.deadline {
+            Some(d) if self.out_of_time => Err(PlanFailure::OutOfTime {
+                limit_s: d.limit_s(),
+                stage: format!("the search over orientation sets ({} sets)", self.nodes.len()),
+            }),
+            _ => Ok(()),
+        }
+    }
+
+    /// What a failure adds when the search hit its bound: the bound and the flag that lifts it.
+    pub(crate) fn bound_note(&self, opt: &PlanOptions) -> String {
+        if !self.capped {
+            return String::new();
+        }
+        format!(
+            "; the search stopped expanding at {} sets (--max-states {}; a larger value searches on)",
+            opt.max_states, opt.max_states
+        )
+    }
+}
+
+/// The searches look at the clock every this many sets.
+const CLOCK_EVERY: usize = 1024;
 
 /// What a plan must meet besides ending in one orientation per part.
 #[derive(Debug, Clone, Default)]
@@ -227,7 +258,12 @@ impl<'a> Search<'a> {
         }
         let (mut shortest, mut finals) = (None, Vec::new());
         let nm = self.maps.first().map_or(0, |m| m.len());
+        let (mut out_of_time, mut capped) = (false, false);
         while let Some(i) = queue.pop_front() {
+            if i % CLOCK_EVERY == 0 && deadline::passed(self.opt.deadline) {
+                out_of_time = true;
+                break;
+            }
             let depth = nodes[i].3;
             if shortest.is_some_and(|d: usize| depth > d + self.opt.extra_steps) {
                 break;
@@ -237,6 +273,7 @@ impl<'a> Search<'a> {
                 finals.push(f);
             }
             if nodes.len() > self.opt.max_states {
+                capped = true;
                 continue;
             }
             for k in 0..nm {
@@ -248,7 +285,7 @@ impl<'a> Search<'a> {
                 }
             }
         }
-        Reach { nodes, shortest, finals }
+        Reach { nodes, shortest, finals, out_of_time, capped }
     }
 
     /// Pass 2: the plan of least cost (`cost(mode, state before or None for the first step)`)
@@ -293,6 +330,9 @@ impl<'a> Search<'a> {
         let mut nearest: Option<(f64, u64, usize)> = None;
         let nm = self.maps.first().map_or(0, |m| m.len());
         while let Some(Reverse((c, i))) = heap.pop() {
+            if i % CLOCK_EVERY == 0 && deadline::passed(self.opt.deadline) {
+                return None;
+            }
             if best.get(&key(&nodes[i])).is_some_and(|&b| b < c) {
                 continue;
             }

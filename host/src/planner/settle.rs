@@ -1,6 +1,8 @@
 //! Step durations: simulated settle times from a step's predicted orientations, lingering
 //! starts left out, and the duration rule (docs/plan.md, "Durations").
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use rayon::prelude::*;
 
 use super::maps::outside_reach;
@@ -67,19 +69,29 @@ pub fn settle_time(body: &Body, mode: &Mode, plate: &PlateModel, orientations: &
     let points = start_points(body, mode, plate);
     let mut ends_on_edge = Vec::new();
     for &pt in &points {
-        let runs: Vec<sim::Run> = orientations
+        // Grid modes: a corner outside the mode's reach (see [`sampled_map`]) never reaches a
+        // node; its drift onto the clamp is no settle time. Once one run from `pt` ends there
+        // the point is left out, so its runs not yet begun are skipped (`None`).
+        let edge = AtomicBool::new(false);
+        let runs: Vec<Option<f64>> = orientations
             .par_iter()
             .map(|&th| {
-                sim::run(body, &field, p, Pose { x: pt[0], y: pt[1], theta: th.to_radians() })
+                if edge.load(Ordering::Relaxed) {
+                    return None;
+                }
+                let q = Pose { x: pt[0], y: pt[1], theta: th.to_radians() };
+                let r = sim::run(body, &field, p, q);
+                if outside_reach(body, mode, plate, r.pose) {
+                    edge.store(true, Ordering::Relaxed);
+                }
+                Some(r.settle_s)
             })
             .collect();
-        // Grid modes: a corner outside the mode's reach (see [`sampled_map`]) never reaches a
-        // node; its drift onto the clamp is no settle time.
-        if runs.iter().any(|r| outside_reach(body, mode, plate, r.pose)) {
+        if edge.into_inner() {
             ends_on_edge.push(pt);
             continue;
         }
-        times.extend(runs.iter().map(|r| r.settle_s));
+        times.extend(runs.into_iter().flatten());
     }
     let (settle_s, lingering) = slowest_settled(times);
     Settle { settle_s, lingering, points: points.len(), ends_on_edge }

@@ -6,7 +6,8 @@
 //! public entry points (`planner::check_input`, `planner::plan_parts`, as `chladni plan` calls
 //! them over the whole plate) say whether a plan exists. One modal solve per clamp set; the
 //! work is bounded by the candidate count and a time budget after which no new candidate
-//! starts.
+//! starts and the planning of the one under way stops (the planner's deadline,
+//! [`planner::Deadline`]; not the first candidate's, so that one row has an answer).
 
 use std::time::{Duration, Instant};
 
@@ -14,7 +15,7 @@ use crate::model::modes_file;
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
 use crate::model::plate_file::{ModeEntry, Plate, PlateFile};
-use crate::planner::{self, PlanOptions};
+use crate::planner::{self, PlanFailure, PlanOptions};
 use crate::plate::drive;
 use crate::plate::solver::{self, ModalSolution};
 
@@ -140,6 +141,10 @@ pub fn run(
     mut tick: impl FnMut(),
 ) -> Vec<Row> {
     let start = Instant::now();
+    // The plan under way when the budget runs out stops there too, but for the first
+    // candidate's: some row gets an answer, whatever the budget.
+    let budget = planner::Deadline::after_s(set.budget.as_secs_f64());
+    let opt = PlanOptions { deadline: set.plan.deadline.or(Some(budget)), ..set.plan };
     let mut solved: Option<(Vec<[f64; 2]>, ModalSolution)> = None;
     let mut rows = Vec::new();
     for cand in candidates(plate.size_mm) {
@@ -159,7 +164,8 @@ pub fn run(
         table.clamps_mm = (!cand.clamps_mm.is_empty()).then(|| cand.clamps_mm.clone());
         let mode = forced_entries(&forced, all, set.grid);
         let modes = mode.len();
-        let outcome = plan_on(&PlateFile { plate: table, mode }, part, &set.plan);
+        let opt = if rows.is_empty() { &set.plan } else { &opt };
+        let outcome = plan_on(&PlateFile { plate: table, mode }, part, opt);
         rows.push(Row { candidate: cand, outcome, modes });
         tick();
     }
@@ -183,6 +189,9 @@ fn plan_on(file: &PlateFile, part: &Part, opt: &PlanOptions) -> Outcome {
             final_orientation_deg: syn.final_orientation_deg,
             period_deg: syn.period_deg,
         }),
+        Err(PlanFailure::OutOfTime { stage, .. }) => {
+            no(format!("the time budget (--budget-s) ran out at {stage}"))
+        }
         Err(e) => no(e.to_string()),
     }
 }
