@@ -8,7 +8,6 @@ use std::process::ExitCode;
 use chladni::model::part::Part;
 use chladni::model::part::mirror::{self, Face, Faces};
 use chladni::model::plan_file::PlanFile;
-use chladni::model::plan_file::r4;
 use chladni::model::plate::PlateModel;
 use chladni::motion::montecarlo::{self, Report, Setup, Stats, Trials};
 use chladni::motion::sim::{self, Body, FieldModel, Pose};
@@ -276,7 +275,7 @@ impl PlanArgs {
                 .map_err(output_error)?;
         }
         if syn.parts.len() > 1 {
-            json["end_overlaps"] = overlaps_json(&parts, &overlaps);
+            json["end_overlaps"] = shapes::plan::end_overlaps_json(&parts, &overlaps);
         }
         if self.json {
             println!("{}", copies::with_bulk(json, &bulk));
@@ -366,17 +365,6 @@ fn collisions(parts: &[Part], faces: &Faces, syn: &Synthesis) -> Vec<EndOverlap>
         );
     }
     found
-}
-
-/// `end_overlaps` of a plan for several parts: `[{"parts": [a, b], "depth_mm"}]`.
-fn overlaps_json(parts: &[Part], found: &[EndOverlap]) -> serde_json::Value {
-    let list = found.iter().map(|o| {
-        serde_json::json!({
-            "parts": [parts[o.a].name, parts[o.b].name],
-            "depth_mm": r4(o.depth_mm),
-        })
-    });
-    serde_json::Value::Array(list.collect())
 }
 
 /// A part that fits the plate in no orientation is refused: the model cannot hold it (the

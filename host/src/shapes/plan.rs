@@ -1,13 +1,17 @@
 //! The `--json` objects of `chladni plan` and `chladni simulate` beyond the plan file and the
 //! simulate report: the bulk numbers of `plan --copies N` ([`with_bulk`]), one entry per part
 //! of a several-part simulation ([`PartReport`], [`parts_json`]) and a refused drop of parts
-//! together ([`cannot_place_json`]). Keys in alphabetical order, as printed.
+//! together ([`cannot_place_json`]), the parts a plan ends on top of each other
+//! ([`end_overlaps_json`]). Keys in alphabetical order, as printed.
 
 use serde::Serialize;
 use serde_json::{Value, json};
 
+use crate::model::part::Part;
 use crate::model::part::mirror::Face;
+use crate::model::plan_file::r4;
 use crate::motion::bulk::CannotPlace;
+use crate::planner::collide::EndOverlap;
 use crate::planner::copies::Ranked;
 use crate::shapes::SimulateReport;
 
@@ -56,4 +60,16 @@ pub fn cannot_place_json(e: &CannotPlace) -> Value {
         "error": "cannot_place", "parts": e.parts, "placed": e.placed,
         "attempts": e.attempts, "message": e.to_string(),
     })
+}
+
+/// `end_overlaps` of a plan for several parts: `[{"depth_mm", "parts": [a, b]}]`, the pairs
+/// whose predicted end poses overlap ([`crate::planner::collide`]).
+pub fn end_overlaps_json(parts: &[Part], found: &[EndOverlap]) -> Value {
+    let list = found.iter().map(|o| {
+        json!({
+            "depth_mm": r4(o.depth_mm),
+            "parts": [parts[o.a].name, parts[o.b].name],
+        })
+    });
+    Value::Array(list.collect())
 }
