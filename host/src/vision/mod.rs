@@ -4,7 +4,7 @@
 //! unknown.
 //!
 //! Pipeline: the plate's corners (given, or found from the plate's contrast, [`corners`]) →
-//! the square-pixel rectified view → Otsu threshold, the parts being the minority class (dark
+//! the square-pixel rectified view → its uneven light divided out ([`flat`]) → Otsu threshold, the parts being the minority class (dark
 //! parts on a light plate and light parts on a dark one both work) → 8-connected blobs with a
 //! margin at the plate's edge → per blob: its area against each part's area, then for a
 //! candidate part and face a coarse search of the orientation on the blob's mask and a
@@ -28,6 +28,7 @@ use crate::plate::photo::rectify::RectifyError;
 
 pub mod corners;
 pub mod fit;
+mod flat;
 pub mod plot;
 pub mod series;
 mod split;
@@ -466,7 +467,8 @@ pub fn locate(
     };
     let (img, pix) = corners::rectify_square(photo, corners, size_mm)?;
     check_templates(templates, size_mm, pix)?;
-    let (labels, blobs, parts_dark, contrast) = segment(&img);
+    let flat = flat::flatten(&img, MARGIN_PX);
+    let (labels, blobs, parts_dark, contrast) = segment(&flat);
     let step = 1.5 * pix;
     let faces = templates
         .iter()
@@ -476,12 +478,13 @@ pub fn locate(
         })
         .collect();
     let view = View {
-        img: &img,
+        img: &flat,
         labels: &labels,
         pix,
         h_mm: size_mm[1],
         pol: if parts_dark { -1.0 } else { 1.0 },
         contrast,
+        evaluated: Default::default(),
     };
     let ctx = Ctx { view, templates, faces };
     let (mut parts, mut unknown) = (Vec::new(), Vec::new());

@@ -59,6 +59,24 @@ fn touching_pairs_are_told_apart() {
     check_all(&Photo::standard(parts, placed, 11), false);
 }
 
+/// One small part under 25–40 % light fall-off, on either polarity: the plate's gradient
+/// spans more grey levels than the part covers pixels, so Otsu on the raw view splits the
+/// gradient (half the plate a "part" at the edge); the flat-field correction divides it out.
+#[test]
+fn one_small_part_under_uneven_light_is_found() {
+    let parts = sample_parts();
+    for (falloff, seed, dark) in [(0.4, 22, true), (0.3, 23, false)] {
+        let placed = vec![Placed { part: 1, c: [205.0, 72.0], theta_deg: 33.0, flipped: true }];
+        let mut photo = Photo::standard(parts.clone(), placed, seed);
+        if !dark {
+            photo = photo.light_on_dark();
+        }
+        photo.light_falloff = falloff;
+        let e = check_all(&photo, false);
+        println!("fall-off {falloff}: {:.3} mm {:.3}°", e[0].0, e[0].1);
+    }
+}
+
 /// A part over the plate's edge and a part half under an object of no given kind: both named,
 /// neither given a pose; the parts in the open still found.
 #[test]
@@ -89,4 +107,27 @@ fn partly_hidden_parts_are_named_never_posed_wrong() {
     assert_eq!(edge.why, Why::Partial, "{edge:?}");
     // The triangle under the disc: not a pose, whatever the blob is called.
     assert!(r.unknown.iter().any(|u| (u.x_mm - 155.0).abs() < 10.0), "{:?}", r.unknown);
+}
+
+/// Time per photo of the bench's scene, printed (never asserted: numbers live in the bench,
+/// `cargo bench -p chladni-host --bench locate`); `--ignored` to run, in a debug build a
+/// relative measure only.
+#[test]
+#[ignore]
+fn time_per_photo_printed() {
+    let parts = sample_parts();
+    let t: Vec<Template> = parts.iter().map(Template::new).collect();
+    let photo =
+        Photo::standard(parts.clone(), random_poses(&parts, [300.0, 200.0], 6, 1, 6.0, 3), 3);
+    let img = render(&photo);
+    for corners in [None, Some(photo.corners)] {
+        let t0 = std::time::Instant::now();
+        let (r, _) = locate(&img, &t, photo.size_mm, corners).unwrap();
+        println!(
+            "corners given {}: {} parts in {:?}",
+            corners.is_some(),
+            r.parts.len(),
+            t0.elapsed()
+        );
+    }
 }
