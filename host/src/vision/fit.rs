@@ -98,6 +98,15 @@ pub struct Fitted {
     pub rms_px: f64,
 }
 
+impl Fitted {
+    /// How well the outline sits on the edges, 0–1: the score, discounted by the inliers'
+    /// RMS distance as a share of [`INLIER_PX`] squared. Two faces that both find every edge
+    /// still differ here by how close their edges lie.
+    pub fn quality(&self) -> f64 {
+        self.score * (1.0 - (self.rms_px / INLIER_PX).powi(2))
+    }
+}
+
 impl View<'_> {
     /// Continuous pixel coordinates (pixel i spans [i, i + 1)) of plate point `q` (mm).
     pub fn to_px(&self, q: [f64; 2]) -> [f64; 2] {
@@ -124,7 +133,8 @@ impl View<'_> {
             let (i, j) = (i.clamp(0, w - 1) as u32, j.clamp(0, h - 1) as u32);
             f64::from(self.img.get_pixel(i, j)[0])
         };
-        let (i, j) = (x0 as i64, y0 as i64);
+        // Far off the image (a diverging refinement) reads the border, without overflow.
+        let (i, j) = ((x0 as i64).clamp(-1, w), (y0 as i64).clamp(-1, h));
         let top = at(i, j) * (1.0 - fx) + at(i + 1, j) * fx;
         let bottom = at(i, j + 1) * (1.0 - fx) + at(i + 1, j + 1) * fx;
         top * (1.0 - fy) + bottom * fy
@@ -301,6 +311,10 @@ pub fn refine(view: &View, s: &[Sample], start: Pose) -> Fitted {
             b += w * d * j;
         }
         let Some(x) = a.lu().solve(&b) else { break };
+        // A step this large comes from too few edges to pin the pose: it is lost, stop.
+        if !x.iter().all(|v| v.is_finite()) || x[0].hypot(x[1]) > 20.0 * view.pix {
+            break;
+        }
         pose.c[0] += x[0];
         pose.c[1] += x[1];
         pose.theta += x[2];

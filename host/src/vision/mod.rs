@@ -49,9 +49,11 @@ pub const ACCEPT_SCORE: f64 = 0.8;
 pub const ACCEPT_TOUCHING: f64 = 0.55;
 /// A blob's area within this ratio of a part's counts as that part's.
 pub const AREA_TOLERANCE: f64 = 0.15;
-/// A chiral part's face is told when its better face's score beats the other face's by at
-/// least this (share of the outline); closer, `face_certain` is false.
-pub const FACE_MARGIN: f64 = 0.1;
+/// A chiral part's face is told when its better face's [`Fitted::quality`] beats the other
+/// face's by at least this; closer, `face_certain` is false. Measured at 0.5 mm per pixel: the
+/// example key's faces differ by 0.09, the example triangle's (its mirror image within 0.3 mm
+/// of it turned) by 0.025; at 0.26 mm the triangle's by 0.1.
+pub const FACE_MARGIN: f64 = 0.05;
 
 /// The best fit of one part kind in a blob, over both faces.
 #[derive(Debug, Clone, Copy)]
@@ -60,7 +62,7 @@ pub struct Fit {
     pub f: Fitted,
     /// Whether that face is the flipped one.
     pub flipped: bool,
-    /// The other face's best score, for a part whose faces differ.
+    /// The other face's best [`Fitted::quality`], for a part whose faces differ.
     pub other_face: Option<f64>,
 }
 
@@ -191,7 +193,7 @@ pub struct Located {
     /// Lies on its other face (the better-fitting face; see `face_certain`).
     pub flipped: bool,
     /// Whether the photo tells the faces apart: false when both faces' outlines fit within
-    /// [`FACE_MARGIN`] of each other (a part nearly its own mirror image at this pixel size);
+    /// [`FACE_MARGIN`] of each other's quality (a part nearly its own mirror image at this pixel size);
     /// then `flipped` is a guess that `verify` does not take as a pose.
     pub face_certain: bool,
     /// Share of its outline whose edge was found on the photo (0–1).
@@ -355,9 +357,11 @@ impl Ctx<'_> {
         }
         match best {
             [Some(up), Some(down)] => {
-                let flipped = down.score > up.score;
+                // The faces are compared by quality, not score alone: a near-mirror part's two
+                // faces can find every edge (score 1) and differ only in how close they lie.
+                let flipped = down.quality() > up.quality();
                 let (f, other) = if flipped { (down, up) } else { (up, down) };
-                Some(Fit { f, flipped, other_face: Some(other.score) })
+                Some(Fit { f, flipped, other_face: Some(other.quality()) })
             }
             [Some(f), None] => Some(Fit { f, flipped: false, other_face: None }),
             [None, Some(f)] => Some(Fit { f, flipped: true, other_face: None }),
@@ -371,7 +375,7 @@ impl Ctx<'_> {
         let theta = f.pose.theta.to_degrees().rem_euclid(t.period_deg);
         // Both faces fitting about as well: the photo cannot tell them apart (a part nearly
         // its own mirror image at this pixel size); the better one is reported, marked.
-        let face_certain = fit.other_face.is_none_or(|o| f.score - o >= FACE_MARGIN);
+        let face_certain = fit.other_face.is_none_or(|o| f.quality() - o >= FACE_MARGIN);
         Located {
             part: t.part.name.clone(),
             x_mm: f.pose.c[0],
