@@ -48,12 +48,19 @@ pub fn samples(part: &Part, step_mm: f64) -> Vec<Sample> {
             // Outline CCW, holes CW: (dy, −dx) points out of the material on both.
             let n = [dy / len, -dx / len];
             let count = (len / step_mm).floor() as usize;
+            let before = out.len();
             for i in 0..count {
                 let t = (i as f64 + 0.5) / count as f64;
                 if t * len < 1.5 * step_mm || (1.0 - t) * len < 1.5 * step_mm {
                     continue;
                 }
                 out.push(Sample { p: [a[0] + t * dx - c[0], a[1] + t * dy - c[1]], n });
+            }
+            // An edge a few steps long (a polygonised hole at a coarse pixel) keeps its
+            // midpoint: skipped whole, a small hole vanishes from the fit, and a part that only
+            // its hole tells from its half turn (the tab) could be posed 180° off.
+            if out.len() == before && count >= 1 {
+                out.push(Sample { p: [a[0] + 0.5 * dx - c[0], a[1] + 0.5 * dy - c[1]], n });
             }
         }
     }
