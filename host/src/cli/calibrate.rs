@@ -178,6 +178,7 @@ impl CalibrateArgs {
             error: InputError(e.to_string()).into(),
         };
         let files = photos::list(dir).map_err(series)?;
+        files.note.iter().for_each(|n| eprintln!("note: {n}"));
         let sightings = photos::locate_all(&files, &part, size, corners).map_err(series)?;
         let flipped = sightings.first().is_some_and(|s| s.located.flipped);
         let mut cal = CalPart::new(&if flipped { part.mirrored() } else { part.clone() });

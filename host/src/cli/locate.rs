@@ -123,7 +123,11 @@ impl LocateArgs {
                 l.x_mm,
                 l.y_mm,
                 l.theta_deg,
-                if l.flipped { "flipped" } else { "face up" },
+                match (l.flipped, l.face_certain) {
+                    (_, false) => "face ?",
+                    (true, _) => "flipped",
+                    _ => "face up",
+                },
                 l.score,
                 if l.touching { "  (touching another)" } else { "" }
             );

@@ -3,9 +3,12 @@
 //!
 //! Otsu splits the photo; the plate is the largest region of either class that does not touch
 //! the photo's border (the surroundings do). Its outer contour's convex hull, simplified by
-//! Douglas–Peucker until four vertices are left, gives rough corners; each side is then fitted
-//! (total least squares) to sub-pixel edge crossings measured across it, and the corners are
-//! the intersections of neighbouring sides. Corners come out in the order the rest of the
+//! Douglas–Peucker until four vertices are left, gives rough corners. That much runs on the
+//! photo shrunk to at most [`ROUGH_SIDE_PX`] on its long side (block means): the rough corners
+//! need only be good to a few pixels, and the labelling and contour passes cost in proportion
+//! to the pixels. Each side is then fitted at full resolution (total least squares) to
+//! sub-pixel edge crossings measured across it, over a window wide enough for the shrunk
+//! view's error, and the corners are the intersections of neighbouring sides. Corners come out in the order the rest of the
 //! photo code uses: the plate's bottom-left, bottom-right, top-right, top-left, taking the
 //! photo's bottom as the plate's bottom.
 
@@ -21,6 +24,32 @@ use crate::plate::photo::rectify::{Homography, RectifyError, check_corners, warp
 
 /// Least share of the photo the plate must cover to be found.
 const MIN_PLATE_SHARE: f64 = 0.05;
+/// The rough corners are found on the photo shrunk to at most this long side (px).
+const ROUGH_SIDE_PX: u32 = 400;
+
+/// `img` shrunk by the whole factor `k` (each pixel the mean of a k × k block; the last
+/// partial blocks dropped).
+fn shrink(img: &GrayImage, k: u32) -> GrayImage {
+    if k <= 1 {
+        return img.clone();
+    }
+    let (w, h) = (img.width() / k, img.height() / k);
+    let mut sums = vec![0u32; w as usize];
+    let mut out = GrayImage::new(w, h);
+    for by in 0..h {
+        sums.fill(0);
+        for y in by * k..(by + 1) * k {
+            for (bx, s) in sums.iter_mut().enumerate() {
+                let x0 = bx as u32 * k;
+                *s += (x0..x0 + k).map(|x| u32::from(img.get_pixel(x, y)[0])).sum::<u32>();
+            }
+        }
+        for (bx, s) in sums.iter().enumerate() {
+            out.put_pixel(bx as u32, by, Luma([(s / (k * k)) as u8]));
+        }
+    }
+    out
+}
 
 /// The plate region: the label image's largest component of one Otsu class off the border.
 fn plate_mask(img: &GrayImage) -> Result<GrayImage, LocateError> {
@@ -112,34 +141,35 @@ fn grey(img: &GrayImage, [x, y]: [f64; 2]) -> f64 {
 }
 
 /// A side's line (point, unit direction) fitted to edge crossings between corners `a` and `b`,
-/// `out` pointing away from the plate.
+/// `out` pointing away from the plate, searched within `reach` px of the rough side.
 fn fit_side(
     img: &GrayImage,
     a: [f64; 2],
     b: [f64; 2],
     out: [f64; 2],
+    reach: f64,
 ) -> Option<([f64; 2], [f64; 2])> {
     let len = (b[0] - a[0]).hypot(b[1] - a[1]);
     let mut pts = Vec::new();
     let n = (len / 3.0) as usize;
+    let steps = (4.0 * reach).round() as usize;
+    let at = |k: usize| -reach + 0.5 * k as f64;
     for i in 0..n {
         let t = 0.1 + 0.8 * i as f64 / n.max(1) as f64;
         let p = [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
-        let v: Vec<f64> = (0..=20)
-            .map(|k| {
-                let s = -5.0 + 0.5 * k as f64;
-                grey(img, [p[0] + s * out[0], p[1] + s * out[1]])
-            })
+        let v: Vec<f64> = (0..=steps)
+            .map(|k| grey(img, [p[0] + at(k) * out[0], p[1] + at(k) * out[1]]))
             .collect();
-        let (inside, outside) = ((v[0] + v[1] + v[2]) / 3.0, (v[18] + v[19] + v[20]) / 3.0);
+        let (inside, outside) =
+            ((v[0] + v[1] + v[2]) / 3.0, (v[steps - 2] + v[steps - 1] + v[steps]) / 3.0);
         if (inside - outside).abs() < 10.0 {
             continue;
         }
         let mid = 0.5 * (inside + outside);
         let sg = (inside - outside).signum();
-        let cross = (0..20)
+        let cross = (0..steps)
             .filter(|&k| (v[k] - mid) * sg > 0.0 && (v[k + 1] - mid) * sg <= 0.0)
-            .map(|k| -5.0 + 0.5 * k as f64 + 0.5 * (v[k] - mid) / (v[k] - v[k + 1]))
+            .map(|k| at(k) + 0.5 * (v[k] - mid) / (v[k] - v[k + 1]))
             .min_by(|x, y| x.abs().total_cmp(&y.abs()));
         if let Some(s) = cross {
             pts.push([p[0] + s * out[0], p[1] + s * out[1]]);
@@ -188,7 +218,13 @@ fn intersect((p, d): ([f64; 2], [f64; 2]), (q, e): ([f64; 2], [f64; 2])) -> Opti
 /// The plate's corners (photo pixels, x right, y down; bottom-left, bottom-right, top-right,
 /// top-left), found from the plate's contrast with its surroundings.
 pub fn find_corners(img: &GrayImage) -> Result<[[f64; 2]; 4], LocateError> {
-    let rough = rough_corners(&plate_mask(img)?)?;
+    let k = img.width().max(img.height()).div_ceil(ROUGH_SIDE_PX).max(1);
+    let small = rough_corners(&plate_mask(&shrink(img, k))?)?;
+    // Shrunk pixel i spans photo pixels [k·i, k·(i + 1)): continuous positions scale by k.
+    let rough = small.map(|p| [p[0] * f64::from(k), p[1] * f64::from(k)]);
+    // The rough sides may be a shrunk pixel or two off: the window covers that, and is the
+    // full-resolution search's ±5 px when nothing was shrunk.
+    let reach = 5.0 + 2.0 * f64::from(k - 1);
     let cx = rough.iter().map(|p| p[0]).sum::<f64>() / 4.0;
     let cy = rough.iter().map(|p| p[1]).sum::<f64>() / 4.0;
     let mut sides = Vec::with_capacity(4);
@@ -200,7 +236,7 @@ pub fn find_corners(img: &GrayImage) -> Result<[[f64; 2]; 4], LocateError> {
         if out[0] * mid[0] + out[1] * mid[1] < 0.0 {
             out = [-out[0], -out[1]];
         }
-        let side = fit_side(img, a, b, out)
+        let side = fit_side(img, a, b, out, reach)
             .ok_or_else(|| LocateError::NoPlate(format!("plate side {k} shows no clear edge")))?;
         sides.push(side);
     }

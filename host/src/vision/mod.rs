@@ -4,7 +4,7 @@
 //! unknown.
 //!
 //! Pipeline: the plate's corners (given, or found from the plate's contrast, [`corners`]) →
-//! the square-pixel rectified view → Otsu threshold, the parts being the minority class (dark
+//! the square-pixel rectified view → its uneven light divided out ([`flat`]) → Otsu threshold, the parts being the minority class (dark
 //! parts on a light plate and light parts on a dark one both work) → 8-connected blobs with a
 //! margin at the plate's edge → per blob: its area against each part's area, then for a
 //! candidate part and face a coarse search of the orientation on the blob's mask and a
@@ -28,6 +28,7 @@ use crate::plate::photo::rectify::RectifyError;
 
 pub mod corners;
 pub mod fit;
+mod flat;
 pub mod plot;
 pub mod series;
 mod split;
@@ -48,6 +49,22 @@ pub const ACCEPT_SCORE: f64 = 0.8;
 pub const ACCEPT_TOUCHING: f64 = 0.55;
 /// A blob's area within this ratio of a part's counts as that part's.
 pub const AREA_TOLERANCE: f64 = 0.15;
+/// A chiral part's face is told when its better face's [`Fitted::quality`] beats the other
+/// face's by at least this; closer, `face_certain` is false. Measured at 0.5 mm per pixel: the
+/// example key's faces differ by 0.09, the example triangle's (its mirror image within 0.3 mm
+/// of it turned) by 0.025; at 0.26 mm the triangle's by 0.1.
+pub const FACE_MARGIN: f64 = 0.05;
+
+/// The best fit of one part kind in a blob, over both faces.
+#[derive(Debug, Clone, Copy)]
+pub struct Fit {
+    /// The better face's fit.
+    pub f: Fitted,
+    /// Whether that face is the flipped one.
+    pub flipped: bool,
+    /// The other face's best [`Fitted::quality`], for a part whose faces differ.
+    pub other_face: Option<f64>,
+}
 
 /// Why a photo cannot be searched.
 #[derive(Debug, thiserror::Error)]
@@ -173,8 +190,12 @@ pub struct Located {
     pub y_mm: f64,
     /// Orientation (deg CCW), in [0, period).
     pub theta_deg: f64,
-    /// Lies on its other face.
+    /// Lies on its other face (the better-fitting face; see `face_certain`).
     pub flipped: bool,
+    /// Whether the photo tells the faces apart: false when both faces' outlines fit within
+    /// [`FACE_MARGIN`] of each other's quality (a part nearly its own mirror image at this pixel size);
+    /// then `flipped` is a guess that `verify` does not take as a pose.
+    pub face_certain: bool,
     /// Share of its outline whose edge was found on the photo (0–1).
     pub score: f64,
     /// RMS distance of those edges from the fitted outline (px).
@@ -317,40 +338,51 @@ pub(crate) struct Ctx<'a> {
 
 impl Ctx<'_> {
     /// The best fit of template `k` (either face) in blob `label` near `centre`, searching
-    /// shifts within `shift_px`: (fit, flipped).
-    pub fn fit(
-        &self,
-        k: usize,
-        label: u32,
-        centre: [f64; 2],
-        shift_px: i32,
-    ) -> Option<(Fitted, bool)> {
+    /// shifts within `shift_px`: the fit, its face and the other face's best score (`None`
+    /// for a part with a mirror axis, fitted on one face).
+    pub fn fit(&self, k: usize, label: u32, centre: [f64; 2], shift_px: i32) -> Option<Fit> {
         let t = &self.templates[k];
         let period = t.period_deg.to_radians();
         let faces = [(Some(&self.faces[k].up), false), (self.faces[k].flipped.as_ref(), true)];
-        let mut best: Option<(Fitted, bool)> = None;
+        let mut best: [Option<Fitted>; 2] = [None, None];
         for (s, flipped) in faces {
             let Some(s) = s else { continue };
+            let slot = &mut best[usize::from(flipped)];
             for (_, start) in fit::coarse(&self.view, s, centre, label, period, shift_px) {
                 let f = fit::refine(&self.view, s, start);
-                if best.as_ref().is_none_or(|b| f.score > b.0.score) {
-                    best = Some((f, flipped));
+                if slot.as_ref().is_none_or(|b| f.score > b.score) {
+                    *slot = Some(f);
                 }
             }
         }
-        best
+        match best {
+            [Some(up), Some(down)] => {
+                // The faces are compared by quality, not score alone: a near-mirror part's two
+                // faces can find every edge (score 1) and differ only in how close they lie.
+                let flipped = down.quality() > up.quality();
+                let (f, other) = if flipped { (down, up) } else { (up, down) };
+                Some(Fit { f, flipped, other_face: Some(other.quality()) })
+            }
+            [Some(f), None] => Some(Fit { f, flipped: false, other_face: None }),
+            [None, Some(f)] => Some(Fit { f, flipped: true, other_face: None }),
+            [None, None] => None,
+        }
     }
 
     /// The located part for fit `f` of template `k`.
-    pub fn located(&self, k: usize, f: &Fitted, flipped: bool, touching: bool) -> Located {
-        let t = &self.templates[k];
+    pub fn located(&self, k: usize, fit: &Fit, touching: bool) -> Located {
+        let (t, f) = (&self.templates[k], &fit.f);
         let theta = f.pose.theta.to_degrees().rem_euclid(t.period_deg);
+        // Both faces fitting about as well: the photo cannot tell them apart (a part nearly
+        // its own mirror image at this pixel size); the better one is reported, marked.
+        let face_certain = fit.other_face.is_none_or(|o| f.quality() - o >= FACE_MARGIN);
         Located {
             part: t.part.name.clone(),
             x_mm: f.pose.c[0],
             y_mm: f.pose.c[1],
             theta_deg: if t.period_deg - theta < 1e-9 { 0.0 } else { theta },
-            flipped,
+            flipped: fit.flipped,
+            face_certain,
             score: f.score,
             rms_px: f.rms_px,
             touching,
@@ -399,9 +431,9 @@ fn classify(ctx: &Ctx, b: &Blob) -> Outcome {
     }
     let mut misfit = None;
     for &k in &single {
-        if let Some((f, flipped)) = ctx.fit(k, b.label, centre, 0) {
-            if f.score >= ACCEPT_SCORE {
-                return Outcome::Parts(vec![ctx.located(k, &f, flipped, false)]);
+        if let Some(fit) = ctx.fit(k, b.label, centre, 0) {
+            if fit.f.score >= ACCEPT_SCORE {
+                return Outcome::Parts(vec![ctx.located(k, &fit, false)]);
             }
             misfit = Some(k);
         }
@@ -466,7 +498,8 @@ pub fn locate(
     };
     let (img, pix) = corners::rectify_square(photo, corners, size_mm)?;
     check_templates(templates, size_mm, pix)?;
-    let (labels, blobs, parts_dark, contrast) = segment(&img);
+    let flat = flat::flatten(&img, MARGIN_PX);
+    let (labels, blobs, parts_dark, contrast) = segment(&flat);
     let step = 1.5 * pix;
     let faces = templates
         .iter()
@@ -476,12 +509,13 @@ pub fn locate(
         })
         .collect();
     let view = View {
-        img: &img,
+        img: &flat,
         labels: &labels,
         pix,
         h_mm: size_mm[1],
         pol: if parts_dark { -1.0 } else { 1.0 },
         contrast,
+        evaluated: Default::default(),
     };
     let ctx = Ctx { view, templates, faces };
     let (mut parts, mut unknown) = (Vec::new(), Vec::new());

@@ -79,12 +79,12 @@ fn fit_pieces(ctx: &Ctx, b: &Blob, seeds: &[[f64; 2]], shift_px: i32) -> Option<
         let centre = ctx.mm(s);
         let best = (0..ctx.templates.len())
             .filter_map(|k| ctx.fit(k, b.label, centre, shift_px).map(|f| (k, f)))
-            .max_by(|a, c| a.1.0.score.total_cmp(&c.1.0.score))?;
-        let (k, (f, flipped)) = best;
-        if f.score < ACCEPT_TOUCHING {
+            .max_by(|a, c| a.1.f.score.total_cmp(&c.1.f.score))?;
+        let (k, fit) = best;
+        if fit.f.score < ACCEPT_TOUCHING {
             return None;
         }
-        let l = ctx.located(k, &f, flipped, true);
+        let l = ctx.located(k, &fit, true);
         let r = ctx.templates[k].radius_mm;
         if out.iter().any(|o| (o.x_mm - l.x_mm).hypot(o.y_mm - l.y_mm) < 0.5 * r) {
             return None;

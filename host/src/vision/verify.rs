@@ -203,6 +203,8 @@ pub enum Miss {
     Position,
     /// Its pose cannot be seen (a cluster, partly hidden, or its outline does not fit).
     NotSeen,
+    /// Which face is up cannot be told from the photo (`Located::face_certain` false).
+    FaceUnknown,
 }
 
 /// One part found, judged.
@@ -296,6 +298,16 @@ impl Check {
             orientation_error_deg: None,
             position_error_mm: None,
         };
+        if !l.face_certain {
+            c.miss = Some(Miss::FaceUnknown);
+            c.reason = Some(format!(
+                "{} at ({:.1}, {:.1}) mm: both its faces fit the photo about equally (score \
+                 {:.2}), so which side is up cannot be told and the pose is not verified; \
+                 photograph the plate closer (smaller pixels)",
+                l.part, l.x_mm, l.y_mm, l.score
+            ));
+            return c;
+        }
         let Some(e) = self.entry(l.kind, l.flipped) else {
             c.miss = Some(Miss::WrongFace);
             c.reason = Some(format!(
@@ -467,6 +479,7 @@ mod tests {
             y_mm: y,
             theta_deg: theta,
             flipped,
+            face_certain: true,
             score: 0.95,
             rms_px: 0.2,
             touching: false,
@@ -508,6 +521,17 @@ mod tests {
         assert!(v.parts[3].reason.as_ref().unwrap().contains("--both-faces"));
         assert_eq!((v.found, v.oriented, v.result), (4, 1, Outcome::Off));
         assert_eq!(v.success_rate, Some(0.25));
+    }
+
+    #[test]
+    fn a_face_the_photo_cannot_tell_is_never_ok() {
+        let check = Check::new(&plan(110.0, 360.0, None), &[tri()], 5.0, 2.0).unwrap();
+        let mut l = located(0, "tri", 150.0, 100.0, 110.0, false);
+        l.face_certain = false;
+        let v = check.judge(&report(vec![l], vec![]));
+        assert_eq!((v.found, v.oriented, v.result), (1, 0, Outcome::Off));
+        assert_eq!(v.parts[0].miss, Some(Miss::FaceUnknown));
+        assert!(v.parts[0].reason.as_ref().unwrap().contains("cannot be told"));
     }
 
     #[test]
