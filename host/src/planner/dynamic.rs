@@ -351,6 +351,7 @@ pub fn dynamic_line_map(
         slack: step / 2f64.powi(set.refine as i32 + 1),
         dead_starts: 0,
         dynamic: Some(std::sync::Arc::new(DynamicImages { rests, outcomes })),
+        evidence: None,
     })
 }
 

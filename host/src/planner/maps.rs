@@ -12,6 +12,7 @@ use chladni_shared::icd::units::deg_from_bam;
 
 use super::cluster::{CLUSTER_DEG, Clusters};
 use super::dynamic;
+use super::margin::ModeMargin;
 use super::options::Backend;
 use super::symmetry::body_symmetry_order;
 use crate::analysis::reference::{RefField, Reference};
@@ -40,6 +41,9 @@ pub struct StepMap {
     /// Dynamic straight-node maps ([`dynamic`]): the measured outcome of every start
     /// orientation from either side of the node; `None` for every other map.
     pub(super) dynamic: Option<std::sync::Arc<dynamic::DynamicImages>>,
+    /// The margin measured for this map ([`super::margin`]: grid modes when the margin is
+    /// automatic); `None`: the options' fixed margin applies.
+    pub evidence: Option<ModeMargin>,
 }
 
 impl StepMap {
@@ -53,6 +57,7 @@ impl StepMap {
             slack: 0.0,
             dead_starts: 0,
             dynamic: None,
+            evidence: None,
         }
     }
 }
@@ -81,8 +86,9 @@ impl StepMap {
     }
 
     /// `Err(distance)` when `theta` lies within `margin` (plus the map's slack) of a basin
-    /// boundary.
+    /// boundary; a map with a measured margin ([`Self::evidence`]) keeps that one instead.
     pub(crate) fn near_boundary(&self, theta: f64, margin: f64) -> Result<(), f64> {
+        let margin = self.evidence.map_or(margin, |m| m.deg);
         let near =
             self.boundaries.iter().map(|&b| cdist(theta, b, 360.0)).fold(f64::INFINITY, f64::min);
         if near < margin + self.slack { Err(near) } else { Ok(()) }
@@ -229,6 +235,7 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, M
         slack: 0.0,
         dead_starts: 0,
         dynamic: None,
+        evidence: None,
     })
 }
 
@@ -274,19 +281,9 @@ pub fn map_starts(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]>
 /// outside the mode's reach, is left out of the map and counted in [`StepMap::dead_starts`]
 /// (docs/plan.md: recording those rim rests as well was tried and is not done yet).
 pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, period: f64) -> StepMap {
-    let field = FieldModel::new(mode, plate);
-    let t0 = body.radius / (mode.speed_mm_s * field.max_gain());
+    let (field, p) = map_run(body, mode, plate);
     let rim = Rim::of(plate);
-    let p = SimParams {
-        speed: mode.speed_mm_s,
-        t_limit: 5000.0 * t0,
-        run_to_limit: false,
-        rim: Some(rim),
-    };
-    // 0.3 of a step off 0° (so also off 45°, 90°, ... for n = 36, 90, 360): a start point on
-    // the node (the plate centre often is) would otherwise sample the symmetric unstable
-    // rests (0°, 90°, ...) exactly and report them as rests.
-    let thetas: Vec<f64> = (0..n).map(|i| (i as f64 + 0.3) * 360.0 / n as f64).collect();
+    let thetas = map_thetas(n);
     let mut clusters = Clusters::new(period, CLUSTER_DEG);
     let mut labels: Vec<Vec<Option<usize>>> = Vec::new();
     let mut dead_starts = 0;
@@ -360,7 +357,30 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
         slack: 180.0 / n as f64,
         dead_starts,
         dynamic: None,
+        evidence: None,
     }
+}
+
+/// The field and run settings of a simulated map's runs: with the rim, to rest or 5000 T₀
+/// (T₀: time to travel one radius at full pull; [`sampled_map`]).
+pub(super) fn map_run(body: &Body, mode: &Mode, plate: &PlateModel) -> (FieldModel, SimParams) {
+    let field = FieldModel::new(mode, plate);
+    let t0 = body.radius / (mode.speed_mm_s * field.max_gain());
+    let p = SimParams {
+        speed: mode.speed_mm_s,
+        t_limit: 5000.0 * t0,
+        run_to_limit: false,
+        rim: Some(Rim::of(plate)),
+    };
+    (field, p)
+}
+
+/// A simulated map's `n` start orientations (deg): 0.3 of a step off 0° (so also off 45°,
+/// 90°, ... for n = 36, 90, 360): a start point on the node (the plate centre often is) would
+/// otherwise sample the symmetric unstable rests (0°, 90°, ...) exactly and report them as
+/// rests. Its boundaries lie half a step after a start orientation.
+pub(super) fn map_thetas(n: usize) -> Vec<f64> {
+    (0..n).map(|i| (i as f64 + 0.3) * 360.0 / n as f64).collect()
 }
 
 /// Is a run that ended at `q` under a grid mode outside the mode's reach: the part ended on

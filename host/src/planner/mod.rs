@@ -56,6 +56,7 @@ pub mod feed;
 pub mod goal;
 mod input;
 mod maps;
+pub mod margin;
 mod options;
 pub mod position;
 mod result;
@@ -122,7 +123,7 @@ impl Problem {
             .map(|(_, mode)| match mode.node {
                 Node::Line { .. } => line_map_of(part, mode, plate, period, opt, opt.maps)
                     .map_err(|e| PlanFailure::Model(e.to_string())),
-                _ => Ok(sampled_map(&body, mode, plate, opt.sim_starts, period)),
+                _ => Ok(margin::simulated_map(&body, mode, plate, opt, period)),
             })
             .collect::<Result<Vec<_>, _>>()?;
         progress(&format!("{}: search, check, step durations", part.name), n, n);
