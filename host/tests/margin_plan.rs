@@ -6,7 +6,7 @@
 use chladni::motion::montecarlo::{self, Setup};
 use chladni::motion::sim::{Body, FieldModel};
 use chladni::planner::margin::{MIN_MARGIN_DEG, MarginSource};
-use chladni::planner::{self, PlanOptions};
+use chladni::planner::{self, PlanOptions, Problem};
 
 mod support;
 use support::cli::{chladni, ex, json, ok_json};
@@ -55,13 +55,17 @@ const ANGLES: [f64; 2] = [7.0, 97.0];
 fn the_evidence_margin_plans_where_a_fixed_three_degrees_refuses_and_the_plan_holds() {
     let plate = line_grid_plate(&ANGLES, 2.0);
     let tri = part("triangle.json");
-    // 36 start orientations per map (10° apart): the sampling slack is 5°.
-    let fixed = PlanOptions { margin_auto: false, sim_starts: 36, ..Default::default() };
-    let err = planner::plan(&tri, &plate, &fixed).unwrap_err().to_string();
+    // 36 start orientations per map (10° apart): the sampling slack is 5°. The maps are made
+    // once; without their evidence they keep the fixed margin.
+    let auto = PlanOptions { sim_starts: 36, ..Default::default() };
+    let problem = Problem::new(&tri, &plate, &auto).unwrap();
+    let mut without = problem.clone();
+    without.maps.iter_mut().for_each(|m| m.evidence = None);
+    let fixed = PlanOptions { margin_auto: false, ..auto };
+    let err = without.search(&fixed).unwrap_err().to_string();
     assert!(err.contains("at least 8.00° (--margin-deg 3° plus 5.00°"), "{err}");
     // The linear fields' resampling moves no boundary: each mode keeps the 0.5° floor.
-    let auto = PlanOptions { sim_starts: 36, ..Default::default() };
-    let syn = planner::plan(&tri, &plate, &auto).unwrap();
+    let syn = planner::plan_with(&tri, &plate, &auto, &problem).unwrap();
     assert!(syn.steps.len() >= 2, "{:?}", syn.steps);
     for s in &syn.steps {
         assert_eq!(s.margin.deg, MIN_MARGIN_DEG, "{:?}", s.margin);
