@@ -38,6 +38,9 @@ pub struct StepMap {
     /// Simulated grid maps: start points outside the mode's reach (no interior node
     /// reached; see [`sampled_map`]).
     pub dead_starts: usize,
+    /// Which of [`map_starts`] those were (indices), for measurements that rerun the map's
+    /// runs ([`super::margin::windowed_spread`]).
+    pub(super) dead_points: Vec<usize>,
     /// Dynamic straight-node maps ([`dynamic`]): the measured outcome of every start
     /// orientation from either side of the node; `None` for every other map.
     pub(super) dynamic: Option<std::sync::Arc<dynamic::DynamicImages>>,
@@ -56,6 +59,7 @@ impl StepMap {
             sampled: None,
             slack: 0.0,
             dead_starts: 0,
+            dead_points: Vec::new(),
             dynamic: None,
             evidence: None,
         }
@@ -234,6 +238,7 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, M
         sampled: None,
         slack: 0.0,
         dead_starts: 0,
+        dead_points: Vec::new(),
         dynamic: None,
         evidence: None,
     })
@@ -286,7 +291,7 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
     let thetas = map_thetas(n);
     let mut clusters = Clusters::new(period, CLUSTER_DEG);
     let mut labels: Vec<Vec<Option<usize>>> = Vec::new();
-    let mut dead_starts = 0;
+    let (mut dead_starts, mut dead_points) = (0, Vec::new());
     // A part of symmetry order m started at θ + 360°/m is the same body at the same place as
     // at θ: its run is that run turned by 360°/m (to rounding), so only the first n/m start
     // orientations of each point are simulated.
@@ -311,7 +316,7 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
             (r.pose, r.rested && !r.lost)
         })
         .collect();
-    for simulated in all.chunks(distinct.max(1)) {
+    for (point, simulated) in all.chunks(distinct.max(1)).enumerate() {
         // (end pose, rested) for each of the n start orientations.
         let runs = (0..n).map(|i| {
             let (q, rested) = simulated[i % distinct];
@@ -319,6 +324,7 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
         });
         if simulated.iter().any(|r| outside_reach(body, mode, plate, r.0)) {
             dead_starts += 1;
+            dead_points.push(point);
             continue;
         }
         let label = runs
@@ -356,6 +362,7 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
         sampled: Some(sampled),
         slack: 180.0 / n as f64,
         dead_starts,
+        dead_points,
         dynamic: None,
         evidence: None,
     }

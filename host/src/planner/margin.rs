@@ -195,7 +195,7 @@ pub fn grid_margin(
     let coarse = coarse_grid(g);
     let dims = [coarse.nx, coarse.ny];
     let other = Mode { node: Node::Grid(coarse), ..mode.clone() };
-    let spread = windowed_spread(body, &other, plate, n, period, &base.boundaries);
+    let spread = windowed_spread(body, &other, plate, n, period, base);
     Some(ModeMargin::from_spread(spread, [g.nx, g.ny], dims))
 }
 
@@ -214,13 +214,13 @@ fn window(boundaries: &[f64], n: usize) -> Vec<usize> {
     idx.into_iter().collect()
 }
 
-/// How far the basin boundaries `base` of a map made with `n` start orientations move under
+/// How far the basin boundaries of `map` (made with `n` start orientations) move under
 /// `mode` (the resampled field): the map's runs (its start points, [`map_starts`], the same
 /// settings, [`map_run`]) from only the start orientations around each base boundary
 /// ([`window`]); the boundaries found there (where neighbouring orientations' sets of rests
 /// differ, or a run does not come to rest) against `base` ([`boundary_spread`]; infinite when
-/// none is found). A start point with a run outside the mode's reach is left out, as in
-/// [`sampled_map`]. The cost: 2·[`WINDOW_STEPS`] + 2 orientations per boundary (per
+/// none is found). The start points the map left out (a run outside the mode's reach,
+/// [`StepMap::dead_starts`]) are left out, and so is one with a windowed run outside it. The cost: 2·[`WINDOW_STEPS`] + 2 orientations per boundary (per
 /// 360°/m for a part of symmetry order m) instead of the map's `n` (n/m).
 pub fn windowed_spread(
     body: &Body,
@@ -228,8 +228,9 @@ pub fn windowed_spread(
     plate: &PlateModel,
     n: usize,
     period: f64,
-    base: &[f64],
+    map: &StepMap,
 ) -> f64 {
+    let base = &map.boundaries;
     // A part of symmetry order m started at θ + 360°/m is the run from θ turned (as in
     // [`sampled_map`]): only the windows' orientations below 360°/m are simulated, and the
     // boundaries found there repeat every 360°/m.
@@ -257,13 +258,24 @@ pub fn windowed_spread(
             (r.pose, r.rested && !r.lost)
         })
         .collect();
+    // Ends are labelled by the map's own rests (the nearest within the clustering tolerance),
+    // so that the windowed runs and the map tell rests apart alike; other ends are clustered
+    // as new rests.
     let mut clusters = Clusters::new(period, CLUSTER_DEG);
+    let mut label = |theta: f64| {
+        let near = map.stable.iter().enumerate().map(|(k, &s)| (k, cdist(s, theta, period)));
+        match near.min_by(|a, b| a.1.total_cmp(&b.1)) {
+            Some((k, d)) if d <= CLUSTER_DEG => k,
+            _ => map.stable.len() + clusters.label(theta),
+        }
+    };
     let labels: Vec<Vec<Option<usize>>> = ends
         .chunks(idx.len().max(1))
+        .enumerate()
+        .filter(|(point, _)| !map.dead_points.contains(point))
+        .map(|(_, runs)| runs)
         .filter(|runs| !runs.iter().any(|r| outside_reach(body, mode, plate, r.0)))
-        .map(|runs| {
-            runs.iter().map(|(q, ok)| ok.then(|| clusters.label(q.theta.to_degrees()))).collect()
-        })
+        .map(|runs| runs.iter().map(|(q, ok)| ok.then(|| label(q.theta.to_degrees()))).collect())
         .collect();
     let combined: Vec<Option<Vec<usize>>> = (0..idx.len())
         .map(|k| {
@@ -427,7 +439,7 @@ mod tests {
         assert!((moved - 10.0).abs() < 1e-6, "{moved}");
         assert_eq!(ModeMargin::from_spread(moved, [41, 41], [21, 21]).deg, 10.0);
         // The windowed measurement finds the same 10° move from a few runs per boundary.
-        let windowed = windowed_spread(&body, &plate.modes[1], &plate, n, period, &a.boundaries);
+        let windowed = windowed_spread(&body, &plate.modes[1], &plate, n, period, &a);
         assert!((windowed - 10.0).abs() < 1e-6, "{windowed}");
         let own = grid_margin(&body, &plate.modes[0], &plate, n, period, &a).unwrap();
         assert_eq!(own.deg, MIN_MARGIN_DEG, "{own:?}");
