@@ -111,10 +111,11 @@ pub struct PlanArgs {
     /// Plate model (TOML with [[mode]] entries; docs/plan.md).
     #[arg(long, value_name = "PLATE.toml")]
     plate: PathBuf,
-    /// Robustness margin: no predicted orientation closer than this to a basin boundary.
-    #[arg(long, value_name = "D", default_value_t = 3.0,
-          value_parser = f64_where("margin-deg", "in [0, 45)", |v| (0.0..45.0).contains(&v)))]
-    margin_deg: f64,
+    /// Robustness margin: no predicted orientation closer than this to a basin boundary
+    /// (deg, in [0, 45)); `auto`: each grid mode's margin from how far its boundaries move when
+    /// its grid is resampled, 3° for the other modes (docs/plan.md, "Margins from evidence").
+    #[arg(long, value_name = "D|auto", default_value = "auto", value_parser = margin_arg)]
+    margin_deg: MarginArg,
     /// Step duration = slowest simulated settle time × this.
     #[arg(long, value_name = "X", default_value_t = 1.5,
           value_parser = f64_where("safety", "in (0, 100]", |v| v > 0.0 && v <= 100.0))]
@@ -278,9 +279,10 @@ impl PlanArgs {
             json["end_overlaps"] = shapes::plan::end_overlaps_json(&parts, &overlaps);
         }
         if self.json {
-            println!("{}", copies::with_bulk(json, &bulk));
+            println!("{}", with_margins(copies::with_bulk(json, &bulk), &syn));
         } else {
             print_plan(&parts, &plate, &syn);
+            print_margins(&syn);
             copies::print_bulk(&bulk);
             if let Some(out) = &self.out {
                 println!("written    {}", out.display());
@@ -299,7 +301,8 @@ impl PlanArgs {
     /// The planner's options from the flags (the first part's goal).
     fn plan_options(&self, region: Option<FeedRegion>, goals: &[Option<f64>]) -> PlanOptions {
         PlanOptions {
-            margin_deg: self.margin_deg,
+            margin_deg: self.margin_deg.0.unwrap_or(PlanOptions::default().margin_deg),
+            margin_auto: self.margin_deg.0.is_none(),
             safety: self.safety,
             feed: region,
             maps: match self.maps {
@@ -391,6 +394,53 @@ fn warn_device_limits(file: &PlanFile) -> Result<(), chladni::model::plan_file::
         eprintln!("warning: {w}");
     }
     Ok(())
+}
+
+/// `--margin-deg`: a number of degrees (every mode keeps it) or `auto` (`None`: margins from
+/// evidence).
+#[derive(Debug, Clone, Copy)]
+struct MarginArg(Option<f64>);
+
+/// Parses `--margin-deg D|auto`: D in [0, 45).
+fn margin_arg(s: &str) -> Result<MarginArg, String> {
+    if s.trim().eq_ignore_ascii_case("auto") {
+        return Ok(MarginArg(None));
+    }
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.0..45.0).contains(&v) => Ok(MarginArg(Some(v))),
+        _ => Err(format!("--margin-deg must be a number in [0, 45) or auto, got {s}")),
+    }
+}
+
+/// `plan --json`: the margin each step kept and where it came from, as `"margins": [{"step",
+/// "mode", "deg", "source", …}]` beside the plan file's keys (docs/plan.md, "Margins from
+/// evidence").
+fn with_margins(mut json: serde_json::Value, syn: &Synthesis) -> serde_json::Value {
+    let m: Vec<serde_json::Value> = syn
+        .steps
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let mut v = s.margin.to_json();
+            v["step"] = (i + 1).into();
+            v["mode"] = (s.mode + 1).into();
+            v
+        })
+        .collect();
+    json["margins"] = m.into();
+    json
+}
+
+/// The margin of each step, in words (after the step lines), unless every step kept the
+/// default of maps without evidence (straight nodes: nothing to add).
+fn print_margins(syn: &Synthesis) {
+    use chladni::planner::margin::MarginSource;
+    if syn.steps.iter().all(|s| s.margin.source == MarginSource::Default) {
+        return;
+    }
+    for (i, s) in syn.steps.iter().enumerate() {
+        println!("margin {:<3} {}", i + 1, s.margin.describe());
+    }
 }
 
 /// `--safety` below 1 makes steps shorter than the slowest simulated settle: allowed, said.

@@ -531,6 +531,7 @@ impl SuggestArgs {
             budget: std::time::Duration::from_secs(self.budget_s as u64),
             plan: chladni::planner::PlanOptions {
                 margin_deg: self.margin_deg,
+                margin_auto: false,
                 maps: chladni::planner::MapKind::Static,
                 ..Default::default()
             },

@@ -18,6 +18,12 @@ use chladni_shared::icd::plan::{DeviceLimits, Level, MAX_NAME, MAX_STEPS, Plan, 
 use chladni_shared::icd::units::{FrequencyError, MilliHz, MmPerS2, Q15};
 use serde::{Deserialize, Serialize};
 
+/// Keys `chladni plan --json` prints beside the plan file's own (the step margins, the parts
+/// that end overlapping, the `--copies` numbers): [`PlanFile::parse`] reads past them, so the
+/// printed object saved to a file is a plan file; they are never written by `--out`.
+pub const REPORT_KEYS: [&str; 7] =
+    ["margins", "end_overlaps", "copies", "oriented", "lost", "parts_per_min", "candidates"];
+
 /// Rounds to 10⁻⁴: the plan file's resolution for orientations (degrees), also used for the
 /// orientations of a failed plan's JSON.
 pub fn r4(v: f64) -> f64 {
@@ -260,7 +266,21 @@ impl PlanFile {
 
     /// Parses JSON text.
     pub fn parse(text: &str) -> Result<PlanFile, PlanFileError> {
-        serde_json::from_str(text).map_err(|e| PlanFileError::Json(e.to_string()))
+        let strict = serde_json::from_str(text).map_err(|e| PlanFileError::Json(e.to_string()));
+        let Err(refused) = strict else { return strict };
+        // `plan --json` prints the plan file with its report keys beside it: that output saved
+        // to a file is a plan file too. Any other unknown key is still refused, with the strict
+        // parse's error (it has the line and column) when no report key is there.
+        let Ok(serde_json::Value::Object(mut object)) = serde_json::from_str(text) else {
+            return Err(refused);
+        };
+        if !REPORT_KEYS.iter().any(|k| object.contains_key(*k)) {
+            return Err(refused);
+        }
+        object.retain(|k, _| !REPORT_KEYS.contains(&k.as_str()));
+        // Refused without the report keys: that error names the real offender.
+        serde_json::from_value(serde_json::Value::Object(object))
+            .map_err(|e| PlanFileError::Json(e.to_string()))
     }
 
     /// The device plan, validated against `limits`.
@@ -368,6 +388,22 @@ mod tests {
         assert!(v["final_position_mm"].is_null());
         assert_eq!(v["steps"][0].as_object().unwrap().len(), 4);
         assert!(v["steps"][0].get("accel_mps2").is_none(), "open-loop steps write no accel");
+    }
+
+    #[test]
+    fn the_printed_report_keys_are_read_past_and_any_other_unknown_key_refused() {
+        let plan = r#""name": "t", "steps": [{"freq_hz": 60.0, "duration_ms": 500, "amplitude": 0.5}],
+            "final_orientation_deg": 90.0, "period_deg": 180.0, "final_position_mm": null"#;
+        let printed = format!(r#"{{{plan}, "margins": [{{"step": 0}}], "end_overlaps": []}}"#);
+        let f = PlanFile::parse(&printed).expect("plan --json's output is a plan file");
+        assert_eq!((f.name.as_str(), f.steps.len()), ("t", 1));
+        for bad in [
+            format!(r#"{{{plan}, "margins": [], "colour": 1}}"#),
+            format!(r#"{{{plan}, "colour": 1}}"#),
+        ] {
+            let Err(PlanFileError::Json(e)) = PlanFile::parse(&bad) else { panic!("{bad}") };
+            assert!(e.contains("unknown field `colour`"), "{e}");
+        }
     }
 
     #[test]

@@ -350,7 +350,9 @@ pub fn dynamic_line_map(
         sampled: None,
         slack: step / 2f64.powi(set.refine as i32 + 1),
         dead_starts: 0,
+        dead_points: Vec::new(),
         dynamic: Some(std::sync::Arc::new(DynamicImages { rests, outcomes })),
+        evidence: None,
     })
 }
 

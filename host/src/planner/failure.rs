@@ -3,6 +3,7 @@
 
 use super::Problem;
 use super::maps::{MapError, StepMap};
+use super::margin::margin_of;
 use super::options::PlanOptions;
 use super::symmetry::symmetry_note;
 use crate::model::angle::cdist;
@@ -136,7 +137,7 @@ impl Problem {
                         "mode {} may not act on {t:.2}° ({d:.2}° from a basin boundary)",
                         k + 1
                     ));
-                    let rule = margin_rule(map, opt.margin_deg);
+                    let rule = margin_rule(map, opt);
                     if !rules.contains(&rule) {
                         rules.push(rule);
                     }
@@ -158,19 +159,22 @@ impl Problem {
     }
 }
 
-/// The margin rule a map's steps obey, stated: `--margin-deg`, plus the map's sampling
-/// allowance (simulated maps: half the spacing of their start orientations; dynamic maps: the
-/// bisection's resolution), how far a sampled boundary may lie from where it was found.
-fn margin_rule(map: &StepMap, margin: f64) -> String {
+/// The margin rule a map's steps obey, stated: its margin and where it came from
+/// ([`margin_of`]: `--margin-deg`, its default, or the mode's resampling evidence), plus the
+/// map's sampling allowance (simulated maps: half the spacing of their start orientations;
+/// dynamic maps: the bisection's resolution), how far a sampled boundary may lie from where it
+/// was found.
+fn margin_rule(map: &StepMap, opt: &PlanOptions) -> String {
     let slack = map.slack;
+    let m = margin_of(map, opt.margin_deg, opt.margin_auto);
+    let (margin, what) = (m.deg, m.describe());
     let rule = if slack > 1e-9 {
         format!(
-            "{:.2}° (--margin-deg {margin}° plus {slack:.2}°, how far the map's sampled \
-             boundaries may be off)",
+            "{:.2}° ({what} plus {slack:.2}°, how far the map's sampled boundaries may be off)",
             margin + slack
         )
     } else {
-        format!("{margin}° (--margin-deg {margin}°)")
+        format!("{margin}° ({what})")
     };
     format!("a step keeps every orientation at least {rule} from its basin boundaries")
 }

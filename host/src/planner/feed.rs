@@ -529,6 +529,7 @@ fn track(
             after: orientations(&poses, period),
             duration_ms: step_duration_ms(settle_s, opt.safety, t.sim.plate.modes[k].ramp_ms),
             settle: Settle { settle_s, lingering, points: starts.len(), ends_on_edge: Vec::new() },
+            margin: super::margin::fixed(opt),
         });
     }
     let (theta, dev) = spread(&poses, period);

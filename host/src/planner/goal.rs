@@ -300,6 +300,11 @@ fn planned_steps(
             after: after[0].clone(),
             duration_ms,
             settle,
+            margin: super::margin::margin_of(
+                &problems[0].maps[*k],
+                opt.margin_deg,
+                opt.margin_auto,
+            ),
         });
         before = after.clone();
     }

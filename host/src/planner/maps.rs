@@ -14,6 +14,7 @@ use chladni_shared::icd::units::deg_from_bam;
 
 use super::cluster::{CLUSTER_DEG, Clusters};
 use super::dynamic;
+use super::margin::ModeMargin;
 use super::options::Backend;
 use super::symmetry::body_symmetry_order;
 use crate::analysis::reference::{RefField, Reference};
@@ -39,9 +40,15 @@ pub struct StepMap {
     /// Simulated grid maps: start points outside the mode's reach (no interior node
     /// reached; see [`sampled_map`]).
     pub dead_starts: usize,
+    /// Which of [`map_starts`] those were (indices), for measurements that rerun the map's
+    /// runs ([`super::margin::windowed_spread`]).
+    pub(super) dead_points: Vec<usize>,
     /// Dynamic straight-node maps ([`dynamic`]): the measured outcome of every start
     /// orientation from either side of the node; `None` for every other map.
     pub(super) dynamic: Option<std::sync::Arc<dynamic::DynamicImages>>,
+    /// The margin measured for this map ([`super::margin`]: grid modes when the margin is
+    /// automatic); `None`: the options' fixed margin applies.
+    pub evidence: Option<ModeMargin>,
 }
 
 impl StepMap {
@@ -54,7 +61,9 @@ impl StepMap {
             sampled: None,
             slack: 0.0,
             dead_starts: 0,
+            dead_points: Vec::new(),
             dynamic: None,
+            evidence: None,
         }
     }
 }
@@ -83,8 +92,9 @@ impl StepMap {
     }
 
     /// `Err(distance)` when `theta` lies within `margin` (plus the map's slack) of a basin
-    /// boundary.
+    /// boundary; a map with a measured margin ([`Self::evidence`]) keeps that one instead.
     pub(crate) fn near_boundary(&self, theta: f64, margin: f64) -> Result<(), f64> {
+        let margin = self.evidence.map_or(margin, |m| m.deg);
         let near =
             self.boundaries.iter().map(|&b| cdist(theta, b, 360.0)).fold(f64::INFINITY, f64::min);
         if near < margin + self.slack { Err(near) } else { Ok(()) }
@@ -230,7 +240,9 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, M
         sampled: None,
         slack: 0.0,
         dead_starts: 0,
+        dead_points: Vec::new(),
         dynamic: None,
+        evidence: None,
     })
 }
 
@@ -276,22 +288,12 @@ pub fn map_starts(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]>
 /// outside the mode's reach, is left out of the map and counted in [`StepMap::dead_starts`]
 /// (docs/plan.md: recording those rim rests as well was tried and is not done yet).
 pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, period: f64) -> StepMap {
-    let field = FieldModel::new(mode, plate);
-    let t0 = body.radius / (mode.speed_mm_s * field.max_gain());
+    let (field, p) = map_run(body, mode, plate);
     let rim = Rim::of(plate);
-    let p = SimParams {
-        speed: mode.speed_mm_s,
-        t_limit: 5000.0 * t0,
-        run_to_limit: false,
-        rim: Some(rim),
-    };
-    // 0.3 of a step off 0° (so also off 45°, 90°, ... for n = 36, 90, 360): a start point on
-    // the node (the plate centre often is) would otherwise sample the symmetric unstable
-    // rests (0°, 90°, ...) exactly and report them as rests.
-    let thetas: Vec<f64> = (0..n).map(|i| (i as f64 + 0.3) * 360.0 / n as f64).collect();
+    let thetas = map_thetas(n);
     let mut clusters = Clusters::new(period, CLUSTER_DEG);
     let mut labels: Vec<Vec<Option<usize>>> = Vec::new();
-    let mut dead_starts = 0;
+    let (mut dead_starts, mut dead_points) = (0, Vec::new());
     // A part of symmetry order m started at θ + 360°/m is the same body at the same place as
     // at θ: its run is that run turned by 360°/m (to rounding), so only the first n/m start
     // orientations of each point are simulated.
@@ -312,11 +314,12 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
         })
         .collect();
     let all = simulate_starts(body, mode, plate, &field, p, &poses, starts.len());
-    for simulated in all.chunks(distinct.max(1)) {
+    for (point, simulated) in all.chunks(distinct.max(1)).enumerate() {
         // A skipped run (`None`) belongs to a start point outside the mode's reach.
         let Some(simulated) = simulated.iter().copied().collect::<Option<Vec<(Pose, bool)>>>()
         else {
             dead_starts += 1;
+            dead_points.push(point);
             continue;
         };
         // (end pose, rested) for each of the n start orientations.
@@ -326,6 +329,7 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
         });
         if simulated.iter().any(|r| outside_reach(body, mode, plate, r.0)) {
             dead_starts += 1;
+            dead_points.push(point);
             continue;
         }
         let label = runs
@@ -363,7 +367,9 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
         sampled: Some(sampled),
         slack: 180.0 / n as f64,
         dead_starts,
+        dead_points,
         dynamic: None,
+        evidence: None,
     }
 }
 
@@ -396,6 +402,28 @@ fn simulate_starts(
             Some((r.pose, r.rested && !r.lost))
         })
         .collect()
+}
+
+/// The field and run settings of a simulated map's runs: with the rim, to rest or 5000 T₀
+/// (T₀: time to travel one radius at full pull; [`sampled_map`]).
+pub(super) fn map_run(body: &Body, mode: &Mode, plate: &PlateModel) -> (FieldModel, SimParams) {
+    let field = FieldModel::new(mode, plate);
+    let t0 = body.radius / (mode.speed_mm_s * field.max_gain());
+    let p = SimParams {
+        speed: mode.speed_mm_s,
+        t_limit: 5000.0 * t0,
+        run_to_limit: false,
+        rim: Some(Rim::of(plate)),
+    };
+    (field, p)
+}
+
+/// A simulated map's `n` start orientations (deg): 0.3 of a step off 0° (so also off 45°,
+/// 90°, ... for n = 36, 90, 360): a start point on the node (the plate centre often is) would
+/// otherwise sample the symmetric unstable rests (0°, 90°, ...) exactly and report them as
+/// rests. Its boundaries lie half a step after a start orientation.
+pub(super) fn map_thetas(n: usize) -> Vec<f64> {
+    (0..n).map(|i| (i as f64 + 0.3) * 360.0 / n as f64).collect()
 }
 
 /// Is a run that ended at `q` under a grid mode outside the mode's reach: the part ended on

@@ -62,6 +62,7 @@ pub mod feed;
 pub mod goal;
 mod input;
 mod maps;
+pub mod margin;
 mod options;
 pub mod position;
 mod result;
@@ -133,7 +134,7 @@ impl Problem {
                 match mode.node {
                     Node::Line { .. } => line_map_of(part, mode, plate, period, opt, opt.maps)
                         .map_err(PlanFailure::Model),
-                    _ => Ok(sampled_map(&body, mode, plate, opt.sim_starts, period)),
+                    _ => Ok(margin::simulated_map(&body, mode, plate, opt, period)),
                 }
             })
             .collect::<Result<Vec<_>, _>>()?;

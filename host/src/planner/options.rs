@@ -17,8 +17,13 @@ pub enum Backend {
 /// Planner settings.
 #[derive(Debug, Clone, Copy)]
 pub struct PlanOptions {
-    /// Robustness margin (degrees).
+    /// Robustness margin (degrees): every mode's with `margin_auto` off; with it on, the
+    /// margin of maps without resampling evidence ([`super::margin`]).
     pub margin_deg: f64,
+    /// Margins from evidence ([`super::margin`], default): each grid mode's map keeps the
+    /// margin its resampling measured; off (`--margin-deg D` given) every map keeps
+    /// `margin_deg`.
+    pub margin_auto: bool,
     /// Settle time safety factor.
     pub safety: f64,
     /// Straight-node model.
@@ -58,6 +63,7 @@ impl Default for PlanOptions {
     fn default() -> Self {
         PlanOptions {
             margin_deg: 3.0,
+            margin_auto: true,
             safety: 1.5,
             backend: Backend::Fixed,
             sim_starts: 90,

@@ -3,6 +3,7 @@
 use super::feed;
 use super::goal::PartPlan;
 use super::input::plan_name;
+use super::margin::ModeMargin;
 use super::settle::Settle;
 use crate::model::plan_file::{PartPrediction, PlanFile, StepJson, r4};
 use crate::model::plate::PlateModel;
@@ -21,6 +22,9 @@ pub struct PlannedStep {
     pub duration_ms: u32,
     /// What the settle simulation measured (all zero without `PlanOptions::durations`).
     pub settle: Settle,
+    /// The margin the step kept from its map's basin boundaries, and its source
+    /// ([`super::margin`]).
+    pub margin: ModeMargin,
 }
 
 /// A synthesised plan.
