@@ -623,36 +623,7 @@ fn face_trials(faces: &Faces, trials: u32, seed: u64) -> Vec<(u32, u64)> {
 
 impl SimulateArgs {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
-        let mut inputs: Vec<(&str, &Path)> =
-            self.part.iter().map(|p| ("part", p.as_path())).collect();
-        inputs.extend([("plate", self.plate.as_path()), ("plan", self.plan.as_path())]);
-        check_plot("--plot", &self.plot, &chladni::plot::FIGURE_EXTENSIONS, &inputs)?;
-        check_plot("--traces", &self.traces, &["jsonl"], &inputs)?;
-        check_plot("--animate", &self.animate, &["gif"], &inputs)?;
-        if let Some(path) = &self.plot {
-            check_output("--plot", &plan_plot::trials_plan_path(path), &inputs)?;
-            if self.part.len() > 1 {
-                return Err(bad(format!("--plot draws one part; {} given", self.part.len())));
-            }
-        }
-        let given =
-            self.part.iter().map(|p| self.read.load(p)).collect::<anyhow::Result<Vec<_>>>()?;
-        let plate = load_plate(&self.plate)?;
-        for part in &given {
-            planner::check_input(part, &plate).map_err(|e| bad(e.to_string()))?;
-            check_fits(part, &plate)?;
-        }
-        let faces = mirror::faces(&given, self.both_faces);
-        if self.plot.is_some() && faces.parts.len() > 1 {
-            return Err(bad(format!(
-                "--plot draws one part; {} faces to simulate",
-                faces.parts.len()
-            )));
-        }
-        self.check_animate(faces.parts.len())?;
-        if self.trials < 2 && faces.of.iter().any(|o| o.face.is_some()) {
-            return Err(bad("--trials 1: both faces need at least 2 trials (half each)".into()));
-        }
+        let (plate, faces) = self.inputs()?;
         note_self_mirrored(&faces);
         let parts = &faces.parts;
         let region = feed_region(&self.feed, &plate)?;
@@ -714,6 +685,42 @@ impl SimulateArgs {
             self.print_json(&faces, reports)?;
         }
         Ok(ExitCode::SUCCESS)
+    }
+
+    /// The flags, the parts and the plate checked before any work: the plate and the faces
+    /// to simulate.
+    fn inputs(&self) -> anyhow::Result<(PlateModel, Faces)> {
+        let mut inputs: Vec<(&str, &Path)> =
+            self.part.iter().map(|p| ("part", p.as_path())).collect();
+        inputs.extend([("plate", self.plate.as_path()), ("plan", self.plan.as_path())]);
+        check_plot("--plot", &self.plot, &chladni::plot::FIGURE_EXTENSIONS, &inputs)?;
+        check_plot("--traces", &self.traces, &["jsonl"], &inputs)?;
+        check_plot("--animate", &self.animate, &["gif"], &inputs)?;
+        if let Some(path) = &self.plot {
+            check_output("--plot", &plan_plot::trials_plan_path(path), &inputs)?;
+            if self.part.len() > 1 {
+                return Err(bad(format!("--plot draws one part; {} given", self.part.len())));
+            }
+        }
+        let given =
+            self.part.iter().map(|p| self.read.load(p)).collect::<anyhow::Result<Vec<_>>>()?;
+        let plate = load_plate(&self.plate)?;
+        for part in &given {
+            planner::check_input(part, &plate).map_err(|e| bad(e.to_string()))?;
+            check_fits(part, &plate)?;
+        }
+        let faces = mirror::faces(&given, self.both_faces);
+        if self.plot.is_some() && faces.parts.len() > 1 {
+            return Err(bad(format!(
+                "--plot draws one part; {} faces to simulate",
+                faces.parts.len()
+            )));
+        }
+        self.check_animate(faces.parts.len())?;
+        if self.trials < 2 && faces.of.iter().any(|o| o.face.is_some()) {
+            return Err(bad("--trials 1: both faces need at least 2 trials (half each)".into()));
+        }
+        Ok((plate, faces))
     }
 
     /// `--json`: one part, the report; several (or both faces), `{"parts": [{"part": name,

@@ -302,54 +302,8 @@ pub fn run_many(
             let s = v0[i][0].hypot(v0[i][1]);
             dt = dt.min(0.25 * r[i] / s.max(1e-30)).min(0.1 / v0[i][2].abs().max(1e-30));
         }
-        let step = |qs: &[Pose], v: &[[f64; 3]], dt: f64| -> Vec<Pose> {
-            let mut out: Vec<Pose> = (qs.iter().zip(v))
-                .map(|(q, v)| Pose {
-                    x: q.x + dt * v[0],
-                    y: q.y + dt * v[1],
-                    theta: q.theta + dt * v[2],
-                })
-                .collect();
-            g.separate(&mut out, &lost);
-            out
-        };
-        let mut tries = 0;
-        let (next, v1) = loop {
-            let pred = step(&qs, &v0, dt);
-            let vp = vel(&pred, &lost);
-            let mut overshoot = false;
-            let mut chatter = true;
-            let mut err = 0.0f64;
-            for i in (0..n).filter(|&i| !lost[i]) {
-                let (a, b) = (v0[i], vp[i]);
-                let s = a[0].hypot(a[1]);
-                let v_tol = 1e-3 * r[i] / t0[i];
-                let o = (s > v_tol && b[0] * a[0] + b[1] * a[1] < -0.25 * s * s)
-                    || (a[2].abs() > 1e-4 / t0[i] && b[2] * a[2] < -0.25 * a[2] * a[2]);
-                overshoot |= o;
-                if o {
-                    chatter &=
-                        dt * s < 1e-4 * r[i] && dt * a[2].abs() < 1e-5 && s < 0.02 * r[i] / t0[i];
-                }
-                let e = 0.5 * dt * (b[0] - a[0]).hypot(b[1] - a[1]).hypot(r[i] * (b[2] - a[2]));
-                err = err.max(e / (STEP_TOL * r[i]));
-            }
-            if overshoot && chatter {
-                break (qs.clone(), v0.clone());
-            }
-            if (overshoot || err > 1.0) && tries < 30 {
-                dt *= if overshoot { 0.5 } else { (0.9 * (1.0 / err).sqrt()).clamp(0.2, 0.5) };
-                tries += 1;
-                continue;
-            }
-            dt_next = dt * (0.9 * (1.0 / err.max(1e-300)).sqrt()).min(2.0);
-            let mean: Vec<[f64; 3]> = (v0.iter().zip(&vp))
-                .map(|(a, b)| [0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.5 * (a[2] + b[2])])
-                .collect();
-            let q = step(&qs, &mean, dt);
-            let v = vel(&q, &lost);
-            break (q, v);
-        };
+        let scales = Scales { r: &r, t0: &t0 };
+        let (next, v1) = advance(g, field, speed, (&qs, &v0), &lost, scales, dt, &mut dt_next);
         if next == qs {
             rested = true;
             break;
@@ -373,6 +327,83 @@ pub fn run_many(
         trace.push((t, qs.clone()));
     }
     ManyRun { poses: qs, lost, trace, t_end: t, rested, steps }
+}
+
+/// Per-body length and time scales of a run: the radius (mm) and T₀, the time to travel one
+/// radius at full pull (s).
+#[derive(Clone, Copy)]
+struct Scales<'a> {
+    r: &'a [f64],
+    t0: &'a [f64],
+}
+
+/// One accepted step of [`run_many`] from poses `qs` with velocities `v0` (the pair `now`):
+/// Heun's method with the contacts resolved after each stage, the step `dt` shrunk on an
+/// overshoot or an error over [`STEP_TOL`] (at most 30 times), and `dt_next` set for the
+/// next step. Returns the new poses and their velocities; the same poses when the bodies
+/// chatter in place (at rest against a contact).
+#[allow(clippy::too_many_arguments)]
+fn advance(
+    g: &Group<'_>,
+    field: &FieldModel,
+    speed: f64,
+    now: (&[Pose], &[[f64; 3]]),
+    lost: &[bool],
+    scales: Scales<'_>,
+    mut dt: f64,
+    dt_next: &mut f64,
+) -> (Vec<Pose>, Vec<[f64; 3]>) {
+    let (qs, v0) = now;
+    let (n, r, t0) = (qs.len(), scales.r, scales.t0);
+    let vel = |qs: &[Pose]| g.twists(field, speed, qs, lost).1;
+    let step = |qs: &[Pose], v: &[[f64; 3]], dt: f64| -> Vec<Pose> {
+        let mut out: Vec<Pose> = (qs.iter().zip(v))
+            .map(|(q, v)| Pose {
+                x: q.x + dt * v[0],
+                y: q.y + dt * v[1],
+                theta: q.theta + dt * v[2],
+            })
+            .collect();
+        g.separate(&mut out, lost);
+        out
+    };
+    let mut tries = 0;
+    loop {
+        let pred = step(qs, v0, dt);
+        let vp = vel(&pred);
+        let mut overshoot = false;
+        let mut chatter = true;
+        let mut err = 0.0f64;
+        for i in (0..n).filter(|&i| !lost[i]) {
+            let (a, b) = (v0[i], vp[i]);
+            let s = a[0].hypot(a[1]);
+            let v_tol = 1e-3 * r[i] / t0[i];
+            let o = (s > v_tol && b[0] * a[0] + b[1] * a[1] < -0.25 * s * s)
+                || (a[2].abs() > 1e-4 / t0[i] && b[2] * a[2] < -0.25 * a[2] * a[2]);
+            overshoot |= o;
+            if o {
+                chatter &=
+                    dt * s < 1e-4 * r[i] && dt * a[2].abs() < 1e-5 && s < 0.02 * r[i] / t0[i];
+            }
+            let e = 0.5 * dt * (b[0] - a[0]).hypot(b[1] - a[1]).hypot(r[i] * (b[2] - a[2]));
+            err = err.max(e / (STEP_TOL * r[i]));
+        }
+        if overshoot && chatter {
+            return (qs.to_vec(), v0.to_vec());
+        }
+        if (overshoot || err > 1.0) && tries < 30 {
+            dt *= if overshoot { 0.5 } else { (0.9 * (1.0 / err).sqrt()).clamp(0.2, 0.5) };
+            tries += 1;
+            continue;
+        }
+        *dt_next = dt * (0.9 * (1.0 / err.max(1e-300)).sqrt()).min(2.0);
+        let mean: Vec<[f64; 3]> = (v0.iter().zip(&vp))
+            .map(|(a, b)| [0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.5 * (a[2] + b[2])])
+            .collect();
+        let q = step(qs, &mean, dt);
+        let v = vel(&q);
+        return (q, v);
+    }
 }
 
 /// A whole plan for a group from `start`: the final poses, which bodies were lost, and the

@@ -338,16 +338,32 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
         labels.push(label);
     }
     let rep = clusters.means();
-    // Per start orientation: every rest reached over the start points (`None`: some run did
-    // not come to rest).
-    let combined: Vec<Option<Vec<usize>>> = (0..n)
-        .map(|i| {
-            let mut set = labels.iter().map(|ls| ls[i]).collect::<Option<Vec<usize>>>()?;
-            set.sort_unstable();
-            set.dedup();
-            Some(set)
-        })
-        .collect();
+    let (boundaries, sampled) = combine(&labels, &thetas, &rep);
+    StepMap {
+        stable: rep,
+        boundaries,
+        neutral: false,
+        sampled: Some(sampled),
+        slack: 180.0 / n as f64,
+        dead_starts,
+        dead_points,
+        dynamic: None,
+        evidence: None,
+    }
+}
+
+/// A simulated map's boundaries and samples from each start point's rest labels (`labels[p][i]`:
+/// the rest reached from start point p at start orientation `thetas[i]`, `None` when that
+/// run did not come to rest; `rep`: each label's orientation). Per start orientation the set
+/// is every rest reached over the start points; a boundary lies half a step after a start
+/// orientation whose set differs from the next one's (or that did not rest).
+fn combine(
+    labels: &[Vec<Option<usize>>],
+    thetas: &[f64],
+    rep: &[f64],
+) -> (Vec<f64>, Vec<(f64, Vec<f64>)>) {
+    let n = thetas.len();
+    let combined = rest_sets(labels, n);
     let mut boundaries = Vec::new();
     for i in 0..n {
         let j = (i + 1) % n;
@@ -360,17 +376,20 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
         .zip(&combined)
         .map(|(&th, l)| (th, l.iter().flatten().map(|&k| rep[k]).collect()))
         .collect();
-    StepMap {
-        stable: rep,
-        boundaries,
-        neutral: false,
-        sampled: Some(sampled),
-        slack: 180.0 / n as f64,
-        dead_starts,
-        dead_points,
-        dynamic: None,
-        evidence: None,
-    }
+    (boundaries, sampled)
+}
+
+/// Per start orientation (`count` of them): every rest label reached over the start points
+/// (sorted, deduplicated; `None` when some start point's run did not come to rest).
+pub(super) fn rest_sets(labels: &[Vec<Option<usize>>], count: usize) -> Vec<Option<Vec<usize>>> {
+    (0..count)
+        .map(|i| {
+            let mut set = labels.iter().map(|ls| ls[i]).collect::<Option<Vec<usize>>>()?;
+            set.sort_unstable();
+            set.dedup();
+            Some(set)
+        })
+        .collect()
 }
 
 /// The runs of [`sampled_map`] from `poses` (start point index, start pose), in order, in

@@ -20,7 +20,9 @@
 use rayon::prelude::*;
 
 use super::cluster::{CLUSTER_DEG, Clusters};
-use super::maps::{StepMap, map_run, map_starts, map_thetas, outside_reach, sampled_map};
+use super::maps::{
+    StepMap, map_run, map_starts, map_thetas, outside_reach, rest_sets, sampled_map,
+};
 use super::options::PlanOptions;
 use super::symmetry::body_symmetry_order;
 use crate::model::angle::cdist;
@@ -277,14 +279,7 @@ pub fn windowed_spread(
         .filter(|runs| !runs.iter().any(|r| outside_reach(body, mode, plate, r.0)))
         .map(|runs| runs.iter().map(|(q, ok)| ok.then(|| label(q.theta.to_degrees()))).collect())
         .collect();
-    let combined: Vec<Option<Vec<usize>>> = (0..idx.len())
-        .map(|k| {
-            let mut set = labels.iter().map(|l| l[k]).collect::<Option<Vec<usize>>>()?;
-            set.sort_unstable();
-            set.dedup();
-            Some(set)
-        })
-        .collect();
+    let combined = rest_sets(&labels, idx.len());
     let mut found = Vec::new();
     for k in 0..idx.len() {
         let next = (k + 1) % idx.len();
