@@ -15,21 +15,27 @@
 use std::process::Command;
 use std::time::Instant;
 
+/// One run of the release `chladni` with `args` (from the host crate's folder): the wall time
+/// (s) and what it printed.
+fn run(args: &[&str]) -> (f64, std::process::Output) {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let start = Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_chladni"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("chladni runs");
+    (start.elapsed().as_secs_f64(), out)
+}
+
 /// Runs `args` `n` times; the sorted wall times (ms). Panics when a run fails: a bench of a
 /// failing command measures nothing.
 fn times(args: &[&str], n: usize) -> Vec<f64> {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut t: Vec<f64> = (0..n)
         .map(|_| {
-            let start = Instant::now();
-            let out = Command::new(env!("CARGO_BIN_EXE_chladni"))
-                .current_dir(dir)
-                .args(args)
-                .output()
-                .expect("chladni runs");
-            let ms = start.elapsed().as_secs_f64() * 1e3;
+            let (s, out) = run(args);
             assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
-            ms
+            s * 1e3
         })
         .collect();
     t.sort_by(f64::total_cmp);
@@ -38,14 +44,7 @@ fn times(args: &[&str], n: usize) -> Vec<f64> {
 
 /// One `chladni plan` run: wall time (s) and outcome (steps, or the failure's `error` name).
 fn plan_once(args: &[&str]) -> (f64, String) {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let start = Instant::now();
-    let out = Command::new(env!("CARGO_BIN_EXE_chladni"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("chladni runs");
-    let s = start.elapsed().as_secs_f64();
+    let (s, out) = run(args);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap_or_default();
     let outcome = match (v["steps"].as_array(), v["error"].as_str()) {
         (Some(st), _) => format!("{} steps", st.len()),

@@ -252,15 +252,7 @@ fn static_and_dynamic_maps_give_the_same_example_plan() {
 #[test]
 fn a_plan_out_of_time_is_one_json_failure_naming_the_limit_and_the_stage() {
     // 1 ns: gone by the first look at the clock (before the first step map).
-    let out = chladni(&[
-        "plan",
-        &ex("parts/triangle.json"),
-        "--plate",
-        &ex("plates/four-lines.toml"),
-        "--max-time-s",
-        "1e-9",
-        "--json",
-    ]);
+    let out = triangle_on_four_lines("plan", &["--max-time-s", "1e-9", "--json"]);
     assert!(!out.status.success());
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["error"], "out_of_time", "{v}");
@@ -268,14 +260,7 @@ fn a_plan_out_of_time_is_one_json_failure_naming_the_limit_and_the_stage() {
     assert!(v["stage"].as_str().unwrap().contains("step map 1 of 4"), "{v}");
     assert!(v["message"].as_str().unwrap().contains("--max-time-s"), "{v}");
     // Refused before planning: a limit that is no time at all.
-    let out = chladni(&[
-        "plan",
-        &ex("parts/triangle.json"),
-        "--plate",
-        &ex("plates/four-lines.toml"),
-        "--max-time-s",
-        "0",
-    ]);
+    let out = triangle_on_four_lines("plan", &["--max-time-s", "0"]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("max-time-s"));
 }

@@ -229,13 +229,7 @@ impl PlanArgs {
         }
         warn_safety(self.safety);
         let given_goals = self.goals()?;
-        let given =
-            self.part.iter().map(|p| self.read.load(p)).collect::<anyhow::Result<Vec<_>>>()?;
-        let plate = load_plate(&self.plate)?;
-        for part in &given {
-            planner::check_input(part, &plate).map_err(|e| bad(e.to_string()))?;
-            check_fits(part, &plate)?;
-        }
+        let (given, plate) = load_checked(&self.read, &self.part, &self.plate)?;
         let name = given.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join("+");
         let faces = mirror::faces(&given, self.both_faces);
         self.one_part_flags(faces.parts.len(), "faces to plan (both faces of a part that flips)")?;
@@ -279,7 +273,7 @@ impl PlanArgs {
             json["end_overlaps"] = shapes::plan::end_overlaps_json(&parts, &overlaps);
         }
         if self.json {
-            println!("{}", with_margins(copies::with_bulk(json, &bulk), &syn));
+            println!("{}", shapes::plan::with_margins(copies::with_bulk(json, &bulk), &syn.steps));
         } else {
             print_plan(&parts, &plate, &syn);
             print_margins(&syn);
@@ -370,22 +364,19 @@ fn collisions(parts: &[Part], faces: &Faces, syn: &Synthesis) -> Vec<EndOverlap>
     found
 }
 
-/// A part that fits the plate in no orientation is refused: the model cannot hold it (the
-/// rim would pinch it on opposite sides) and no plan moves it ([`Rim::best_fit`]).
-///
-/// [`Rim::best_fit`]: chladni::motion::contact::Rim::best_fit
-fn check_fits(part: &Part, plate: &PlateModel) -> anyhow::Result<()> {
-    let rim = chladni::motion::contact::Rim::of(plate);
-    let (deg, over) = rim.best_fit(&Body::new(part));
-    if over > 0.0 {
-        let [w, h] = plate.size_mm;
-        return Err(bad(format!(
-            "part {} fits the {w} × {h} mm plate in no orientation: even turned by {deg}° its \
-             bounding box is {over:.1} mm too large (a smaller part, or a larger plate)",
-            part.name
-        )));
+/// The given parts and the plate, each part checked against the plate (vertices, size and
+/// fit: [`planner::check_input`]) before any work: `plan` and `simulate` refuse alike.
+fn load_checked(
+    read: &PartRead,
+    parts: &[PathBuf],
+    plate: &Path,
+) -> anyhow::Result<(Vec<Part>, PlateModel)> {
+    let given = parts.iter().map(|p| read.load(p)).collect::<anyhow::Result<Vec<_>>>()?;
+    let plate = load_plate(plate)?;
+    for part in &given {
+        planner::check_input(part, &plate).map_err(|e| bad(e.to_string()))?;
     }
-    Ok(())
+    Ok((given, plate))
 }
 
 /// Device limits apply at `device upload`: here they are a warning (research first).
@@ -410,25 +401,6 @@ fn margin_arg(s: &str) -> Result<MarginArg, String> {
         Ok(v) if (0.0..45.0).contains(&v) => Ok(MarginArg(Some(v))),
         _ => Err(format!("--margin-deg must be a number in [0, 45) or auto, got {s}")),
     }
-}
-
-/// `plan --json`: the margin each step kept and where it came from, as `"margins": [{"step",
-/// "mode", "deg", "source", …}]` beside the plan file's keys (docs/plan.md, "Margins from
-/// evidence").
-fn with_margins(mut json: serde_json::Value, syn: &Synthesis) -> serde_json::Value {
-    let m: Vec<serde_json::Value> = syn
-        .steps
-        .iter()
-        .enumerate()
-        .map(|(i, s)| {
-            let mut v = s.margin.to_json();
-            v["step"] = (i + 1).into();
-            v["mode"] = (s.mode + 1).into();
-            v
-        })
-        .collect();
-    json["margins"] = m.into();
-    json
 }
 
 /// The margin of each step, in words (after the step lines), unless every step kept the
@@ -702,13 +674,7 @@ impl SimulateArgs {
                 return Err(bad(format!("--plot draws one part; {} given", self.part.len())));
             }
         }
-        let given =
-            self.part.iter().map(|p| self.read.load(p)).collect::<anyhow::Result<Vec<_>>>()?;
-        let plate = load_plate(&self.plate)?;
-        for part in &given {
-            planner::check_input(part, &plate).map_err(|e| bad(e.to_string()))?;
-            check_fits(part, &plate)?;
-        }
+        let (given, plate) = load_checked(&self.read, &self.part, &self.plate)?;
         let faces = mirror::faces(&given, self.both_faces);
         if self.plot.is_some() && faces.parts.len() > 1 {
             return Err(bad(format!(

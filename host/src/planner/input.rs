@@ -1,10 +1,12 @@
-//! Input checks the planner makes before any work: vertex count, part size against the
-//! plate, the plan name's length.
+//! Input checks the planner makes before any work: vertex count, part size and fit against
+//! the plate, the plan name's length.
 
 use chladni_shared::icd::plan::MAX_NAME;
 
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
+use crate::motion::body::Body;
+use crate::motion::contact::Rim;
 
 /// Most vertices (all rings) a part may have for planning and simulation: the planner's cost
 /// grows with the vertex count (the step maps analyse the whole outline hundreds of times).
@@ -45,6 +47,24 @@ pub enum PlanInputError {
         /// The plate's shorter side (mm).
         side: f64,
     },
+    /// Narrow enough, but too long for every turn of its bounding box ([`Rim::best_fit`]):
+    /// the rim would have to hold it on two opposite sides at once, and no plan moves it.
+    #[error(
+        "part {name} fits the {w} × {h} mm plate in no orientation: even turned by {deg}° its \
+         bounding box is {over_mm:.1} mm too large (a smaller part, or a larger plate)"
+    )]
+    NoFit {
+        /// Part name.
+        name: String,
+        /// The turn (deg) at which its bounding box is least over the plate.
+        deg: f64,
+        /// By how much it is over there (mm).
+        over_mm: f64,
+        /// Plate width (mm).
+        w: f64,
+        /// Plate height (mm).
+        h: f64,
+    },
 }
 
 /// Checks a part against the planner's limits and the plate's size, before any work.
@@ -58,6 +78,10 @@ pub fn check_input(part: &Part, plate: &PlateModel) -> Result<(), PlanInputError
     let width_mm = min_width(&part.outline);
     if width_mm > side {
         return Err(PlanInputError::TooLarge { name: part.name.clone(), width_mm, w, h, side });
+    }
+    let (deg, over_mm) = Rim::of(plate).best_fit(&Body::new(part));
+    if over_mm > 0.0 {
+        return Err(PlanInputError::NoFit { name: part.name.clone(), deg, over_mm, w, h });
     }
     Ok(())
 }

@@ -2,7 +2,7 @@
 //! simulate report: the bulk numbers of `plan --copies N` ([`with_bulk`]), one entry per part
 //! of a several-part simulation ([`PartReport`], [`parts_json`]) and a refused drop of parts
 //! together ([`cannot_place_json`]), the parts a plan ends on top of each other
-//! ([`end_overlaps_json`]). Keys in alphabetical order, as printed.
+//! ([`end_overlaps_json`]) and the margin each step kept ([`with_margins`]). Keys in alphabetical order, as printed.
 
 use serde::Serialize;
 use serde_json::{Value, json};
@@ -11,6 +11,7 @@ use crate::model::part::Part;
 use crate::model::part::mirror::Face;
 use crate::model::plan_file::r4;
 use crate::motion::bulk::CannotPlace;
+use crate::planner::PlannedStep;
 use crate::planner::collide::EndOverlap;
 use crate::planner::copies::Ranked;
 use crate::shapes::SimulateReport;
@@ -72,4 +73,22 @@ pub fn end_overlaps_json(parts: &[Part], found: &[EndOverlap]) -> Value {
         })
     });
     Value::Array(list.collect())
+}
+
+/// `plan --json` with the margin each step kept and where it came from, as `"margins":
+/// [{"step", "mode", "deg", "source", …}]` beside the plan file's keys (docs/plan.md,
+/// "Margins from evidence"; steps and modes numbered from 1).
+pub fn with_margins(mut json: Value, steps: &[PlannedStep]) -> Value {
+    let m: Vec<Value> = steps
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let mut v = s.margin.to_json();
+            v["step"] = (i + 1).into();
+            v["mode"] = (s.mode + 1).into();
+            v
+        })
+        .collect();
+    json["margins"] = m.into();
+    json
 }
