@@ -218,8 +218,8 @@ fn window(boundaries: &[f64], n: usize) -> Vec<usize> {
 
 /// How far the basin boundaries of `map` (made with `n` start orientations) move under
 /// `mode` (the resampled field): the map's runs (its start points, [`map_starts`], the same
-/// settings, [`map_run`]) from only the start orientations around each base boundary
-/// ([`window`]); the boundaries found there (where neighbouring orientations' sets of rests
+/// settings, `maps::map_run`) from only the start orientations around each base boundary
+/// (`window`); the boundaries found there (where neighbouring orientations' sets of rests
 /// differ, or a run does not come to rest) against `base` ([`boundary_spread`]; infinite when
 /// none is found). The start points the map left out (a run outside the mode's reach,
 /// [`StepMap::dead_starts`]) are left out, and so is one with a windowed run outside it. The cost: 2·[`WINDOW_STEPS`] + 2 orientations per boundary (per

@@ -4,7 +4,7 @@
 //! Otsu splits the photo; the plate is the largest region of either class that does not touch
 //! the photo's border (the surroundings do). Its outer contour's convex hull, simplified by
 //! Douglas–Peucker until four vertices are left, gives rough corners. That much runs on the
-//! photo shrunk to at most [`ROUGH_SIDE_PX`] on its long side (block means): the rough corners
+//! photo shrunk to at most `ROUGH_SIDE_PX` on its long side (block means): the rough corners
 //! need only be good to a few pixels, and the labelling and contour passes cost in proportion
 //! to the pixels. Each side is then fitted at full resolution (total least squares) to
 //! sub-pixel edge crossings measured across it, over a window wide enough for the shrunk

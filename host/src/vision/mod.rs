@@ -4,7 +4,7 @@
 //! unknown.
 //!
 //! Pipeline: the plate's corners (given, or found from the plate's contrast, [`corners`]) →
-//! the square-pixel rectified view → its uneven light divided out ([`flat`]) → Otsu threshold, the parts being the minority class (dark
+//! the square-pixel rectified view → its uneven light divided out (`flat`) → Otsu threshold, the parts being the minority class (dark
 //! parts on a light plate and light parts on a dark one both work) → 8-connected blobs with a
 //! margin at the plate's edge → per blob: its area against each part's area, then for a
 //! candidate part and face a coarse search of the orientation on the blob's mask and a
