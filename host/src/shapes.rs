@@ -168,6 +168,12 @@ pub fn plan_failure_json(e: &PlanFailure) -> serde_json::Value {
             "error": "parts_apart", "searched": searched,
             "apart": apart.iter().map(|(n, d, p)| json!({"part": n, "orientations_deg": d,
                 "period_deg": p})).collect::<Vec<_>>()}),
+        PlanFailure::NotWholePlate(n) => {
+            json!({"error": "not_whole_plate", "part": n.part, "drops": n.drops,
+            "failed": n.failed, "held_share": r4(1.0 - n.failed as f64 / n.drops.max(1) as f64),
+            "failed_region_mm": n.region_mm, "ends": n.ends, "rounds": n.rounds,
+            "max_rounds": n.max_rounds, "feed_mm": n.feed_mm})
+        }
         PlanFailure::OutOfTime { limit_s, stage } => {
             json!({"error": "out_of_time", "max_time_s": limit_s, "stage": stage})
         }

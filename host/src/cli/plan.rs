@@ -170,6 +170,12 @@ pub struct PlanArgs {
     #[arg(long, value_name = "N", default_value_t = 200_000,
           value_parser = clap::value_parser!(u32).range(1..=50_000_000))]
     max_states: u32,
+    /// Whole-plate plans on grid (solver) modes: how many times the step maps are refined with
+    /// the drop points a plan does not hold from (docs/plan.md, "Whole-plate plans on grid
+    /// modes"); 0: no whole-plate check.
+    #[arg(long, value_name = "N", default_value_t = planner::whole::REFINE_ROUNDS as u32,
+          value_parser = clap::value_parser!(u32).range(0..=20))]
+    refine_rounds: u32,
 }
 
 /// `--maps`: which step maps straight-node modes use ([`MapKind`]).
@@ -273,6 +279,7 @@ impl PlanArgs {
             json["end_overlaps"] = shapes::plan::end_overlaps_json(&parts, &overlaps);
         }
         if self.json {
+            let json = shapes::plan::with_whole_plate(json, syn.whole_plate.as_ref());
             println!("{}", shapes::plan::with_margins(copies::with_bulk(json, &bulk), &syn.steps));
         } else {
             print_plan(&parts, &plate, &syn);
@@ -313,6 +320,7 @@ impl PlanArgs {
             goal_pos_mm: self.goal_pos.as_ref().map(|g| [g[0], g[1]]),
             deadline: Some(planner::Deadline::after_s(self.max_time_s)),
             max_states: self.max_states as usize,
+            refine_rounds: self.refine_rounds as usize,
             ..Default::default()
         }
     }
@@ -496,6 +504,12 @@ fn print_plan(parts: &[Part], plate: &PlateModel, syn: &Synthesis) {
             print_final(p.final_orientation_deg, p.period_deg, p.goal_deg, p.final_position_mm);
             print_reach(&p.reachable_deg, syn.max_steps);
         }
+    }
+    if let Some(w) = &syn.whole_plate {
+        println!(
+            "whole plate  held from {} of {} drops on a grid over the plate ({} refinement round(s))",
+            w.held, w.drops, w.rounds
+        );
     }
     if let Some(d) = syn.position_check_mm {
         println!("           (simulated from 40 starts: every final centroid within {d:.2} mm)");

@@ -83,6 +83,10 @@ pub enum PlanFailure {
         /// States searched.
         searched: usize,
     },
+    /// A whole-plate plan on grid modes that does not hold from every drop point, after
+    /// refining the maps with those drops ([`super::whole`]).
+    #[error(transparent)]
+    NotWholePlate(Box<super::whole::NotWhole>),
     /// The time limit ([`super::Deadline`], `--max-time-s`) ran out before an answer.
     #[error(
         "no answer within {limit_s} s (--max-time-s {limit_s}): stopped at {stage}; give it \

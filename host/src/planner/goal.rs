@@ -133,19 +133,35 @@ pub fn plan_parts_progress(
         .map(|p| Problem::with_progress(p, plate, opt, progress))
         .collect::<Result<Vec<_>, _>>()?;
     let parts: Vec<&Part> = parts.iter().collect();
+    // Whole-plate plans on grid modes are refined by the drops they do not hold from.
+    let plan =
+        |problems: &[Problem]| planned_or_fallback(&parts, plate, opt, problems, goals, progress);
+    super::whole::refined(&parts, plate, opt, problems, &plan)
+}
+
+/// [`plan_parts_with`] over `problems`, then over the [`super::fallback`] maps when that gives
+/// no plan.
+fn planned_or_fallback(
+    parts: &[&Part],
+    plate: &PlateModel,
+    opt: &PlanOptions,
+    problems: &[Problem],
+    goals: &[Option<f64>],
+    progress: Progress<'_>,
+) -> Result<Synthesis, PlanFailure> {
     let refs: Vec<&Problem> = problems.iter().collect();
-    let first = plan_parts_with(&parts, plate, opt, &refs, goals);
+    let first = plan_parts_with(parts, plate, opt, &refs, goals);
     match (first, super::fallback(opt)) {
         (Err(e), Some(kind)) if super::falls_back(&e, plate, opt) => {
             let other = PlanOptions { maps: kind, ..*opt };
             progress("dynamic step maps (the static ones gave no plan)", 0, 1);
             let remapped = parts
                 .iter()
-                .zip(&problems)
+                .zip(problems)
                 .map(|(p, pr)| super::remapped(p, plate, opt, pr, kind))
                 .collect::<Result<Vec<_>, _>>()?;
             let refs: Vec<&Problem> = remapped.iter().collect();
-            plan_parts_with(&parts, plate, &other, &refs, goals)
+            plan_parts_with(parts, plate, &other, &refs, goals)
                 .map_err(|second| super::reported(e, second, opt))
         }
         (other, _) => other,
@@ -207,6 +223,7 @@ pub fn plan_parts_with(
         reachable_deg: first.reachable_deg,
         max_steps,
         position_check_mm: None,
+        whole_plate: None,
         parts: if parts.len() > 1 { per_part } else { Vec::new() },
     };
     if opt.fix_position || opt.goal_pos_mm.is_some() {

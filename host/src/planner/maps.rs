@@ -288,6 +288,20 @@ pub fn map_starts(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]>
 /// outside the mode's reach, is left out of the map and counted in [`StepMap::dead_starts`]
 /// (docs/plan.md: recording those rim rests as well was tried and is not done yet).
 pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, period: f64) -> StepMap {
+    sampled_map_from(body, mode, plate, n, period, &[])
+}
+
+/// [`sampled_map`] with `extra` start points after those of [`map_starts`]: the drop points a
+/// whole-plate plan did not hold from ([`super::whole`]), so that the map sees what the mode
+/// does to a part dropped there.
+pub(super) fn sampled_map_from(
+    body: &Body,
+    mode: &Mode,
+    plate: &PlateModel,
+    n: usize,
+    period: f64,
+    extra: &[[f64; 2]],
+) -> StepMap {
     let (field, p) = map_run(body, mode, plate);
     let rim = Rim::of(plate);
     let thetas = map_thetas(n);
@@ -303,7 +317,8 @@ pub fn sampled_map(body: &Body, mode: &Mode, plate: &PlateModel, n: usize, perio
     // Every start point's runs at once, in parallel (no wait for the slowest run of each
     // point), collected in order: the map does not depend on the thread count. Start poses
     // on the rim are pushed against its wall.
-    let starts = map_starts(body, mode, plate);
+    let mut starts = map_starts(body, mode, plate);
+    starts.extend_from_slice(extra);
     let poses: Vec<(usize, Pose)> = starts
         .iter()
         .enumerate()

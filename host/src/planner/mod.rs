@@ -69,6 +69,7 @@ mod result;
 pub mod search;
 mod settle;
 mod symmetry;
+pub mod whole;
 
 pub use goal::{PartPlan, plan_parts, plan_parts_progress, plan_parts_with};
 pub use search::Minimize;

@@ -57,6 +57,9 @@ pub struct PlanOptions {
     pub goal_pos_mm: Option<[f64; 2]>,
     /// Stop with [`super::PlanFailure::OutOfTime`] after this ([`Deadline`]); `None`: no limit.
     pub deadline: Option<Deadline>,
+    /// Whole-plate plans on grid modes: how many times the maps are refined with the drop
+    /// points a plan did not hold from ([`super::whole`]); 0: no whole-plate check.
+    pub refine_rounds: usize,
 }
 
 impl Default for PlanOptions {
@@ -79,6 +82,7 @@ impl Default for PlanOptions {
             fix_position: false,
             goal_pos_mm: None,
             deadline: None,
+            refine_rounds: 0,
         }
     }
 }

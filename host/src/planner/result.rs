@@ -52,6 +52,9 @@ pub struct Synthesis {
     pub position_check_mm: Option<f64>,
     /// Several parts: one prediction per part (empty for a single part).
     pub parts: Vec<PartPlan>,
+    /// Whole-plate plans on grid modes: what the drops over the plate gave
+    /// ([`super::whole`]); `None` when not checked.
+    pub whole_plate: Option<super::whole::WholePlate>,
 }
 
 impl Synthesis {

@@ -92,3 +92,17 @@ pub fn with_margins(mut json: Value, steps: &[PlannedStep]) -> Value {
     json["margins"] = m.into();
     json
 }
+
+/// `plan --json` of a whole-plate plan on grid modes with what its drops over the plate gave,
+/// as `"whole_plate": {"drops", "held", "held_share", "rounds"}` (docs/plan.md, "Whole-plate
+/// plans on grid modes"); unchanged when the plan was not checked so.
+pub fn with_whole_plate(
+    mut json: Value,
+    whole: Option<&crate::planner::whole::WholePlate>,
+) -> Value {
+    if let Some(w) = whole {
+        json["whole_plate"] = serde_json::json!({"drops": w.drops, "held": w.held,
+            "held_share": r4(w.held as f64 / w.drops.max(1) as f64), "rounds": w.rounds});
+    }
+    json
+}

@@ -1,0 +1,388 @@
+//! Whole-plate plans on simulated (grid) modes, refined by counterexamples (docs/plan.md,
+//! "Whole-plate plans on grid modes").
+//!
+//! A grid mode's map is simulated from a handful of start points ([`super::map_starts`]), so
+//! a plan found on it may not hold from where the maps never looked. After the search finds a
+//! plan, it is run as `chladni simulate` runs it from a fixed grid of drop points over the
+//! whole plate ([`drops`]); the drop points whose runs end elsewhere become extra start points
+//! of the maps of the plan's grid modes, and the search runs again, at most
+//! [`PlanOptions::refine_rounds`] times. The answer is a plan confirmed from every drop point
+//! or [`PlanFailure::NotWholePlate`]: which share of the drops no plan holds from, where they
+//! lie and how they end, with a feed region that avoids them.
+
+use rayon::prelude::*;
+
+use super::maps::{on_plate_edge, sampled_map_from};
+use super::{PlanFailure, PlanOptions, Problem, Synthesis, deadline};
+use crate::model::angle::cdist;
+use crate::model::part::Part;
+use crate::model::plate::{Node, PlateModel};
+use crate::motion::sim::{Body, FieldModel, Pose, simulate_plan};
+
+/// Drop points across the plate: columns (along x) and rows (along y) of the grid.
+pub const DROP_GRID: [usize; 2] = [6, 4];
+/// Start orientations per drop point.
+pub const DROP_TURNS: usize = 2;
+/// A drop counts as held when it ends within this of the predicted orientation (deg), as
+/// `chladni simulate`'s default `--tol-deg`.
+pub const DROP_TOL_DEG: f64 = 5.0;
+/// The default of [`PlanOptions::refine_rounds`] in `chladni plan` (`--refine-rounds`).
+pub const REFINE_ROUNDS: usize = 3;
+/// New start points added per round at most (each costs a map's runs per mode).
+const NEW_STARTS_PER_ROUND: usize = 6;
+
+/// Why no plan holds over the whole plate ([`PlanFailure::NotWholePlate`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error(
+        "{part}: no plan holds over the whole plate: of {drops} drops on a grid over the \
+         plate, {failed} ({:.0} %) end elsewhere ({ends}), from x {:.0}–{:.0} mm, y {:.0}–{:.0} \
+         mm, after {rounds} of at most {max_rounds} refinement rounds (--refine-rounds){}",
+        100.0 * self.failed as f64 / self.drops.max(1) as f64,
+        self.region_mm[0], self.region_mm[2], self.region_mm[1], self.region_mm[3],
+        self.feed_mm.map(|f| format!("; the plan held from every drop in x {:.0}–{:.0} mm, y {:.0}–{:.0} mm: \
+            try --feed {:.0} {:.0} {:.0} {:.0}", f[0], f[2], f[1], f[3], f[0], f[1], f[2], f[3])).unwrap_or_default()
+    )]
+pub struct NotWhole {
+    /// The part.
+    pub part: String,
+    /// Drops run over the plate.
+    pub drops: usize,
+    /// Drops the last plan did not hold from.
+    pub failed: usize,
+    /// The box of those drop points (mm: x0, y0, x1, y1).
+    pub region_mm: [f64; 4],
+    /// How they ended (counts by edge, inside, off the plate).
+    pub ends: String,
+    /// Refinement rounds run.
+    pub rounds: usize,
+    /// The bound on them ([`PlanOptions::refine_rounds`]).
+    pub max_rounds: usize,
+    /// The largest block of drop cells the last plan held from (mm: x0, y0, x1, y1).
+    pub feed_mm: Option<[f64; 4]>,
+}
+
+/// How a drop that the plan does not hold from ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DropEnd {
+    /// Against the plate edge at x = 0 (the cantilever's clamp) or another edge.
+    Edge(PlateEdge),
+    /// Inside the plate, at another orientation (a wrong node, or still on its way).
+    Interior,
+    /// Off the plate (open edge).
+    Lost,
+}
+
+/// One of the plate's four edges.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlateEdge {
+    /// x = 0.
+    Left,
+    /// x = W.
+    Right,
+    /// y = 0.
+    Bottom,
+    /// y = H.
+    Top,
+}
+
+impl PlateEdge {
+    fn name(self) -> &'static str {
+        match self {
+            PlateEdge::Left => "left (x = 0)",
+            PlateEdge::Right => "right (x = W)",
+            PlateEdge::Bottom => "bottom (y = 0)",
+            PlateEdge::Top => "top (y = H)",
+        }
+    }
+}
+
+/// What a plan's drops over the whole plate gave.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WholePlate {
+    /// Drops run.
+    pub drops: usize,
+    /// Drops that ended at the predicted orientation.
+    pub held: usize,
+    /// Refinement rounds used (0: the first plan held).
+    pub rounds: usize,
+}
+
+/// The drops a plan does not hold from: (drop point, start orientation deg, how it ended).
+type Failed = Vec<([f64; 2], f64, DropEnd)>;
+
+/// The drop grid: [`DROP_GRID`] cell centres, inset by the part's radius, [`DROP_TURNS`]
+/// orientations each (deterministic, spread so that neighbouring points differ).
+pub fn drops(body: &Body, plate: &PlateModel) -> Vec<([f64; 2], f64)> {
+    let [w, h] = plate.size_mm;
+    let r = body.radius.min(w / 2.0).min(h / 2.0);
+    let [nx, ny] = DROP_GRID;
+    let mut out = Vec::new();
+    for i in 0..nx {
+        for j in 0..ny {
+            let x = (w * (i as f64 + 0.5) / nx as f64).clamp(r, w - r);
+            let y = (h * (j as f64 + 0.5) / ny as f64).clamp(r, h - r);
+            for k in 0..DROP_TURNS {
+                let th = (17.0 + 53.0 * (i * ny + j) as f64 + 360.0 * k as f64 / DROP_TURNS as f64)
+                    .rem_euclid(360.0);
+                out.push(([x, y], th));
+            }
+        }
+    }
+    out
+}
+
+/// Runs `syn` from every drop of [`drops`]: the drops it does not hold from.
+pub fn check(body: &Body, plate: &PlateModel, syn: &Synthesis) -> (usize, Failed) {
+    let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
+    let steps = syn.sim_steps();
+    let all = drops(body, plate);
+    let [w, h] = plate.size_mm;
+    let failed = all
+        .par_iter()
+        .filter_map(|&(p, th)| {
+            let start = Pose { x: p[0], y: p[1], theta: th.to_radians() };
+            let (poses, _, _) = simulate_plan(body, plate, &fields, &steps, start);
+            let e = poses.last().copied().unwrap_or(start);
+            let off = e.x < 0.0 || e.y < 0.0 || e.x > w || e.y > h;
+            let ok = cdist(e.theta.to_degrees(), syn.final_orientation_deg, syn.period_deg);
+            if !off && ok <= DROP_TOL_DEG {
+                return None;
+            }
+            Some((p, th, ending(body, plate, e, off)))
+        })
+        .collect();
+    (all.len(), failed)
+}
+
+/// How a failed drop ended at `e`.
+fn ending(body: &Body, plate: &PlateModel, e: Pose, off: bool) -> DropEnd {
+    if off {
+        return DropEnd::Lost;
+    }
+    if !on_plate_edge(body, plate, e) {
+        return DropEnd::Interior;
+    }
+    let [w, h] = plate.size_mm;
+    let d = [(e.x, PlateEdge::Left), (w - e.x, PlateEdge::Right), (e.y, PlateEdge::Bottom)];
+    let (_, edge) =
+        d.into_iter().fold((h - e.y, PlateEdge::Top), |a, b| if b.0 < a.0 { b } else { a });
+    DropEnd::Edge(edge)
+}
+
+/// Plans with `plan` over `problems` and refines whole-plate plans on grid modes by
+/// counterexamples (see the module doc); other plans (a feed region, several parts, no grid
+/// mode, `refine_rounds` 0) are returned as `plan` gives them.
+pub(super) fn refined(
+    part: &[&Part],
+    plate: &PlateModel,
+    opt: &PlanOptions,
+    mut problems: Vec<Problem>,
+    plan: &dyn Fn(&[Problem]) -> Result<Synthesis, PlanFailure>,
+) -> Result<Synthesis, PlanFailure> {
+    let grid = |k: usize| matches!(plate.modes[k].node, Node::Grid(_));
+    let applies = opt.refine_rounds > 0 && opt.feed.is_none() && part.len() == 1;
+    let mut syn = plan(&problems)?;
+    if !applies || !(0..plate.modes.len()).any(grid) {
+        return Ok(syn);
+    }
+    let body = Body::with_samples(part[0], 160);
+    let mut extra: Vec<Vec<[f64; 2]>> = vec![Vec::new(); plate.modes.len()];
+    let mut round = 0;
+    loop {
+        deadline::check(opt.deadline, || {
+            format!("{}: whole-plate check, round {round}", part[0].name)
+        })?;
+        let (n, failed) = check(&body, plate, &syn);
+        if failed.is_empty() {
+            syn.whole_plate = Some(WholePlate { drops: n, held: n, rounds: round });
+            return Ok(syn);
+        }
+        let modes: Vec<usize> = syn.steps.iter().map(|s| s.mode).filter(|&k| grid(k)).collect();
+        let learned = learn(&mut extra, &modes, &failed);
+        if round == opt.refine_rounds || !learned {
+            return Err(not_whole(part[0], plate, &body, n, &failed, round, opt));
+        }
+        round += 1;
+        for &k in &modes {
+            deadline::check(opt.deadline, || {
+                format!("{}: refined step map of mode {}", part[0].name, k + 1)
+            })?;
+            let old = &problems[0].maps[k];
+            let mut map = sampled_map_from(
+                &body,
+                &plate.modes[k],
+                plate,
+                opt.sim_starts,
+                problems[0].period,
+                &extra[k],
+            );
+            map.evidence = old.evidence;
+            problems[0].maps[k] = map;
+        }
+        syn = match plan(&problems) {
+            Ok(s) => s,
+            Err(PlanFailure::OutOfTime { limit_s, stage }) => {
+                return Err(PlanFailure::OutOfTime { limit_s, stage });
+            }
+            Err(_) => return Err(not_whole(part[0], plate, &body, n, &failed, round, opt)),
+        };
+    }
+}
+
+/// Adds up to [`NEW_STARTS_PER_ROUND`] failed drop points not yet there to the extra start
+/// points of each of `modes`; whether any was new.
+fn learn(extra: &mut [Vec<[f64; 2]>], modes: &[usize], failed: &Failed) -> bool {
+    let mut any = false;
+    for &k in modes {
+        let new: Vec<[f64; 2]> =
+            failed.iter().map(|d| d.0).filter(|p| !extra[k].contains(p)).collect();
+        // Spread over the failed drops (they come column by column), not the first few.
+        let stride = new.len().div_ceil(NEW_STARTS_PER_ROUND).max(1);
+        for p in new.iter().step_by(stride) {
+            if !extra[k].contains(p) {
+                extra[k].push(*p);
+                any = true;
+            }
+        }
+    }
+    any
+}
+
+/// The failure after the last round: the share of the drops held, where the others lie and
+/// how they ended, and the largest block of drop cells the plan held from as a feed region.
+fn not_whole(
+    part: &Part,
+    plate: &PlateModel,
+    body: &Body,
+    drops: usize,
+    failed: &Failed,
+    rounds: usize,
+    opt: &PlanOptions,
+) -> PlanFailure {
+    let count = |f: &dyn Fn(DropEnd) -> bool| failed.iter().filter(|d| f(d.2)).count();
+    let mut ends = Vec::new();
+    for edge in [PlateEdge::Left, PlateEdge::Right, PlateEdge::Bottom, PlateEdge::Top] {
+        let c = count(&|e| e == DropEnd::Edge(edge));
+        if c > 0 {
+            ends.push(format!("{c} against the {} edge", edge.name()));
+        }
+    }
+    for (what, end) in [
+        (
+            "inside the plate at another orientation (on another node, or still moving when the plan ended)",
+            DropEnd::Interior,
+        ),
+        ("off the plate", DropEnd::Lost),
+    ] {
+        let c = count(&|e| e == end);
+        if c > 0 {
+            ends.push(format!("{c} {what}"));
+        }
+    }
+    let xs = failed.iter().map(|d| d.0[0]);
+    let ys = failed.iter().map(|d| d.0[1]);
+    let span = |v: &mut dyn Iterator<Item = f64>| {
+        v.fold([f64::INFINITY, f64::NEG_INFINITY], |a, x| [a[0].min(x), a[1].max(x)])
+    };
+    let (sx, sy) = (span(&mut xs.clone()), span(&mut ys.clone()));
+    PlanFailure::NotWholePlate(Box::new(NotWhole {
+        part: part.name.clone(),
+        drops,
+        failed: failed.len(),
+        region_mm: [sx[0], sy[0], sx[1], sy[1]],
+        ends: ends.join(", "),
+        rounds,
+        max_rounds: opt.refine_rounds,
+        feed_mm: held_block(body, plate, failed),
+    }))
+}
+
+/// The largest rectangle of [`DROP_GRID`] cells with no failed drop (mm: x0, y0, x1, y1),
+/// if any cell held.
+fn held_block(body: &Body, plate: &PlateModel, failed: &Failed) -> Option<[f64; 4]> {
+    let [nx, ny] = DROP_GRID;
+    let [w, h] = plate.size_mm;
+    let cell = |p: [f64; 2]| {
+        let i = ((p[0] / w * nx as f64) as usize).min(nx - 1);
+        let j = ((p[1] / h * ny as f64) as usize).min(ny - 1);
+        (i, j)
+    };
+    let bad: Vec<(usize, usize)> = failed.iter().map(|d| cell(d.0)).collect();
+    let mut best: Option<(usize, [usize; 4])> = None;
+    for i0 in 0..nx {
+        for i1 in i0..nx {
+            for j0 in 0..ny {
+                for j1 in j0..ny {
+                    let clean =
+                        !bad.iter().any(|&(i, j)| (i0..=i1).contains(&i) && (j0..=j1).contains(&j));
+                    let area = (i1 - i0 + 1) * (j1 - j0 + 1);
+                    if clean && best.is_none_or(|b| area > b.0) {
+                        best = Some((area, [i0, j0, i1, j1]));
+                    }
+                }
+            }
+        }
+    }
+    let r = body.radius.min(w / 2.0).min(h / 2.0);
+    best.map(|(_, [i0, j0, i1, j1])| {
+        let x = |i: usize| (w * i as f64 / nx as f64).clamp(r, w - r);
+        let y = |j: usize| (h * j as f64 / ny as f64).clamp(r, h - r);
+        [x(i0), y(j0), x(i1 + 1), y(j1 + 1)]
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::part::Part;
+
+    fn plate() -> PlateModel {
+        let text = "[plate]\nname = \"t\"\nsize_mm = [300.0, 200.0]\n[[mode]]\nname = \"a\"\n\
+                    freq_hz = 50.0\namplitude = 1.0\nnode = { kind = \"line\", angle_deg = 0.0 }\n";
+        PlateModel::parse(text, "t").unwrap()
+    }
+
+    fn body() -> Body {
+        let outline = vec![[-20.0, -5.0], [20.0, -5.0], [20.0, 5.0], [-20.0, 5.0]];
+        Body::new(&Part::new("r".into(), outline, Vec::new()).unwrap())
+    }
+
+    #[test]
+    fn the_drop_grid_covers_the_plate_inset_by_the_radius() {
+        let (b, p) = (body(), plate());
+        let d = drops(&b, &p);
+        assert_eq!(d.len(), DROP_GRID[0] * DROP_GRID[1] * DROP_TURNS);
+        assert!(d.iter().all(|(q, _)| q[0] >= b.radius && q[0] <= 300.0 - b.radius));
+        assert!(d.iter().all(|(q, _)| q[1] >= b.radius && q[1] <= 200.0 - b.radius));
+        assert_eq!(drops(&b, &p), d, "deterministic");
+    }
+
+    #[test]
+    fn the_held_block_avoids_every_failed_cell() {
+        let (b, p) = (body(), plate());
+        // Failures in the first column (x < 50 mm): the block is the other five columns.
+        let failed: Failed = vec![
+            ([25.0, 25.0], 0.0, DropEnd::Edge(PlateEdge::Left)),
+            ([25.0, 175.0], 0.0, DropEnd::Interior),
+        ];
+        let f = held_block(&b, &p, &failed).unwrap();
+        assert_eq!(f, [50.0, b.radius, 300.0 - b.radius, 200.0 - b.radius]);
+        assert_eq!(held_block(&b, &p, &Vec::new()).unwrap()[0], b.radius);
+        // One failure in every cell: no block.
+        let all: Failed = drops(&b, &p).into_iter().map(|(q, t)| (q, t, DropEnd::Lost)).collect();
+        assert!(held_block(&b, &p, &all).is_none());
+    }
+
+    #[test]
+    fn learning_adds_spread_new_points_and_says_when_none_is_new() {
+        let failed: Failed = (0..12).map(|i| ([i as f64, 0.0], 0.0, DropEnd::Interior)).collect();
+        let mut extra = vec![Vec::new(); 2];
+        assert!(learn(&mut extra, &[1], &failed));
+        assert!(extra[0].is_empty());
+        assert_eq!(extra[1].len(), NEW_STARTS_PER_ROUND);
+        assert_eq!(extra[1][1], [2.0, 0.0], "every other one of twelve");
+        assert!(learn(&mut extra, &[1], &failed));
+        assert_eq!(extra[1].len(), 12);
+        assert!(!learn(&mut extra, &[1], &failed), "nothing new to learn");
+    }
+}
