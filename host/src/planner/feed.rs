@@ -444,7 +444,7 @@ pub fn plan(
         for (i, d) in drafts {
             match check(t, d, (region, &starts, &verify), opt) {
                 Ok(syn) => {
-                    best = Some(shorten(t, syn, [&starts, &verify], opt));
+                    best = Some(syn);
                     break;
                 }
                 Err(e) => why.push((i, e)),
@@ -573,33 +573,6 @@ fn check(
         }),
         ..Synthesis::default()
     })
-}
-
-/// A confirmed plan with the shortest durations the same check still confirms, from the
-/// tracked and the interleaved starts ([`super::settle::shortest_confirmed`]); a plan whose
-/// position is fixed also needs every end within 2 mm of it, as [`common_position`] does.
-fn shorten(
-    t: &mut Tracker,
-    mut syn: Synthesis,
-    starts: [&[Pose]; 2],
-    o: &PlanOptions,
-) -> Synthesis {
-    let runs: Vec<Pose> = starts.concat();
-    let (theta, bound) = (syn.final_orientation_deg, o.margin_deg.max(o.feed_search.tol_deg));
-    let (plate, at) = (t.sim.plate, syn.final_position_mm);
-    let ok = |s: &[PlannedStep]| {
-        checked_error(t, s, &runs, theta, bound) <= bound
-            && at.is_none_or(|m| {
-                let ends = s
-                    .iter()
-                    .fold(runs.clone(), |q, s| t.after(s.mode, s.duration_ms as f64 / 1000.0, &q));
-                ends.iter().all(|q| (q.x - m[0]).hypot(q.y - m[1]) <= 2.0)
-            })
-    };
-    if let Some(steps) = super::settle::shortest_confirmed(&syn.steps, plate, o.safety, ok) {
-        syn.steps = steps;
-    }
-    syn
 }
 
 /// The largest final orientation error (deg, mod the period) of the plan run as the simulator

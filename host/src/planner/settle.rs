@@ -5,7 +5,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use rayon::prelude::*;
 
-use super::PlannedStep;
 use super::maps::outside_reach;
 use crate::model::plate::{Mode, PlateModel};
 use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
@@ -125,37 +124,6 @@ pub(crate) fn step_duration_ms(settle_s: f64, safety: f64, ramp_ms: u32) -> u32 
     (ms + ramp_ms).max(100)
 }
 
-/// Fractions of the measured settle times tried, shortest first, by [`shortest_confirmed`].
-pub const SHORTER: [f64; 4] = [0.5, 0.625, 0.75, 0.875];
-
-/// The shortest durations the evidence needs. A step's settle time is the slowest tracked
-/// start coming fully to rest (no motion across the node, orientation within 0.5° of its
-/// rest), but a plan needs less: each step only has to leave the part where the next step
-/// takes it to the same rest, and the last one within the margin of the goal. For each
-/// fraction f of [`SHORTER`] (shortest first) every step's settle time is cut to f × its
-/// measured one and `confirms` runs the plan with those durations *without* the safety
-/// factor (fixed durations, as the simulator runs a plan); the first fraction it confirms
-/// gives the steps, with `safety` × the cut settle time + ramp, so the safety factor is
-/// kept over what the confirmation needed. `None` when no fraction confirms (the measured
-/// durations stay).
-pub(crate) fn shortest_confirmed(
-    steps: &[PlannedStep],
-    plate: &PlateModel,
-    safety: f64,
-    mut confirms: impl FnMut(&[PlannedStep]) -> bool,
-) -> Option<Vec<PlannedStep>> {
-    let cut = |f: f64, safety: f64| -> Vec<PlannedStep> {
-        let mut out = steps.to_vec();
-        for s in &mut out {
-            s.settle.settle_s *= f;
-            s.duration_ms =
-                step_duration_ms(s.settle.settle_s, safety, plate.modes[s.mode].ramp_ms);
-        }
-        out
-    };
-    SHORTER.iter().find(|&&f| confirms(&cut(f, 1.0))).map(|&f| cut(f, safety))
-}
-
 #[cfg(test)]
 mod tests {
     use super::slowest_settled;
@@ -183,41 +151,5 @@ mod tests {
         fast.extend((0..11).map(|i| 40.0 + i as f64));
         assert_eq!(slowest_settled(fast), (50.0, 0));
         assert_eq!(slowest_settled(Vec::new()), (0.0, 0));
-    }
-
-    #[test]
-    fn durations_are_cut_to_the_first_fraction_the_check_confirms() {
-        use super::{PlannedStep, Settle, shortest_confirmed, step_duration_ms};
-        use crate::model::plate::PlateModel;
-        use crate::planner::PlanOptions;
-        let text = "[plate]\nsize_mm = [300.0, 200.0]\n[[mode]]\nfreq_hz = 50.0\n\
-                    node = { kind = \"line\", angle_deg = 0.0, offset_mm = 0.0 }\n";
-        let plate = PlateModel::parse(text, "t").expect("plate parses");
-        let ramp = plate.modes[0].ramp_ms;
-        let step = |settle_s: f64| PlannedStep {
-            mode: 0,
-            before: Vec::new(),
-            after: vec![0.0],
-            duration_ms: step_duration_ms(settle_s, 1.5, ramp),
-            settle: Settle { settle_s, ..Settle::default() },
-            margin: crate::planner::margin::fixed(&PlanOptions::default()),
-        };
-        let steps = [step(1000.0), step(400.0)];
-        // The check sees the cut durations without the safety factor: it confirms from 70 %
-        // of the settle times on, so 75 % is the first fraction tried that passes.
-        let mut seen = Vec::new();
-        let cut = shortest_confirmed(&steps, &plate, 1.5, |s| {
-            seen.push(s[0].duration_ms);
-            s[0].duration_ms >= 700_000 + ramp
-        })
-        .expect("a fraction confirms");
-        assert_eq!(seen, [500_000 + ramp, 625_000 + ramp, 750_000 + ramp]);
-        assert_eq!(cut[0].settle.settle_s, 750.0);
-        // The written durations keep the safety factor over what the check needed.
-        assert_eq!(cut[0].duration_ms, step_duration_ms(750.0, 1.5, ramp));
-        assert_eq!(cut[1].duration_ms, step_duration_ms(300.0, 1.5, ramp));
-        assert!(cut[0].duration_ms < steps[0].duration_ms);
-        // Nothing confirms: the measured durations stay (None).
-        assert!(shortest_confirmed(&steps, &plate, 1.5, |_| false).is_none());
     }
 }
