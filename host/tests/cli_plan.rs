@@ -264,3 +264,26 @@ fn a_plan_out_of_time_is_one_json_failure_naming_the_limit_and_the_stage() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("max-time-s"));
 }
+
+#[test]
+fn a_plan_over_the_device_hour_is_written_with_a_warning_in_text_and_json() {
+    // --safety 100: the triangle's two ~24 s steps last about 40 min each, over the hour.
+    let out_file = tmp("plan", "tri-long.json");
+    let args = ["--json", "--safety", "100", "--out", out_file.to_str().unwrap()];
+    let out = triangle_on_four_lines("plan", &args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let d = &v["device_limit"];
+    assert_eq!(d["max_total_ms"], 3_600_000);
+    let plan_ms = d["plan_ms"].as_u64().unwrap();
+    assert!(plan_ms > 3_600_000, "{d}");
+    let w = d["warning"].as_str().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    for needed in [format!("{plan_ms} ms"), "3600000 ms".into(), "plate calibrate-speed".into()] {
+        assert!(w.contains(&needed) && stderr.contains(&needed), "{needed}: {w} / {stderr}");
+    }
+    // The written file is the plan, without the report key.
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out_file).unwrap()).unwrap();
+    assert!(written.get("device_limit").is_none());
+}

@@ -268,12 +268,17 @@ impl PlanArgs {
                 p.face = o.face;
             }
         }
-        warn_device_limits(&file).map_err(|e| anyhow::anyhow!("planned steps refused: {e}"))?;
+        let limit =
+            warn_device_limits(&file).map_err(|e| anyhow::anyhow!("planned steps refused: {e}"))?;
         let overlaps = collisions(&parts, &faces, &syn);
         let mut json = file.to_json();
         if let Some(out) = &self.out {
             write_atomic(out, (serde_json::to_string_pretty(&json)? + "\n").as_bytes())
                 .map_err(output_error)?;
+        }
+        if let Some(w) = &limit {
+            let max = DeviceLimits::DEFAULT.max_total_ms;
+            json["device_limit"] = shapes::plan::device_limit_json(w, &file, max);
         }
         if syn.parts.len() > 1 {
             json["end_overlaps"] = shapes::plan::end_overlaps_json(&parts, &overlaps);
@@ -388,11 +393,15 @@ fn load_checked(
 }
 
 /// Device limits apply at `device upload`: here they are a warning (research first).
-fn warn_device_limits(file: &PlanFile) -> Result<(), chladni::model::plan_file::PlanFileError> {
-    if let Some(w) = file.device_limit_warning(&DeviceLimits::DEFAULT)? {
+/// Returns the warning (`plan --json` names it too).
+fn warn_device_limits(
+    file: &PlanFile,
+) -> Result<Option<String>, chladni::model::plan_file::PlanFileError> {
+    let w = file.device_limit_warning(&DeviceLimits::DEFAULT)?;
+    if let Some(w) = &w {
         eprintln!("warning: {w}");
     }
-    Ok(())
+    Ok(w)
 }
 
 /// `--margin-deg`: a number of degrees (every mode keeps it) or `auto` (`None`: margins from

@@ -21,8 +21,16 @@ use serde::{Deserialize, Serialize};
 /// Keys `chladni plan --json` prints beside the plan file's own (the step margins, the parts
 /// that end overlapping, the `--copies` numbers): [`PlanFile::parse`] reads past them, so the
 /// printed object saved to a file is a plan file; they are never written by `--out`.
-pub const REPORT_KEYS: [&str; 7] =
-    ["margins", "end_overlaps", "copies", "oriented", "lost", "parts_per_min", "candidates"];
+pub const REPORT_KEYS: [&str; 8] = [
+    "margins",
+    "end_overlaps",
+    "copies",
+    "oriented",
+    "lost",
+    "parts_per_min",
+    "candidates",
+    "device_limit",
+];
 
 /// Rounds to 10⁻⁴: the plan file's resolution for orientations (degrees), also used for the
 /// orientations of a failed plan's JSON.
@@ -228,8 +236,11 @@ impl PlanFileError {
     pub fn device_limit_fix(&self) -> Option<&'static str> {
         match self {
             PlanFileError::Invalid(PlanError::TooLong { .. }) => Some(
-                "shorten it (fewer repeats, shorter steps: a lower --safety) or split it into \
-                 plans of at most an hour",
+                "shorten it: measure the plate's real speed (`chladni plate calibrate-speed`; \
+                 the durations scale as 1/speed_mm_s, and the plate file's default 10 mm/s is \
+                 no measurement), feed the parts into a region (`--feed`), plan on another \
+                 plate, use fewer repeats or a lower --safety; or split it into plans of at \
+                 most an hour",
             ),
             PlanFileError::Invalid(PlanError::TooManySteps { .. })
             | PlanFileError::TooManySteps(_) => Some("split it into several plans"),
@@ -500,5 +511,31 @@ mod tests {
             PlanFile::parse(&long).unwrap().to_plan(&DeviceLimits::DEFAULT),
             Err(PlanFileError::NameTooLong(_))
         ));
+    }
+
+    #[test]
+    fn a_plan_over_the_hour_is_a_warning_naming_the_limit_length_and_fix() {
+        let two_h = r#"{"steps": [{"freq_hz": 60.0, "duration_ms": 4000000, "amplitude": 0.5},
+                                  {"freq_hz": 90.0, "duration_ms": 3200000, "amplitude": 0.5}]}"#;
+        let file = PlanFile::parse(two_h).unwrap();
+        let w = file.device_limit_warning(&DeviceLimits::DEFAULT).unwrap().expect("a warning");
+        for needed in ["7200000 ms", "3600000 ms", "plate calibrate-speed", "--feed", "another"] {
+            assert!(w.contains(needed), "{needed}: {w}");
+        }
+        let json = crate::shapes::plan::device_limit_json(&w, &file, 3_600_000);
+        assert_eq!(
+            (json["plan_ms"].as_u64(), json["max_total_ms"].as_u64()),
+            (Some(7_200_000), Some(3_600_000))
+        );
+        // Saved `plan --json` output with the key still reads as a plan file.
+        let mut saved: serde_json::Value = serde_json::from_str(two_h).unwrap();
+        saved["device_limit"] = json;
+        assert_eq!(PlanFile::parse(&saved.to_string()).unwrap().steps.len(), 2);
+        // An hour exactly is no warning.
+        let hour = r#"{"steps": [{"freq_hz": 60.0, "duration_ms": 3600000, "amplitude": 0.5}]}"#;
+        assert_eq!(
+            PlanFile::parse(hour).unwrap().device_limit_warning(&DeviceLimits::DEFAULT).unwrap(),
+            None
+        );
     }
 }

@@ -9,7 +9,7 @@ use serde_json::{Value, json};
 
 use crate::model::part::Part;
 use crate::model::part::mirror::Face;
-use crate::model::plan_file::r4;
+use crate::model::plan_file::{PlanFile, r4};
 use crate::motion::bulk::CannotPlace;
 use crate::planner::PlannedStep;
 use crate::planner::collide::EndOverlap;
@@ -101,8 +101,17 @@ pub fn with_whole_plate(
     whole: Option<&crate::planner::whole::WholePlate>,
 ) -> Value {
     if let Some(w) = whole {
-        json["whole_plate"] = serde_json::json!({"drops": w.drops, "held": w.held,
+        json["whole_plate"] = json!({"drops": w.drops, "held": w.held,
             "held_share": r4(w.held as f64 / w.drops.max(1) as f64), "rounds": w.rounds});
     }
     json
+}
+
+/// `device_limit` of `plan --json` when the plan exceeds a controller limit (research first:
+/// a warning, not a failure): `{"warning", "plan_ms", "max_total_ms"}`, the warning naming the
+/// limit, the plan's length and the fix ([`PlanFile::device_limit_warning`]).
+pub fn device_limit_json(warning: &str, file: &PlanFile, max_total_ms: u64) -> Value {
+    let plan_ms: u64 =
+        file.steps.iter().map(|s| u64::from(s.duration_ms)).sum::<u64>() * u64::from(file.repeat);
+    json!({ "warning": warning, "plan_ms": plan_ms, "max_total_ms": max_total_ms })
 }
