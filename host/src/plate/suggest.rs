@@ -222,14 +222,17 @@ impl Tried {
     /// Whether this row's outcome is the one of a candidate on `clamps` exciting `members`:
     /// same clamps, single modes only (a degenerate pair's shape depends on the drive point),
     /// and the same modes, or fewer when this row has no sequence (the searches over fewer
-    /// modes are a part of its search) or is symmetric (fewer modes stay symmetric).
+    /// modes are a part of its search) or is symmetric (fewer modes stay symmetric); never a
+    /// row the budget stopped.
     fn answers(&self, clamps: &[[f64; 2]], members: &[Vec<usize>], row: &Row) -> bool {
         let single = members.iter().all(|g| g.len() == 1);
         let fewer =
             matches!(row.outcome, Outcome::NoPlan { why: Why::NoSequence | Why::Symmetric, .. })
                 && !members.is_empty()
                 && members.iter().all(|g| self.members.contains(g));
-        self.clamps_mm == clamps && single && (self.members == members || fewer)
+        // A row the budget stopped has no answer to give.
+        let answered = !matches!(row.outcome, Outcome::NoPlan { why: Why::OutOfTime, .. });
+        self.clamps_mm == clamps && single && answered && (self.members == members || fewer)
     }
 }
 
