@@ -15,7 +15,8 @@
 //! Prints the markdown table and the counts (stdout) and a line per case (stderr).
 //! `cargo bench -p chladni-host --bench plates_table` (release). Filters, comma-separated
 //! substrings: `CHLADNI_TABLE_PLATES=free`, `CHLADNI_TABLE_PARTS=gear,key`;
-//! `CHLADNI_TABLE_SUGGEST=0` skips the suggest rows; `CHLADNI_TABLE_JOBS=2` runs two cases at
+//! `CHLADNI_TABLE_SUGGEST=0` skips the suggest rows (each `plate suggest` stops at its
+//! default `--budget-s 60`, past it by at most the first candidate that is planned); `CHLADNI_TABLE_JOBS=2` runs two cases at
 //! once (default 1: the timings are per command on an otherwise idle machine).
 
 use std::path::{Path, PathBuf};
@@ -199,7 +200,22 @@ fn suggest(root: &Path, source: &str, part: &str) -> Suggested {
         let clamps = b["clamps_mm"].as_array().map_or(Vec::new(), |c| c.iter().map(pt).collect());
         (pt(&b["drive_mm"]), clamps)
     });
-    let head = format!("{}/{tried} tried plan, of {}", plans.len(), rows.len());
+    let mut why: Vec<(String, usize)> = Vec::new();
+    for w in rows.iter().filter(|r| r["same_as"].is_null()).filter_map(|r| r["why"].as_str()) {
+        match why.iter_mut().find(|(n, _)| n == w) {
+            Some((_, c)) => *c += 1,
+            None => why.push((w.to_string(), 1)),
+        }
+    }
+    let why: Vec<String> = why.iter().map(|(n, c)| format!("{n} {c}")).collect();
+    let planned = rows.iter().filter(|r| r["outcome"] != "not_tried" && r["same_as"].is_null());
+    let head = format!(
+        "{}/{tried} tried plan ({} planned, the rest same modes as a row), of {}{}",
+        plans.len(),
+        planned.count(),
+        rows.len(),
+        if why.is_empty() { String::new() } else { format!("; no plan: {}", why.join(", ")) }
+    );
     let text = match &chosen {
         None => head,
         Some((d, c)) => {

@@ -407,10 +407,10 @@ fn warn_device_limits(
 /// `--margin-deg`: a number of degrees (every mode keeps it) or `auto` (`None`: margins from
 /// evidence).
 #[derive(Debug, Clone, Copy)]
-struct MarginArg(Option<f64>);
+pub(super) struct MarginArg(pub(super) Option<f64>);
 
 /// Parses `--margin-deg D|auto`: D in [0, 45).
-fn margin_arg(s: &str) -> Result<MarginArg, String> {
+pub(super) fn margin_arg(s: &str) -> Result<MarginArg, String> {
     if s.trim().eq_ignore_ascii_case("auto") {
         return Ok(MarginArg(None));
     }

@@ -12,6 +12,7 @@ use super::{InputError, check_output, output_error, plot_error};
 use chladni::model::modes_file;
 use chladni::model::plate_file::{ModeEntry, Plate, PlateFile, PlateTable};
 use chladni::output::write_atomic;
+use chladni::planner::PlanOptions;
 use chladni::plate::contour::{line_count, node_lines, total_length};
 use chladni::plate::photo::job::{PhotoGrid, PhotoRequest};
 use chladni::plate::{drive, photo, rocking, solver, suggest};
@@ -507,11 +508,13 @@ pub struct SuggestArgs {
     /// Solver modes per candidate (as `plate modes --count`).
     #[arg(long, default_value_t = 6, value_parser = usize_in("count", 1, 12))]
     count: usize,
-    /// Robustness margin of the plans (deg, as `plan --margin-deg`).
-    #[arg(long, default_value_t = 3.0, value_parser = super::parse::f64_where("margin-deg", "in [0, 30]", |v| (0.0..=30.0).contains(&v)))]
-    margin_deg: f64,
-    /// No new candidate starts after this many seconds (the rest are reported "not tried"),
-    /// and the plan under way stops there (its row says so; not the first candidate's).
+    /// Robustness margin of the plans, as `plan --margin-deg`: a number of degrees in [0, 45)
+    /// for every mode, or `auto` (each grid mode's margin from evidence, docs/plan.md).
+    #[arg(long, value_name = "D|auto", default_value = "auto", value_parser = super::plan::margin_arg)]
+    margin_deg: super::plan::MarginArg,
+    /// No new candidate starts after this many seconds (the rest are reported "not tried",
+    /// but for those with the plate file of a row tried), and the plan under way stops there
+    /// (its row says so; not the first candidate that is planned).
     #[arg(long, default_value_t = 60, value_parser = usize_in("budget-s", 1, 3600))]
     budget_s: usize,
     /// Print the rows as JSON.
@@ -529,9 +532,9 @@ impl SuggestArgs {
             terms: solver::DEFAULT_TERMS,
             grid: 41,
             budget: std::time::Duration::from_secs(self.budget_s as u64),
-            plan: chladni::planner::PlanOptions {
-                margin_deg: self.margin_deg,
-                margin_auto: false,
+            plan: PlanOptions {
+                margin_deg: self.margin_deg.0.unwrap_or(PlanOptions::default().margin_deg),
+                margin_auto: self.margin_deg.0.is_none(),
                 maps: chladni::planner::MapKind::Static,
                 ..Default::default()
             },
@@ -564,40 +567,59 @@ impl SuggestArgs {
     }
 }
 
-/// The suggest table: drive point, clamps, plan found, plan length, predicted orientation.
+/// The suggest table: drive point, clamps, plan found, plan length, predicted orientation,
+/// time, and why not; then each failing row's reason.
 fn print_suggest(rows: &[suggest::Row]) {
     println!(
-        "{:>16} {:<28} {:>5} {:>5} {:>6} {:>9} {:>16}",
-        "drive (mm)", "clamps (mm)", "modes", "plan", "steps", "total s", "final θ (deg)"
+        "{:>3} {:>12} {:<24} {:>5} {:>4} {:>5} {:>8} {:>14} {:>7}  why not",
+        "row",
+        "drive (mm)",
+        "clamps (mm)",
+        "modes",
+        "plan",
+        "steps",
+        "total s",
+        "final θ (deg)",
+        "wall s"
     );
-    for r in rows {
-        let drive = format!("({:.0}, {:.0})", r.candidate.drive_mm[0], r.candidate.drive_mm[1]);
-        let clamps = if r.candidate.clamps_mm.is_empty() {
+    let pt = |c: &[f64; 2]| format!("({:.0}, {:.0})", c[0], c[1]);
+    for (k, r) in rows.iter().enumerate() {
+        let c = &r.candidate;
+        let clamps = if c.clamps_mm.is_empty() {
             "none".to_string()
         } else {
-            let c: Vec<String> = r
-                .candidate
-                .clamps_mm
-                .iter()
-                .map(|c| format!("({:.0}, {:.0})", c[0], c[1]))
-                .collect();
-            c.join(" ")
+            c.clamps_mm.iter().map(pt).collect::<Vec<_>>().join(" ")
         };
-        let (plan, steps, total, theta) = match &r.outcome {
+        let (plan, steps, total, theta, why) = match &r.outcome {
             suggest::Outcome::Plan(f) => (
                 "y",
                 f.steps.to_string(),
                 format!("{:.1}", f.total_s),
                 format!("{:.2} mod {}", f.final_orientation_deg, f.period_deg),
+                String::new(),
             ),
-            suggest::Outcome::NoPlan { .. } => ("n", "-".into(), "-".into(), "-".into()),
+            suggest::Outcome::NoPlan { why, .. } => {
+                ("n", "-".into(), "-".into(), "-".into(), why.name().to_string())
+            }
             suggest::Outcome::NotTried => {
-                ("?", "not tried (budget)".into(), String::new(), String::new())
+                ("?", "-".into(), "-".into(), "-".into(), "not tried (budget)".into())
             }
         };
+        let why = match r.same_as {
+            Some(j) => format!("{why} (same modes as row {})", j + 1).trim_start().to_string(),
+            None => why,
+        };
         println!(
-            "{drive:>16} {clamps:<28} {:>5} {plan:>5} {steps:>6} {total:>9} {theta:>16}",
-            r.modes
+            "{:>3} {:>12} {clamps:<24} {:>5} {plan:>4} {steps:>5} {total:>8} {theta:>14} {:>7.1}  {why}",
+            k + 1,
+            pt(&c.drive_mm),
+            r.modes,
+            r.wall_s
         );
+    }
+    for (k, r) in rows.iter().enumerate().filter(|(_, r)| r.same_as.is_none()) {
+        if let suggest::Outcome::NoPlan { reason, .. } = &r.outcome {
+            println!("row {}: {reason}", k + 1);
+        }
     }
 }

@@ -1,13 +1,25 @@
 //! `chladni plate suggest`: where to drive and clamp a plate so that a part gets a plan.
 //!
-//! A small fixed grid of candidates (drive points off the plate's symmetry lines, no clamp or
-//! point supports near the corners): for each, the solver's forced response at the first
-//! resonances ([`crate::plate::drive`]) becomes a plate file in memory, and the planner's
-//! public entry points (`planner::check_input`, `planner::plan_parts`, as `chladni plan` calls
-//! them over the whole plate) say whether a plan exists. One modal solve per clamp set; the
-//! work is bounded by the candidate count and a time budget after which no new candidate
-//! starts and the planning of the one under way stops (the planner's deadline,
-//! [`planner::Deadline`]; not the first candidate's, so that one row has an answer).
+//! A small fixed list of candidates, clamp set by clamp set (supports at edges and near
+//! corners, off the plate's mid-lines; no clamp last), each with a few drive points off both
+//! mid-lines and diagonals: for each, the solver's forced response at the first resonances
+//! ([`crate::plate::drive`]; a hinged-rod plate's forced rocking ahead, as `plate modes
+//! --write-modes` writes them) becomes a plate file in memory, and the planner's public entry
+//! points (`planner::check_input`, `planner::plan_parts`, as `chladni plan` calls them over the
+//! whole plate) say whether a plan exists.
+//!
+//! What keeps it inside its budget:
+//! - one modal solve per clamp set (the drive point only changes the forcing);
+//! - a drive point that excites the same single modes as one tried before on the same clamps
+//!   gives the same plate file up to each mode's sign and scale (a single mode's response is
+//!   φ_k(x_d) φ_k, and the planner's grid field depends on φ² normalised), so its row takes
+//!   that row's outcome ([`Row::same_as`]) instead of planning again;
+//! - a plate whose every mode is centrally symmetric ([`planner::symmetry_centre`]) moves a pose
+//!   and its twin turned 180° about the centre alike: a part whose period does not divide 180°
+//!   has no whole-plate plan there, said without mapping ([`Why::Symmetric`]);
+//! - a time budget: no new candidate starts after it, and the plan under way stops there (the
+//!   planner's deadline, [`planner::Deadline`]), except the first candidate that is planned,
+//!   so that one row has the planner's answer.
 
 use std::time::{Duration, Instant};
 
@@ -16,19 +28,28 @@ use crate::model::part::Part;
 use crate::model::plate::PlateModel;
 use crate::model::plate_file::{ModeEntry, Plate, PlateFile};
 use crate::planner::{self, PlanFailure, PlanOptions};
-use crate::plate::drive;
 use crate::plate::solver::{self, ModalSolution};
+use crate::plate::{drive, rocking};
 
 /// Drive points tried, as fractions of [W, H]: off the mid-lines and diagonals, so no
 /// symmetry of a rectangular plate maps one onto a node of every mode.
 pub const DRIVE_FRACTIONS: [[f64; 2]; 3] = [[0.3, 0.37], [0.69, 0.28], [0.4, 0.73]];
 
-/// Clamp sets tried, as fractions of [W, H]: one support near a corner (three corners), two
-/// supports on one side, none. Clamps first: on a centrally symmetric plate φ² stays
-/// symmetric whatever the drive point (docs/plate.md, "Drive point"), a support off the
-/// centre is what breaks a pose's 180° twin, so a short budget is spent where plans are.
-pub const CLAMP_FRACTIONS: [&[[f64; 2]]; 5] =
-    [&[[0.1, 0.12]], &[[0.88, 0.1]], &[[0.12, 0.9]], &[[0.1, 0.12], [0.88, 0.1]], &[]];
+/// Clamp sets tried, as fractions of [W, H], in this order: one support near a corner, one on
+/// an edge off its middle (a node on the rim, a wall the field pushes parts against), in turn
+/// round the plate, then two supports, then none. Clamps first: on a centrally symmetric
+/// plate φ² stays symmetric whatever the drive point (docs/plate.md, "Drive point"), a support
+/// off the centre and off both mid-lines is what breaks a pose's 180° twin and its mirror
+/// image, so a short budget is spent where plans are.
+pub const CLAMP_FRACTIONS: [&[[f64; 2]]; 7] = [
+    &[[0.1, 0.12]],
+    &[[0.3, 0.0]],
+    &[[0.88, 0.1]],
+    &[[0.0, 0.35]],
+    &[[0.12, 0.9]],
+    &[[0.1, 0.12], [0.88, 0.1]],
+    &[],
+];
 
 /// One drive point and clamp set.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -52,14 +73,57 @@ pub struct Found {
     pub period_deg: f64,
 }
 
+/// Why a candidate gives no plan (`--json`'s `why`: [`Why::name`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Why {
+    /// Every mode is centrally symmetric and the part's period does not divide 180°: a pose
+    /// and its 180° twin end apart whatever the sequence (found before any map is made).
+    Symmetric,
+    /// The drive point excites none of the first modes.
+    NotExcited,
+    /// The in-memory plate file is not a plate model (`PlateModel::from_file`).
+    PlateModel,
+    /// The part does not fit the plate or the planner's limits (`planner::check_input`).
+    Part,
+    /// A mode cannot be mapped for this part ([`PlanFailure::Model`]).
+    Map,
+    /// The search found no sequence ([`PlanFailure::NoPlan`] and the goal failures).
+    NoSequence,
+    /// The time budget stopped the planning of this candidate.
+    OutOfTime,
+}
+
+impl Why {
+    /// The snake_case name `--json` and the table print.
+    pub fn name(self) -> &'static str {
+        match self {
+            Why::Symmetric => "symmetric",
+            Why::NotExcited => "not_excited",
+            Why::PlateModel => "plate_model",
+            Why::Part => "part",
+            Why::Map => "map",
+            Why::NoSequence => "no_sequence",
+            Why::OutOfTime => "out_of_time",
+        }
+    }
+}
+
+impl serde::Serialize for Why {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
 /// What one candidate gave.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 #[serde(tag = "outcome", rename_all = "snake_case")]
 pub enum Outcome {
     /// A plan.
     Plan(Found),
-    /// No plan: the planner's (or the model's) reason.
+    /// No plan: why, and the planner's (or the model's) message.
     NoPlan {
+        /// The kind of failure.
+        why: Why,
         /// The message.
         reason: String,
     },
@@ -76,8 +140,15 @@ pub struct Row {
     /// Its outcome.
     #[serde(flatten)]
     pub outcome: Outcome,
-    /// Resonances written for it (after unexcited ones are left out).
+    /// Resonances written for it (after unexcited ones are left out; the forced rocking of a
+    /// hinged-rod plate counts).
     pub modes: usize,
+    /// Wall time spent on this row (s): the modal solve when its clamp set is new, the forced
+    /// response and the planning.
+    pub wall_s: f64,
+    /// The row (0-based) with the same plate file up to sign and scale, whose outcome this
+    /// one takes without planning again.
+    pub same_as: Option<usize>,
 }
 
 /// How the search runs.
@@ -95,15 +166,17 @@ pub struct Settings {
     pub plan: PlanOptions,
 }
 
-/// The candidates for a plate of `size` (mm), clamp set by clamp set.
+/// The candidates for a plate of `size` (mm): every clamp set with the first drive point,
+/// then with the second, …, so that a short budget tries every clamp set once (the drive
+/// point matters less: it only selects which modes are excited).
 pub fn candidates(size: [f64; 2]) -> Vec<Candidate> {
     let mm = |f: [f64; 2]| {
         [(f[0] * size[0] * 10.0).round() / 10.0, (f[1] * size[1] * 10.0).round() / 10.0]
     };
-    CLAMP_FRACTIONS
+    DRIVE_FRACTIONS
         .iter()
-        .flat_map(|c| {
-            DRIVE_FRACTIONS.iter().map(move |&d| Candidate {
+        .flat_map(|&d| {
+            CLAMP_FRACTIONS.iter().map(move |c| Candidate {
                 drive_mm: mm(d),
                 clamps_mm: c.iter().map(|&f| mm(f)).collect(),
             })
@@ -131,8 +204,42 @@ pub fn forced_entries(forced: &drive::Forced, all: &ModalSolution, grid: usize) 
         .collect()
 }
 
+/// A clamp set's modal solve, kept for its later candidates.
+struct Solved {
+    clamps_mm: Vec<[f64; 2]>,
+    plate: Plate,
+    all: ModalSolution,
+}
+
+/// What a tried candidate's plate file was, to spot a later one that gives the same file.
+struct Tried {
+    row: usize,
+    clamps_mm: Vec<[f64; 2]>,
+    members: Vec<Vec<usize>>,
+}
+
+impl Tried {
+    /// Whether this row's outcome is the one of a candidate on `clamps` exciting `members`:
+    /// same clamps, single modes only (a degenerate pair's shape depends on the drive point),
+    /// and the same modes, or fewer when this row has no sequence (the searches over fewer
+    /// modes are a part of its search) or is symmetric (fewer modes stay symmetric); never a
+    /// row the budget stopped.
+    fn answers(&self, clamps: &[[f64; 2]], members: &[Vec<usize>], row: &Row) -> bool {
+        let single = members.iter().all(|g| g.len() == 1);
+        let fewer =
+            matches!(row.outcome, Outcome::NoPlan { why: Why::NoSequence | Why::Symmetric, .. })
+                && !members.is_empty()
+                && members.iter().all(|g| self.members.contains(g));
+        // A row the budget stopped has no answer to give.
+        let answered = !matches!(row.outcome, Outcome::NoPlan { why: Why::OutOfTime, .. });
+        self.clamps_mm == clamps && single && answered && (self.members == members || fewer)
+    }
+}
+
 /// Tries every candidate on `part` (calling `tick` after each), in order, until the budget
-/// is spent; the rest are [`Outcome::NotTried`].
+/// is spent; the rest are [`Outcome::NotTried`], but for those whose plate file is one
+/// already tried (same clamps, same single modes excited: [`Row::same_as`]), which cost no
+/// planning.
 pub fn run(
     file: &PlateFile,
     plate: &Plate,
@@ -141,48 +248,124 @@ pub fn run(
     mut tick: impl FnMut(),
 ) -> Vec<Row> {
     let start = Instant::now();
-    // The plan under way when the budget runs out stops there too, but for the first
-    // candidate's: some row gets an answer, whatever the budget.
     let budget = planner::Deadline::after_s(set.budget.as_secs_f64());
-    let opt = PlanOptions { deadline: set.plan.deadline.or(Some(budget)), ..set.plan };
-    let mut solved: Option<(Vec<[f64; 2]>, ModalSolution)> = None;
-    let mut rows = Vec::new();
-    for cand in candidates(plate.size_mm) {
-        if start.elapsed() > set.budget {
-            rows.push(Row { candidate: cand, outcome: Outcome::NotTried, modes: 0 });
+    let limited = PlanOptions { deadline: set.plan.deadline.or(Some(budget)), ..set.plan };
+    let mut solved: Vec<Solved> = Vec::new();
+    let mut tried: Vec<Tried> = Vec::new();
+    let mut planned_once = false;
+    let mut rows: Vec<Row> = Vec::new();
+    for candidate in candidates(plate.size_mm) {
+        let t = Instant::now();
+        let spent = start.elapsed() > set.budget;
+        let new_set = !solved.iter().any(|s| s.clamps_mm == candidate.clamps_mm);
+        if spent && new_set {
+            rows.push(Row {
+                candidate,
+                outcome: Outcome::NotTried,
+                modes: 0,
+                wall_s: 0.0,
+                same_as: None,
+            });
             tick();
             continue;
         }
-        if solved.as_ref().is_none_or(|(c, _)| *c != cand.clamps_mm) {
-            let p = Plate { clamps_mm: cand.clamps_mm.clone(), ..plate.clone() };
-            solved = Some((cand.clamps_mm.clone(), solver::solve_all(&p, set.terms)));
+        if new_set {
+            let p = Plate { clamps_mm: candidate.clamps_mm.clone(), ..plate.clone() };
+            let all = solver::solve_all(&p, set.terms);
+            solved.push(Solved { clamps_mm: candidate.clamps_mm.clone(), plate: p, all });
         }
-        let all = &solved.as_ref().expect("solved above").1;
-        let forced = drive::forced(all, set.count, cand.drive_mm, plate.damping_ratio);
-        let mut table = file.plate.clone();
-        table.drive_mm = Some(cand.drive_mm);
-        table.clamps_mm = (!cand.clamps_mm.is_empty()).then(|| cand.clamps_mm.clone());
-        let mode = forced_entries(&forced, all, set.grid);
-        let modes = mode.len();
-        let opt = if rows.is_empty() { &set.plan } else { &opt };
-        let outcome = plan_on(&PlateFile { plate: table, mode }, part, opt);
-        rows.push(Row { candidate: cand, outcome, modes });
+        let s = solved.iter().find(|s| s.clamps_mm == candidate.clamps_mm).expect("solved above");
+        let forced = drive::forced(&s.all, set.count, candidate.drive_mm, plate.damping_ratio);
+        let members: Vec<Vec<usize>> =
+            forced.resonances.iter().map(|r| r.members.clone()).collect();
+        let hinged = plate.boundary == crate::model::plate_file::Boundary::HingedRod;
+        let modes = members.len() + usize::from(hinged && !members.is_empty());
+        let twin = tried.iter().find(|t| t.answers(&candidate.clamps_mm, &members, &rows[t.row]));
+        let (outcome, same_as) = match twin {
+            Some(t) => (rows[t.row].outcome.clone(), Some(t.row)),
+            None if spent => (Outcome::NotTried, None),
+            None => {
+                let opt = if planned_once { &limited } else { &set.plan };
+                let (outcome, planned) =
+                    try_candidate(file, s, &candidate, &forced, part, set, opt);
+                planned_once |= planned;
+                tried.push(Tried {
+                    row: rows.len(),
+                    clamps_mm: candidate.clamps_mm.clone(),
+                    members,
+                });
+                (outcome, None)
+            }
+        };
+        let modes = if outcome == Outcome::NotTried { 0 } else { modes };
+        rows.push(Row { candidate, outcome, modes, wall_s: t.elapsed().as_secs_f64(), same_as });
         tick();
     }
     rows
 }
 
-/// Whether `part` gets a whole-plate plan on `file`'s modes.
-fn plan_on(file: &PlateFile, part: &Part, opt: &PlanOptions) -> Outcome {
-    let no = |reason: String| Outcome::NoPlan { reason };
-    let model = match PlateModel::from_file(file) {
+/// One candidate's plate file in memory and its outcome; `true` when the planner ran (the
+/// cheap refusals before it do not count as the one plan the budget lets finish).
+fn try_candidate(
+    file: &PlateFile,
+    s: &Solved,
+    cand: &Candidate,
+    forced: &drive::Forced,
+    part: &Part,
+    set: &Settings,
+    opt: &PlanOptions,
+) -> (Outcome, bool) {
+    let no = |why: Why, reason: String| Outcome::NoPlan { why, reason };
+    if forced.resonances.is_empty() {
+        let r = format!(
+            "drive_mm = {:?} mm excites none of the first {} modes (it lies on their nodes)",
+            cand.drive_mm, set.count
+        );
+        return (no(Why::NotExcited, r), false);
+    }
+    let mut table = file.plate.clone();
+    table.drive_mm = Some(cand.drive_mm);
+    table.clamps_mm = (!cand.clamps_mm.is_empty()).then(|| cand.clamps_mm.clone());
+    let rock = match rocking::rocking_mode(&s.plate, &forced.as_solution(&s.all), None) {
+        Ok(r) => r,
+        Err(e) => return (no(Why::PlateModel, e.to_string()), false),
+    };
+    let mode = rock.into_iter().chain(forced_entries(forced, &s.all, set.grid)).collect();
+    let model = match PlateModel::from_file(&PlateFile { plate: table, mode }) {
         Ok(m) => m,
-        Err(e) => return no(e.to_string()),
+        Err(e) => return (no(Why::PlateModel, e.to_string()), false),
     };
     if let Err(e) = planner::check_input(part, &model) {
-        return no(e.to_string());
+        return (no(Why::Part, e.to_string()), false);
     }
-    match planner::plan_parts(std::slice::from_ref(part), &model, opt, &[None]) {
+    if let Some(reason) = symmetric_refusal(part, &model) {
+        return (no(Why::Symmetric, reason), false);
+    }
+    (plan_on(&model, part, opt), true)
+}
+
+/// The refusal of a plate whose every mode is centrally symmetric for a part whose period
+/// does not divide 180° (a pose and its twin turned 180° about the centre end 180° apart
+/// modulo the period, whatever the sequence); `None` otherwise.
+pub fn symmetric_refusal(part: &Part, model: &PlateModel) -> Option<String> {
+    let c = planner::symmetry_centre(model)?;
+    let p = planner::plan_period(part, model);
+    let k = 180.0 / p;
+    if (k - k.round()).abs() < 1e-9 {
+        return None;
+    }
+    Some(format!(
+        "every mode's field is centrally symmetric about the plate centre ({:.1}, {:.1}) mm, so \
+         a pose and its twin turned 180° about the centre end 180° apart whatever the sequence \
+         ({} has period {p}°): no whole-plate plan; a clamp off the centre breaks the symmetry",
+        c[0], c[1], part.name
+    ))
+}
+
+/// Whether `part` gets a whole-plate plan on `model`.
+fn plan_on(model: &PlateModel, part: &Part, opt: &PlanOptions) -> Outcome {
+    let no = |why: Why, reason: String| Outcome::NoPlan { why, reason };
+    match planner::plan_parts(std::slice::from_ref(part), model, opt, &[None]) {
         Ok(syn) => Outcome::Plan(Found {
             steps: syn.steps.len(),
             total_s: syn.steps.iter().map(|s| f64::from(s.duration_ms)).sum::<f64>() / 1000.0,
@@ -190,9 +373,10 @@ fn plan_on(file: &PlateFile, part: &Part, opt: &PlanOptions) -> Outcome {
             period_deg: syn.period_deg,
         }),
         Err(PlanFailure::OutOfTime { stage, .. }) => {
-            no(format!("the time budget (--budget-s) ran out at {stage}"))
+            no(Why::OutOfTime, format!("the time budget (--budget-s) ran out at {stage}"))
         }
-        Err(e) => no(e.to_string()),
+        Err(e @ PlanFailure::Model(_)) => no(Why::Map, e.to_string()),
+        Err(e) => no(Why::NoSequence, e.to_string()),
     }
 }
 
@@ -201,7 +385,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn candidates_are_on_the_plate_off_its_mid_lines_and_one_solve_per_clamp_set() {
+    fn candidates_are_on_the_plate_off_its_mid_lines_and_every_clamp_set_comes_first_once() {
         let c = candidates([300.0, 200.0]);
         assert_eq!(c.len(), DRIVE_FRACTIONS.len() * CLAMP_FRACTIONS.len());
         for k in &c {
@@ -209,8 +393,46 @@ mod tests {
             assert!(d[0] > 0.0 && d[0] < 300.0 && d[1] > 0.0 && d[1] < 200.0);
             assert!((d[0] - 150.0).abs() > 10.0 && (d[1] - 100.0).abs() > 10.0, "{d:?}");
         }
-        // Clamp sets come in runs, so the modal solve is reused within a run.
-        let changes = c.windows(2).filter(|w| w[0].clamps_mm != w[1].clamps_mm).count();
-        assert_eq!(changes, CLAMP_FRACTIONS.len() - 1);
+        // Every clamp set once before any comes again (a short budget tries each).
+        let n = CLAMP_FRACTIONS.len();
+        for (k, w) in c.chunks(n).enumerate() {
+            assert!(w.iter().all(|x| x.drive_mm == w[0].drive_mm), "round {k}");
+            for (i, x) in w.iter().enumerate() {
+                assert_eq!(x.clamps_mm, c[i].clamps_mm, "round {k}");
+            }
+        }
+    }
+
+    /// The free 300 × 200 plate's forced modes from `drive`, with `clamps`, as a plate model.
+    fn free_plate(clamps: &str, drive: [f64; 2]) -> PlateModel {
+        let text = format!(
+            "[plate]\nname = \"free\"\nsize_mm = [300.0, 200.0]\nthickness_mm = 2.0\n\
+             youngs_modulus_gpa = 70.0\ndensity_kg_m3 = 2700.0\npoisson = 0.33\n\
+             boundary = \"free\"\n{clamps}"
+        );
+        let file = PlateFile::parse(&text, "t").unwrap();
+        let plate = file.plate.mechanics().unwrap();
+        let all = solver::solve_all(&plate, 10);
+        let forced = drive::forced(&all, 4, drive, plate.damping_ratio);
+        let mode = forced_entries(&forced, &all, 31);
+        PlateModel::from_file(&PlateFile { plate: file.plate, mode }).unwrap()
+    }
+
+    #[test]
+    fn a_free_plate_without_clamps_is_refused_for_a_part_without_a_half_turn_symmetry() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/parts");
+        let l = Part::load(&root.join("l-shape.json")).unwrap();
+        let rect = Part::load(&root.join("rectangle.json")).unwrap();
+        // Whatever the drive point, φ² of the free rectangle is centrally symmetric.
+        for d in [[90.0, 74.0], [207.0, 56.0]] {
+            let plain = free_plate("", d);
+            let why = symmetric_refusal(&l, &plain).expect("refused");
+            assert!(why.contains("(150.0, 100.0) mm") && why.contains("clamp"), "{why}");
+            // A rectangle's twin is itself (period 180°): not refused.
+            assert_eq!(symmetric_refusal(&rect, &plain), None);
+        }
+        // One support off the centre breaks it.
+        let clamped = free_plate("clamps_mm = [[30.0, 24.0]]\n", [90.0, 74.0]);
+        assert_eq!(symmetric_refusal(&l, &clamped), None);
     }
 }
