@@ -16,7 +16,10 @@ use support::examples::root;
 
 /// The free plate's solver modes 2 and 4 (`chladni plate modes --count 4 --write-modes`).
 fn free_plate_modes_2_and_4() -> PlateModel {
-    let out = std::env::temp_dir().join(format!("chladni-feed-{}.toml", std::process::id()));
+    // One file per call: the tests run in parallel in one process.
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let out = std::env::temp_dir().join(format!("chladni-feed-{}-{n}.toml", std::process::id()));
     let st = Command::new(env!("CARGO_BIN_EXE_chladni"))
         .args(["plate", "modes"])
         .arg(root().join("examples/plate-free.toml"))
@@ -72,4 +75,26 @@ fn triangle_on_free_plate_modes_plans_only_from_a_feed_region() {
         }
     }
     assert!(worst < 3.0, "worst final orientation error {worst}° (plan {modes:?})");
+}
+
+/// Both faces from the feed region (docs/plan.md, "Both faces"): the triangle and its mirror
+/// image are tracked through the same sequences. On modes 2 and 4 the face up gets to one
+/// orientation (modes 2, 4, 2 as in the test above) but the flipped face from every start
+/// ends in a 180° pair, so the search fails, naming the flipped face.
+#[test]
+fn both_faces_from_a_feed_region_fail_naming_the_face_left_apart() {
+    let plate = free_plate_modes_2_and_4();
+    let up = Part::load(&root().join("examples/parts/triangle.json")).unwrap();
+    let parts = [up.clone(), up.mirrored()];
+    let region = FeedRegion::new([60.0, 40.0, 100.0, 80.0], &plate).unwrap();
+    let feed_search = FeedSearch { depth: 3, points: 2, starts: 6, ..Default::default() };
+    let opt = PlanOptions { feed: Some(region), feed_search, ..Default::default() };
+    let bar = indicatif::ProgressBar::hidden();
+    let err = planner::feed::plan_parts(&parts, &plate, &opt, &region, &bar).unwrap_err();
+    let msg = err.to_string();
+    assert!(matches!(err, PlanFailure::NoPlan(_)), "{msg}");
+    assert!(msg.contains("every part in the feed region"), "{msg}");
+    assert!(msg.contains("triangle (flipped)'s tracked orientations spread"), "{msg}");
+    // The face up alone plans from the same region (the test above).
+    assert!(planner::feed::plan_parts(&parts[..1], &plate, &opt, &region, &bar).is_ok());
 }

@@ -191,6 +191,11 @@ impl PlanArgs {
     /// before any work.
     fn goals(&self) -> anyhow::Result<Vec<Option<f64>>> {
         let n = self.part.len();
+        if n > 1 && self.feed.is_some() {
+            return Err(bad(format!(
+                "--feed plans one part (on both faces when it flips); {n} parts were given"
+            )));
+        }
         self.one_part_flags(n, "parts were given")?;
         let goal_flags = self.goal_deg.is_some() || self.fix_position || self.goal_pos.is_some();
         if self.feed.is_some() && (goal_flags || self.minimize != MinimizeArg::Steps) {
@@ -210,12 +215,10 @@ impl PlanArgs {
         }
     }
 
-    /// `--feed`, `--plot` and `--goal-pos` take one part (`what`: "parts were given", or
-    /// "faces to plan" once both faces are counted).
+    /// `--plot` and `--goal-pos` take one part (`what`: "parts were given", or "faces to
+    /// plan" once both faces are counted); `--feed` takes one part on one face or both
+    /// ([`Self::goals`]).
     fn one_part_flags(&self, n: usize, what: &str) -> anyhow::Result<()> {
-        if n > 1 && self.feed.is_some() {
-            return Err(bad(format!("--feed plans one part; {n} {what}")));
-        }
         if n > 1 && self.plot.is_some() {
             return Err(bad(format!("--plot draws one part; {n} {what}")));
         }
@@ -343,7 +346,7 @@ impl PlanArgs {
         match &region {
             Some(r) => {
                 let bar = search_bar(self.json);
-                let syn = feed::plan(&parts[0], plate, &opt, r, &bar);
+                let syn = feed::plan_parts(parts, plate, &opt, r, &bar);
                 bar.finish_and_clear();
                 syn
             }

@@ -19,6 +19,13 @@
 //!    orientations half a step; and from the tracked starts again when some lingered and
 //!    were left out of the durations); every end must lie within the margin of the
 //!    predicted orientation. The fastest confirmed sequence wins.
+//!
+//! **Several parts** ([`plan_parts`]; in practice the two faces of a part that flips,
+//! docs/plan.md "Both faces") are tracked together through the same sequences, each part from
+//! its own starts in the region (they are never on the plate at once): a sequence succeeds when
+//! every part's poses end within `tol_deg` of one orientation of its own, and the confirmation
+//! checks every part against its own prediction. A search that brings one part there but not
+//! another fails naming the part left apart ([`PlanFailure::PartsApart`]).
 
 use std::collections::{HashMap, HashSet};
 
@@ -26,8 +33,8 @@ use indicatif::ProgressBar;
 use rayon::prelude::*;
 
 use super::{
-    PlanFailure, PlanOptions, PlannedStep, Settle, Synthesis, cdist, on_plate_edge, plan_period,
-    slowest_settled, step_duration_ms,
+    PartPlan, PlanFailure, PlanOptions, PlannedStep, Settle, Synthesis, cdist, on_plate_edge,
+    plan_period, slowest_settled, step_duration_ms,
 };
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
@@ -133,19 +140,23 @@ struct Outcome {
     rested: bool,
 }
 
-/// A (mode, pose) pair as a memo key: the same pose bit for bit.
-type Key = (usize, [u64; 3]);
+/// A tracked pose: the index of its part (face) and the pose.
+type Tagged = (usize, Pose);
 
-fn key(k: usize, q: Pose) -> Key {
-    (k, [q.x.to_bits(), q.y.to_bits(), q.theta.to_bits()])
+/// A (part, mode, pose) triple as a memo key: the same pose bit for bit.
+type Key = (usize, usize, [u64; 3]);
+
+fn key(k: usize, (i, q): Tagged) -> Key {
+    (i, k, [q.x.to_bits(), q.y.to_bits(), q.theta.to_bits()])
 }
 
-/// The part, the plate and its fields: simulates one run (shared by the worker threads).
+/// The parts, the plate and its fields: simulates one run (shared by the worker threads).
 struct Sim<'a> {
-    body: Body,
+    bodies: Vec<Body>,
     plate: &'a PlateModel,
     fields: Vec<FieldModel>,
-    period: f64,
+    /// Each part's period (deg).
+    periods: Vec<f64>,
 }
 
 impl Sim<'_> {
@@ -160,49 +171,49 @@ impl Sim<'_> {
         }
     }
 
-    /// 5000 T₀ of mode `k`: the limit of a run to rest, as for simulated maps.
-    fn rest_limit(&self, k: usize) -> f64 {
+    /// 5000 T₀ of mode `k` for part `i`: the limit of a run to rest, as for simulated maps.
+    fn rest_limit(&self, i: usize, k: usize) -> f64 {
         let (mode, field) = (&self.plate.modes[k], &self.fields[k]);
-        5000.0 * (self.body.radius / (mode.speed_mm_s * field.max_gain()))
+        5000.0 * (self.bodies[i].radius / (mode.speed_mm_s * field.max_gain()))
     }
 
-    /// The run under mode `k` from `pose`, stopped at `t_limit` or at rest.
-    fn run(&self, k: usize, pose: Pose, t_limit: f64) -> Outcome {
-        let run = sim::run(&self.body, &self.fields[k], self.params(k, t_limit), pose);
+    /// The run under mode `k` from the tagged pose, stopped at `t_limit` or at rest.
+    fn run(&self, k: usize, (i, pose): Tagged, t_limit: f64) -> Outcome {
+        let run = sim::run(&self.bodies[i], &self.fields[k], self.params(k, t_limit), pose);
         Outcome { pose: run.pose, settle_s: run.settle_s, t_end: run.t_end, rested: run.rested }
     }
 
-    /// A run to rest that counts: it rested and not on the plate edge.
-    fn ok(&self, o: &Outcome) -> bool {
-        o.rested && !on_plate_edge(&self.body, self.plate, o.pose)
+    /// A run to rest of part `i` that counts: it rested and not on the plate edge.
+    fn ok(&self, i: usize, o: &Outcome) -> bool {
+        o.rested && !on_plate_edge(&self.bodies[i], self.plate, o.pose)
     }
 }
 
-/// Simulates parts to rest under the plate's modes, each (mode, pose) once: runs are
+/// Simulates parts to rest under the plate's modes, each (part, mode, pose) once: runs are
 /// memoised, and the runs a batch still needs are simulated in parallel (`rayon`; results are
 /// collected in order, so plans do not depend on the thread count).
 struct Tracker<'a> {
     sim: Sim<'a>,
     /// Runs to rest (limit 5000 T₀).
     memo: HashMap<Key, Outcome>,
-    /// Runs stopped at a step duration before they rested: (mode, pose, duration bits).
+    /// Runs stopped at a step duration before they rested: (key, duration bits).
     fixed: HashMap<(Key, u64), Pose>,
 }
 
 impl<'a> Tracker<'a> {
-    fn new(body: Body, plate: &'a PlateModel, period: f64) -> Self {
+    fn new(bodies: Vec<Body>, plate: &'a PlateModel, periods: Vec<f64>) -> Self {
         let fields = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
         Tracker {
-            sim: Sim { body, plate, fields, period },
+            sim: Sim { bodies, plate, fields, periods },
             memo: HashMap::new(),
             fixed: HashMap::new(),
         }
     }
 
-    /// The run to rest (limit 5000 T₀) of every job (mode, pose), simulating those not yet
-    /// memoised in parallel.
-    fn outcomes(&mut self, jobs: &[(usize, Pose)]) -> Vec<Outcome> {
-        let mut todo: Vec<(usize, Pose)> = Vec::new();
+    /// The run to rest (limit 5000 T₀) of every job (mode, tagged pose), simulating those not
+    /// yet memoised in parallel.
+    fn outcomes(&mut self, jobs: &[(usize, Tagged)]) -> Vec<Outcome> {
+        let mut todo: Vec<(usize, Tagged)> = Vec::new();
         let mut queued = HashSet::new();
         for &(k, q) in jobs {
             if !self.memo.contains_key(&key(k, q)) && queued.insert(key(k, q)) {
@@ -211,27 +222,27 @@ impl<'a> Tracker<'a> {
         }
         let sim = &self.sim;
         let done: Vec<Outcome> =
-            todo.par_iter().map(|&(k, q)| sim.run(k, q, sim.rest_limit(k))).collect();
+            todo.par_iter().map(|&(k, q)| sim.run(k, q, sim.rest_limit(q.0, k))).collect();
         self.memo.extend(todo.iter().map(|&(k, q)| key(k, q)).zip(done));
         jobs.iter().map(|&(k, q)| self.memo[&key(k, q)]).collect()
     }
 
     /// Every pose's rest under mode `k`, or `None` when one does not come to rest within
     /// 5000 T₀ or ends on the plate edge.
-    fn rests(&mut self, k: usize, poses: &[Pose]) -> Option<Vec<Outcome>> {
-        let jobs: Vec<(usize, Pose)> = poses.iter().map(|&q| (k, q)).collect();
+    fn rests(&mut self, k: usize, poses: &[Tagged]) -> Option<Vec<Outcome>> {
+        let jobs: Vec<(usize, Tagged)> = poses.iter().map(|&q| (k, q)).collect();
         let out = self.outcomes(&jobs);
-        out.iter().all(|o| self.sim.ok(o)).then_some(out)
+        out.iter().zip(poses).all(|(o, q)| self.sim.ok(q.0, o)).then_some(out)
     }
 
     /// Where each pose is after mode `k` for `duration_s`, as `simulate_plan` runs a step: a
     /// memoised run that rested by then stopped at the same pose (the duration only caps the
     /// last integration step, which it did not reach); others are run with the duration as
     /// their limit, in parallel.
-    fn after(&mut self, k: usize, duration_s: f64, poses: &[Pose]) -> Vec<Pose> {
+    fn after(&mut self, k: usize, duration_s: f64, poses: &[Tagged]) -> Vec<Tagged> {
         let done = |o: &Outcome| o.rested && o.t_end <= duration_s;
-        let fkey = |q: Pose| (key(k, q), duration_s.to_bits());
-        let mut todo: Vec<Pose> = Vec::new();
+        let fkey = |q: Tagged| (key(k, q), duration_s.to_bits());
+        let mut todo: Vec<Tagged> = Vec::new();
         let mut queued = HashSet::new();
         for &q in poses {
             let known =
@@ -242,9 +253,8 @@ impl<'a> Tracker<'a> {
         }
         let sim = &self.sim;
         let runs: Vec<Outcome> = todo.par_iter().map(|&q| sim.run(k, q, duration_s)).collect();
-        let limit = self.sim.rest_limit(k);
         for (q, o) in todo.into_iter().zip(runs) {
-            if o.rested && o.t_end < limit {
+            if o.rested && o.t_end < self.sim.rest_limit(q.0, k) {
                 // Also the run to rest (the same trajectory).
                 self.memo.insert(key(k, q), o);
             } else {
@@ -254,11 +264,27 @@ impl<'a> Tracker<'a> {
         poses
             .iter()
             .map(|&q| match self.memo.get(&key(k, q)) {
-                Some(o) if done(o) => o.pose,
-                _ => self.fixed[&fkey(q)],
+                Some(o) if done(o) => (q.0, o.pose),
+                _ => (q.0, self.fixed[&fkey(q)]),
             })
             .collect()
     }
+}
+
+/// The poses of part `i` among tagged ones.
+fn of_part(poses: &[Tagged], i: usize) -> Vec<Pose> {
+    poses.iter().filter(|q| q.0 == i).map(|q| q.1).collect()
+}
+
+/// Per part: the circular mean orientation of its poses and their largest distance from it
+/// ([`spread`]; deg).
+fn spreads(poses: &[Tagged], periods: &[f64]) -> Vec<(f64, f64)> {
+    periods.iter().enumerate().map(|(i, &p)| spread(&of_part(poses, i), p)).collect()
+}
+
+/// The largest of the parts' spreads (deg).
+fn worst_spread(poses: &[Tagged], periods: &[f64]) -> f64 {
+    spreads(poses, periods).iter().map(|s| s.1).fold(0.0, f64::max)
 }
 
 /// Circular mean (mod `period`) of the orientations of `poses` (deg) and the largest distance
@@ -276,31 +302,35 @@ fn spread(poses: &[Pose], period: f64) -> (f64, f64) {
     (mean, dev)
 }
 
-/// Greedy clustering of rest poses: a pose joins the first cluster whose first pose is within
-/// 1° (mod `period`) and 2 mm; that first pose stands for the cluster. Poses that close end
-/// alike under the next mode unless they lie on a basin boundary, which the confirmation
-/// (every start tracked, no clustering) catches.
-fn cluster(poses: &[Pose], period: f64) -> Vec<Pose> {
-    let mut reps: Vec<Pose> = Vec::new();
-    for q in poses {
-        let near = |r: &Pose| {
-            cdist(r.theta.to_degrees(), q.theta.to_degrees(), period) < 1.0
+/// Greedy clustering of rest poses: a pose joins the first cluster of its part whose first
+/// pose is within 1° (mod the part's period) and 2 mm; that first pose stands for the cluster.
+/// Poses that close end alike under the next mode unless they lie on a basin boundary, which
+/// the confirmation (every start tracked, no clustering) catches.
+fn cluster(poses: &[Tagged], periods: &[f64]) -> Vec<Tagged> {
+    let mut reps: Vec<Tagged> = Vec::new();
+    for &(i, q) in poses {
+        let near = |&(j, r): &Tagged| {
+            j == i
+                && cdist(r.theta.to_degrees(), q.theta.to_degrees(), periods[i]) < 1.0
                 && (r.x - q.x).hypot(r.y - q.y) < 2.0
         };
         if !reps.iter().any(near) {
-            reps.push(*q);
+            reps.push((i, q));
         }
     }
     reps
 }
 
-/// Coarse cells (2°, 4 mm) of a pose set: sequences reaching the same cells are equivalent.
-fn cells(poses: &[Pose], period: f64) -> Vec<[i64; 3]> {
-    let mut c: Vec<[i64; 3]> = poses
+/// Coarse cells (part, 2°, 4 mm) of a pose set: sequences reaching the same cells are
+/// equivalent.
+fn cells(poses: &[Tagged], periods: &[f64]) -> Vec<[i64; 4]> {
+    let mut c: Vec<[i64; 4]> = poses
         .iter()
-        .map(|q| {
+        .map(|&(i, q)| {
+            let period = periods[i];
             let th = q.theta.to_degrees().rem_euclid(period);
             [
+                i as i64,
                 (th / 2.0) as i64 % (period / 2.0).ceil() as i64,
                 (q.x / 4.0) as i64,
                 (q.y / 4.0) as i64,
@@ -325,53 +355,66 @@ fn orientations(poses: &[Pose], period: f64) -> Vec<f64> {
     out.iter().map(|v| (v * 100.0).round() / 100.0).collect()
 }
 
+/// Each part's orientations ([`orientations`]) in a tagged pose set.
+fn part_orientations(poses: &[Tagged], periods: &[f64]) -> Vec<Vec<f64>> {
+    periods.iter().enumerate().map(|(i, &p)| orientations(&of_part(poses, i), p)).collect()
+}
+
 /// A partial sequence in the search: its modes and the (clustered) poses it leaves.
 struct Node {
     seq: Vec<usize>,
-    poses: Vec<Pose>,
+    poses: Vec<Tagged>,
 }
+
+/// The closest a sequence came: (orientations left over all parts, the modes, each part's
+/// orientations).
+type Closest = (usize, Vec<usize>, Vec<Vec<f64>>);
 
 /// Why the search found nothing, for the failure message.
 #[derive(Default)]
 struct Tally {
     tried: usize,
     dead: usize,
-    best: Option<(usize, Vec<usize>, Vec<f64>)>,
+    best: Option<Closest>,
 }
 
 impl Tally {
-    /// Remembers the sequence leaving the fewest distinct orientations.
-    fn note(&mut self, seq: &[usize], poses: &[Pose], period: f64) {
-        let o = orientations(poses, period);
-        if self.best.as_ref().is_none_or(|b| o.len() < b.0) {
-            self.best = Some((o.len(), seq.to_vec(), o));
+    /// Remembers the sequence leaving the fewest distinct orientations (summed over parts).
+    fn note(&mut self, seq: &[usize], poses: &[Tagged], periods: &[f64]) {
+        let o = part_orientations(poses, periods);
+        let n: usize = o.iter().map(Vec::len).sum();
+        if self.best.as_ref().is_none_or(|b| n < b.0) {
+            self.best = Some((n, seq.to_vec(), o));
         }
     }
 }
 
-/// The search: mode sequences of increasing length whose tracked poses end in one orientation.
+/// The search: mode sequences of increasing length whose tracked poses end in one orientation
+/// per part.
 struct Search<'a> {
     tracker: Tracker<'a>,
-    seen: HashSet<Vec<[i64; 3]>>,
+    seen: HashSet<Vec<[i64; 4]>>,
     tally: Tally,
 }
 
 impl Search<'_> {
     /// Rests of `poses` under mode `k` (memoised: the same cluster pose recurs across
     /// sequences), or `None` if one run fails.
-    fn apply(&mut self, k: usize, poses: &[Pose]) -> Option<Vec<Pose>> {
-        self.tracker.rests(k, poses).map(|r| r.iter().map(|o| o.pose).collect())
+    fn apply(&mut self, k: usize, poses: &[Tagged]) -> Option<Vec<Tagged>> {
+        let rests = self.tracker.rests(k, poses)?;
+        Some(poses.iter().zip(rests).map(|(q, o)| (q.0, o.pose)).collect())
     }
 
     /// One BFS level: the children of `level`, and the sequences among them that succeed.
     fn expand(&mut self, level: &[Node], tol: f64, bar: &ProgressBar) -> (Vec<Node>, Vec<Node>) {
-        let (nm, period) = (self.tracker.sim.plate.modes.len(), self.tracker.sim.period);
+        let nm = self.tracker.sim.plate.modes.len();
+        let periods = self.tracker.sim.periods.clone();
         let (mut next, mut found) = (Vec::new(), Vec::new());
         for node in level {
             // A mode applied twice in a row leaves every part where it rested.
             let modes: Vec<usize> = (0..nm).filter(|&k| node.seq.last() != Some(&k)).collect();
             // Every run this node's children need, at once (in parallel).
-            let jobs: Vec<(usize, Pose)> =
+            let jobs: Vec<(usize, Tagged)> =
                 modes.iter().flat_map(|&k| node.poses.iter().map(move |&q| (k, q))).collect();
             self.tracker.outcomes(&jobs);
             bar.inc((nm - modes.len()) as u64);
@@ -382,14 +425,14 @@ impl Search<'_> {
                     self.tally.dead += 1;
                     continue;
                 };
-                let poses = cluster(&rests, period);
-                if !self.seen.insert(cells(&poses, period)) {
+                let poses = cluster(&rests, &periods);
+                if !self.seen.insert(cells(&poses, &periods)) {
                     continue;
                 }
                 let seq = [node.seq.as_slice(), &[k]].concat();
-                self.tally.note(&seq, &poses, period);
+                self.tally.note(&seq, &poses, &periods);
                 let child = Node { seq, poses };
-                if spread(&child.poses, period).1 <= tol {
+                if worst_spread(&child.poses, &periods) <= tol {
                     found.push(child);
                 } else {
                     next.push(child);
@@ -409,13 +452,34 @@ pub fn plan(
     region: &FeedRegion,
     bar: &ProgressBar,
 ) -> Result<Synthesis, PlanFailure> {
+    plan_parts(std::slice::from_ref(part), plate, opt, region, bar)
+}
+
+/// [`plan`] for several parts at once (the two faces of a part that flips: the part and its
+/// mirror image, [`Part::mirrored`]): one sequence that brings every part dropped in `region`
+/// to one orientation of its own; [`Synthesis::parts`] holds each part's prediction when there
+/// are several.
+pub fn plan_parts(
+    parts: &[Part],
+    plate: &PlateModel,
+    opt: &PlanOptions,
+    region: &FeedRegion,
+    bar: &ProgressBar,
+) -> Result<Synthesis, PlanFailure> {
     let s = opt.feed_search;
-    let period = plan_period(part, plate);
+    let periods: Vec<f64> = parts.iter().map(|p| plan_period(p, plate)).collect();
     // 160 body samples, as `plan_with`'s settle times (grid nodes integrate along the outline
     // and do not use them).
-    let tracker = Tracker::new(Body::with_samples(part, 160), plate, period);
-    let starts = tracked_starts(region, &tracker.sim.body, plate, &s);
-    let verify = interleaved_starts(region, &tracker.sim.body, plate, &s);
+    let bodies: Vec<Body> = parts.iter().map(|p| Body::with_samples(p, 160)).collect();
+    let tag = |f: &dyn Fn(&Body) -> Vec<Pose>| -> Vec<Tagged> {
+        (bodies.iter().enumerate())
+            .flat_map(|(i, b)| f(b).into_iter().map(move |q| (i, q)))
+            .collect()
+    };
+    let starts = tag(&|b| tracked_starts(region, b, plate, &s));
+    let verify = tag(&|b| interleaved_starts(region, b, plate, &s));
+    let names: Vec<&str> = parts.iter().map(|p| p.name.as_str()).collect();
+    let tracker = Tracker::new(bodies, plate, periods);
     let mut search = Search { tracker, seen: HashSet::new(), tally: Tally::default() };
     let mut level = vec![Node { seq: Vec::new(), poses: starts.clone() }];
     let mut rejected = Vec::new();
@@ -434,7 +498,7 @@ pub fn plan(
         let mut why: Vec<(usize, String)> = Vec::new();
         let mut drafts: Vec<(usize, Draft)> = Vec::new();
         for (i, cand) in found.iter().take(s.candidates).enumerate() {
-            match track(t, &cand.seq, &starts, opt) {
+            match track(t, &cand.seq, &starts, (opt, &names)) {
                 Ok(d) => drafts.push((i, d)),
                 Err(e) => why.push((i, e)),
             }
@@ -442,7 +506,7 @@ pub fn plan(
         drafts.sort_by_key(|(i, d)| (d.total_ms(), *i));
         let mut best = None;
         for (i, d) in drafts {
-            match check(t, d, (region, &starts, &verify), opt) {
+            match check(t, d, (region, &starts, &verify), (opt, &names)) {
                 Ok(syn) => {
                     best = Some(syn);
                     break;
@@ -463,25 +527,54 @@ pub fn plan(
             break;
         }
     }
-    Err(PlanFailure::NoPlan(explain(&search.tally, &rejected, s.depth, period)))
+    Err(failure(&search, &rejected, s.depth, &names))
 }
 
-fn explain(t: &Tally, rejected: &[String], depth: usize, period: f64) -> String {
+/// The failure of a search that found no plan: for one part (or when candidates failed the
+/// check), [`PlanFailure::NoPlan`] with [`explain`]; for several, the parts the closest
+/// sequence leaves with several orientations ([`PlanFailure::PartsApart`], naming the face
+/// that does not get there).
+fn failure(search: &Search, rejected: &[String], depth: usize, names: &[&str]) -> PlanFailure {
+    let periods = &search.tracker.sim.periods;
+    let t = &search.tally;
+    if names.len() > 1
+        && rejected.is_empty()
+        && let Some((_, _, o)) = &t.best
+    {
+        let apart: Vec<(String, Vec<f64>, f64)> = (0..names.len())
+            .filter(|&i| o[i].len() > 1)
+            .map(|i| (names[i].to_string(), o[i].clone(), periods[i]))
+            .collect();
+        if !apart.is_empty() {
+            return PlanFailure::PartsApart { apart, searched: t.tried };
+        }
+    }
+    PlanFailure::NoPlan(explain(t, rejected, depth, periods[0], names))
+}
+
+fn explain(t: &Tally, rejected: &[String], depth: usize, period: f64, names: &[&str]) -> String {
+    let what = if names.len() > 1 { "every part" } else { "every start" };
     let mut msg = format!(
-        "no sequence of up to {depth} modes brings every start in the feed region to one \
+        "no sequence of up to {depth} modes brings {what} in the feed region to one \
          orientation ({} sequences simulated, {} of them left a part unsettled or on the plate edge)",
         t.tried, t.dead
     );
     if let Some((_, seq, o)) = &t.best {
         let modes = seq.iter().map(|k| (k + 1).to_string()).collect::<Vec<_>>().join(", ");
-        let list = o.iter().map(|v| format!("{v:.1}°")).collect::<Vec<_>>().join(", ");
-        msg += &format!("; the closest, modes {modes}, leaves {list} (mod {period}°)");
+        let list = |o: &[f64]| o.iter().map(|v| format!("{v:.1}°")).collect::<Vec<_>>().join(", ");
+        if names.len() > 1 {
+            let each: Vec<String> =
+                names.iter().zip(o).map(|(n, o)| format!("{n} at {}", list(o))).collect();
+            msg += &format!("; the closest, modes {modes}, leaves {}", each.join(", "));
+        } else {
+            msg += &format!("; the closest, modes {modes}, leaves {} (mod {period}°)", list(&o[0]));
+        }
     }
     if let Some(first) = rejected.first() {
         msg += &format!("; {} candidate(s) failed the check, e.g. {first}", rejected.len());
     }
     // From one side of the plate a central symmetry is already broken; a local one is not.
-    if let Some(note) = t.best.as_ref().and_then(|b| super::symmetry_note(None, &b.2, period)) {
+    if let Some(note) = t.best.as_ref().and_then(|b| super::symmetry_note(None, &b.2[0], period)) {
         msg += &format!(". {note}");
     }
     msg
@@ -492,10 +585,12 @@ fn explain(t: &Tally, rejected: &[String], depth: usize, period: f64) -> String 
 struct Draft {
     modes: String,
     steps: Vec<PlannedStep>,
-    poses: Vec<Pose>,
-    /// Circular mean orientation of the ends and their largest distance from it (deg).
-    theta: f64,
-    dev: f64,
+    poses: Vec<Tagged>,
+    /// Each part's orientations after each step (deg).
+    afters: Vec<Vec<Vec<f64>>>,
+    /// Each part's circular mean orientation of the ends and their largest distance from it
+    /// (deg).
+    spreads: Vec<(f64, f64)>,
 }
 
 impl Draft {
@@ -505,65 +600,93 @@ impl Draft {
 }
 
 /// Tracks every start through a mode sequence without clustering (see the module
-/// documentation): the durations, and the spread of the ends.
+/// documentation): the durations (the slowest of every part's runs), and the spread of each
+/// part's ends.
 fn track(
     t: &mut Tracker,
     seq: &[usize],
-    starts: &[Pose],
-    opt: &PlanOptions,
+    starts: &[Tagged],
+    (opt, names): (&PlanOptions, &[&str]),
 ) -> Result<Draft, String> {
     let modes = seq.iter().map(|k| (k + 1).to_string()).collect::<Vec<_>>().join(", ");
-    let period = t.sim.period;
+    let periods = t.sim.periods.clone();
     let mut poses = starts.to_vec();
     let mut steps = Vec::with_capacity(seq.len());
+    let mut afters = vec![Vec::with_capacity(seq.len()); periods.len()];
     for (i, &k) in seq.iter().enumerate() {
         let runs = t
             .rests(k, &poses)
             .ok_or_else(|| format!("modes {modes}: step {} leaves a part off any node", i + 1))?;
         let (settle_s, lingering) = slowest_settled(runs.iter().map(|r| r.settle_s).collect());
-        let before = if i == 0 { Vec::new() } else { orientations(&poses, period) };
-        poses = runs.iter().map(|r| r.pose).collect();
+        let before =
+            if i == 0 { Vec::new() } else { orientations(&of_part(&poses, 0), periods[0]) };
+        poses = poses.iter().zip(&runs).map(|(q, r)| (q.0, r.pose)).collect();
+        for (a, o) in afters.iter_mut().zip(part_orientations(&poses, &periods)) {
+            a.push(o);
+        }
         steps.push(PlannedStep {
             mode: k,
             before,
-            after: orientations(&poses, period),
+            after: afters[0][i].clone(),
             duration_ms: step_duration_ms(settle_s, opt.safety, t.sim.plate.modes[k].ramp_ms),
             settle: Settle { settle_s, lingering, points: starts.len(), ends_on_edge: Vec::new() },
             margin: super::margin::fixed(opt),
         });
     }
-    let (theta, dev) = spread(&poses, period);
-    if dev > opt.feed_search.tol_deg {
-        return Err(format!("modes {modes}: tracked orientations spread ±{dev:.2}°"));
+    let spreads = spreads(&poses, &periods);
+    for (name, &(_, dev)) in names.iter().zip(&spreads) {
+        if dev > opt.feed_search.tol_deg {
+            let whose = if names.len() > 1 { format!("{name}'s ") } else { String::new() };
+            return Err(format!("modes {modes}: {whose}tracked orientations spread ±{dev:.2}°"));
+        }
     }
-    Ok(Draft { modes, steps, poses, theta, dev })
+    Ok(Draft { modes, steps, poses, afters, spreads })
 }
 
 /// Runs a tracked sequence with its fixed durations from the interleaved starts (and the
 /// tracked ones again when some lingered) and builds its plan if every end lies within the
-/// margin of the predicted orientation.
+/// margin of its part's predicted orientation.
 fn check(
     t: &mut Tracker,
     d: Draft,
-    (region, starts, verify): (&FeedRegion, &[Pose], &[Pose]),
-    opt: &PlanOptions,
+    (region, starts, verify): (&FeedRegion, &[Tagged], &[Tagged]),
+    (opt, names): (&PlanOptions, &[&str]),
 ) -> Result<Synthesis, String> {
     // Tracked starts settled within their step durations unless some lingered (left out of
     // the durations); only then can they end elsewhere when run with the fixed durations.
     let lingered = d.steps.iter().any(|s| s.settle.lingering > 0);
     let again = if lingered { starts } else { &[] };
-    let runs: Vec<Pose> = again.iter().chain(verify).copied().collect();
+    let runs: Vec<Tagged> = again.iter().chain(verify).copied().collect();
     let bound = opt.margin_deg.max(opt.feed_search.tol_deg);
-    let worst = checked_error(t, &d.steps, &runs, d.theta, bound).max(d.dev);
+    let thetas: Vec<f64> = d.spreads.iter().map(|s| s.0).collect();
+    let (checked, part) = checked_error(t, &d.steps, &runs, &thetas, bound);
+    let dev = d.spreads.iter().map(|s| s.1).fold(0.0, f64::max);
+    let worst = checked.max(dev);
     if worst > bound {
         let modes = &d.modes;
-        return Err(format!("modes {modes}: a start ends {worst:.2}° off (bound {bound}°)"));
+        let of = if names.len() > 1 { format!(" of {}", names[part]) } else { String::new() };
+        return Err(format!("modes {modes}: a start{of} ends {worst:.2}° off (bound {bound}°)"));
     }
+    let periods = &t.sim.periods;
+    let parts = if names.len() < 2 {
+        Vec::new()
+    } else {
+        (names.iter().enumerate())
+            .map(|(i, name)| PartPlan {
+                name: name.to_string(),
+                period_deg: periods[i],
+                final_orientation_deg: thetas[i],
+                final_position_mm: common_position(&of_part(&d.poses, i)),
+                after: d.afters[i].clone(),
+                ..PartPlan::default()
+            })
+            .collect()
+    };
     Ok(Synthesis {
-        final_position_mm: common_position(&d.poses),
+        final_position_mm: common_position(&of_part(&d.poses, 0)),
         steps: d.steps,
-        final_orientation_deg: d.theta,
-        period_deg: t.sim.period,
+        final_orientation_deg: thetas[0],
+        period_deg: periods[0],
         feed: Some(FeedCheck {
             region: *region,
             starts: starts.len(),
@@ -571,31 +694,38 @@ fn check(
             worst_error_deg: worst,
             rejected: 0,
         }),
+        parts,
         ..Synthesis::default()
     })
 }
 
-/// The largest final orientation error (deg, mod the period) of the plan run as the simulator
-/// runs it (fixed step durations, [`simulate_plan`](crate::motion::sim::simulate_plan)) from `starts`. Starts go in batches of
+/// The largest final orientation error (deg, mod the part's period) of the plan run as the
+/// simulator runs it (fixed step durations,
+/// [`simulate_plan`](crate::motion::sim::simulate_plan)) from `starts`, each part against its
+/// own prediction `thetas[part]`, and the part it was measured on. Starts go in batches of
 /// 64 (each batch in parallel); after a batch with an error above `bound` the rest are
 /// skipped, so a rejected plan costs less (the result then exceeds `bound` but need not be
 /// the largest).
 fn checked_error(
     t: &mut Tracker,
     steps: &[PlannedStep],
-    starts: &[Pose],
-    theta: f64,
+    starts: &[Tagged],
+    thetas: &[f64],
     bound: f64,
-) -> f64 {
-    let mut worst = 0.0f64;
+) -> (f64, usize) {
+    let mut worst = (0.0f64, 0);
     for batch in starts.chunks(64) {
         let mut poses = batch.to_vec();
         for s in steps {
             poses = t.after(s.mode, s.duration_ms as f64 / 1000.0, &poses);
         }
-        let err = poses.iter().map(|q| cdist(q.theta.to_degrees(), theta, t.sim.period));
-        worst = err.fold(worst, f64::max);
-        if worst > bound {
+        for &(i, q) in &poses {
+            let err = cdist(q.theta.to_degrees(), thetas[i], t.sim.periods[i]);
+            if err > worst.0 {
+                worst = (err, i);
+            }
+        }
+        if worst.0 > bound {
             break;
         }
     }
