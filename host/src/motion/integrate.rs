@@ -48,15 +48,29 @@ pub struct SimParams {
 /// creeping along a node moved towards those of a converged integration (10⁻⁴ R).
 pub const STEP_TOL: f64 = 1e-3;
 
-/// Integrates the quasi-static motion from `start`: Heun's method (second order) with the
-/// step chosen from its embedded error estimate (Euler vs Heun position, at most
-/// [`STEP_TOL`]·R per step), halved on overshoot (the velocity reverses across a node).
-/// With a rim, every pose is kept inside a wall and the velocity is the field's with the
-/// wall's contact forces ([`crate::motion::contact`]); a part off an open edge is lost.
-pub fn run(body: &Body, field: &FieldModel, p: SimParams, start: Pose) -> Run {
-    let r = body.radius.max(1e-6);
-    let vel = |q: Pose| {
-        let w = field.wrench(body, q);
+/// How many integration steps [`run_while`] takes between two questions to its caller.
+pub const GO_EVERY: usize = 64;
+
+/// The velocity field of one run: the field's wrench turned into velocities, with the rim's
+/// walls and contact forces when there is a rim.
+struct Flow<'a> {
+    body: &'a Body,
+    field: &'a FieldModel,
+    p: SimParams,
+    /// Part radius R (mm), T₀ (s: one radius at full pull) and the rest tolerances.
+    r: f64,
+    t0: f64,
+    v_tol: f64,
+    w_tol: f64,
+}
+
+/// A velocity (mm/s, mm/s, rad/s).
+type Vel = (f64, f64, f64);
+
+impl Flow<'_> {
+    fn vel(&self, q: Pose) -> Vel {
+        let (p, body) = (self.p, self.body);
+        let w = self.field.wrench(body, q);
         let free =
             (p.speed * w.fx / body.area, p.speed * w.fy / body.area, p.speed * w.m / body.polar);
         match p.rim {
@@ -66,49 +80,36 @@ pub fn run(body: &Body, field: &FieldModel, p: SimParams, start: Pose) -> Run {
             }
             None => free,
         }
-    };
-    let keep = |q: Pose| p.rim.map_or(q, |rim| rim.project(body, q));
-    let fell = |q: Pose| p.rim.is_some_and(|rim| rim.lost(q));
-    let t0 = r / (p.speed * field.max_gain().max(1e-9));
-    // Curved nodes let a part creep slowly along them: a creep below 10⁻³ R per T0 counts as rest.
-    let (v_tol, w_tol) = (1e-3 * r / t0, 1e-4 / t0);
-    let tol = STEP_TOL * r;
-    let mut dt_next = 0.05 * t0;
-    let mut pose = keep(start);
-    let mut t = 0.0;
-    let mut lost = fell(pose);
-    let mut trace = vec![(0.0, pose)];
-    let mut v0 = vel(pose);
-    let mut rested = false;
-    let mut steps = 0;
-    while t < p.t_limit && steps < 20_000 && !lost {
-        steps += 1;
+    }
+
+    fn keep(&self, q: Pose) -> Pose {
+        self.p.rim.map_or(q, |rim| rim.project(self.body, q))
+    }
+
+    fn fell(&self, q: Pose) -> bool {
+        self.p.rim.is_some_and(|rim| rim.lost(q))
+    }
+
+    /// One accepted Heun step from `pose` (velocity `v0`) trying `dt` first: the step taken,
+    /// the new pose and its velocity, and the next step to try. The pose comes back unchanged
+    /// when the part chatters about a non-smooth rest (it is at rest).
+    fn step(&self, pose: Pose, v0: Vel, mut dt: f64, tol: f64) -> (f64, Pose, Vel, f64) {
+        let (r, t0, v_tol, w_tol) = (self.r, self.t0, self.v_tol, self.w_tol);
         let speed = v0.0.hypot(v0.1);
-        if speed < v_tol && v0.2.abs() < w_tol {
-            rested = true;
-            break;
-        }
-        // Never more than 10 T₀, a quarter radius or 0.1 rad per step, whatever the estimate
-        // says: a node narrower than that could be stepped over without a velocity change.
-        let mut dt = dt_next
-            .min(10.0 * t0)
-            .min(0.25 * r / speed.max(1e-30))
-            .min(0.1 / v0.2.abs().max(1e-30))
-            .min(p.t_limit - t);
         let mut tries = 0;
-        let (next, v1) = loop {
-            let pred = keep(Pose {
+        loop {
+            let pred = self.keep(Pose {
                 x: pose.x + dt * v0.0,
                 y: pose.y + dt * v0.1,
                 theta: pose.theta + dt * v0.2,
             });
-            let vp = vel(pred);
+            let vp = self.vel(pred);
             let overshoot = (speed > v_tol && vp.0 * v0.0 + vp.1 * v0.1 < -0.25 * speed * speed)
                 || (v0.2.abs() > w_tol && vp.2 * v0.2 < -0.25 * v0.2 * v0.2);
             if overshoot && dt * speed < 1e-4 * r && dt * v0.2.abs() < 1e-5 && speed < 0.02 * r / t0
             {
                 // Chattering about a non-smooth rest (an edge lying on the node): at rest.
-                break (pose, v0);
+                return (dt, pose, v0, dt);
             }
             // Euler vs Heun: 0.5·dt·|v(pred) − v(pose)|, angles as arc length at R.
             let err = 0.5 * dt * (vp.0 - v0.0).hypot(vp.1 - v0.1).hypot(r * (vp.2 - v0.2));
@@ -118,30 +119,85 @@ pub fn run(body: &Body, field: &FieldModel, p: SimParams, start: Pose) -> Run {
                 continue;
             }
             // Second order: the error scales as dt², so the next step aims at 0.9·tol.
-            dt_next = dt * (0.9 * (tol / err.max(1e-300)).sqrt()).min(2.0);
-            let q = keep(Pose {
+            let dt_next = dt * (0.9 * (tol / err.max(1e-300)).sqrt()).min(2.0);
+            let q = self.keep(Pose {
                 x: pose.x + 0.5 * dt * (v0.0 + vp.0),
                 y: pose.y + 0.5 * dt * (v0.1 + vp.1),
                 theta: pose.theta + 0.5 * dt * (v0.2 + vp.2),
             });
-            break (q, vel(q));
-        };
+            return (dt, q, self.vel(q), dt_next);
+        }
+    }
+}
+
+/// Integrates the quasi-static motion from `start`: Heun's method (second order) with the
+/// step chosen from its embedded error estimate (Euler vs Heun position, at most
+/// [`STEP_TOL`]·R per step), halved on overshoot (the velocity reverses across a node).
+/// With a rim, every pose is kept inside a wall and the velocity is the field's with the
+/// wall's contact forces ([`crate::motion::contact`]); a part off an open edge is lost.
+pub fn run(body: &Body, field: &FieldModel, p: SimParams, start: Pose) -> Run {
+    run_while(body, field, p, start, &|| true).expect("a run that is never called off ends")
+}
+
+/// [`run`], called off (`None`) as soon as `go` says no (asked every [`GO_EVERY`] steps): a
+/// caller whose answer no longer depends on the run (a step map's start point already found
+/// outside the mode's reach) stops paying for it, e.g. for a run creeping for its whole step
+/// budget where the pull vanishes.
+pub fn run_while(
+    body: &Body,
+    field: &FieldModel,
+    p: SimParams,
+    start: Pose,
+    go: &dyn Fn() -> bool,
+) -> Option<Run> {
+    let r = body.radius.max(1e-6);
+    let t0 = r / (p.speed * field.max_gain().max(1e-9));
+    // Curved nodes let a part creep slowly along them: a creep below 10⁻³ R per T0 counts as rest.
+    let flow = Flow { body, field, p, r, t0, v_tol: 1e-3 * r / t0, w_tol: 1e-4 / t0 };
+    let tol = STEP_TOL * r;
+    let mut dt_next = 0.05 * t0;
+    let mut pose = flow.keep(start);
+    let mut t = 0.0;
+    let mut lost = flow.fell(pose);
+    let mut trace = vec![(0.0, pose)];
+    let mut v0 = flow.vel(pose);
+    let mut rested = false;
+    let mut steps = 0;
+    while t < p.t_limit && steps < 20_000 && !lost {
+        if steps % GO_EVERY == 0 && !go() {
+            return None;
+        }
+        steps += 1;
+        let speed = v0.0.hypot(v0.1);
+        if speed < flow.v_tol && v0.2.abs() < flow.w_tol {
+            rested = true;
+            break;
+        }
+        // Never more than 10 T₀, a quarter radius or 0.1 rad per step, whatever the estimate
+        // says: a node narrower than that could be stepped over without a velocity change.
+        let dt = dt_next
+            .min(10.0 * t0)
+            .min(0.25 * r / speed.max(1e-30))
+            .min(0.1 / v0.2.abs().max(1e-30))
+            .min(p.t_limit - t);
+        let (dt, next, v1, dt_after) = flow.step(pose, v0, dt, tol);
         if next == pose {
             rested = true;
             break;
         }
+        dt_next = dt_after;
         t += dt;
         pose = next;
         v0 = v1;
         trace.push((t, pose));
-        lost = fell(pose);
+        lost = flow.fell(pose);
     }
     if p.run_to_limit && t < p.t_limit && !lost {
         t = p.t_limit;
         trace.push((t, pose));
     }
     let settle = settle_time(&trace, pose, 0.02 * r / t0);
-    Run { pose, settle_s: settle, t_end: t, trace, rested, steps, lost }
+    Some(Run { pose, settle_s: settle, t_end: t, trace, rested, steps, lost })
 }
 
 /// Settle time: the last time the part was still moving across its node (speed above

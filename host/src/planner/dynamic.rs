@@ -308,36 +308,11 @@ pub fn dynamic_line_map(
         (None, None) => true,
         _ => false,
     };
-    let changes: Vec<Vec<Option<f64>>> = starts
-        .par_iter()
-        .zip(&labels)
-        .map(|(&pt, l)| {
-            (0..n)
-                .into_par_iter()
-                .map(|i| {
-                    let (a, b) = (l[i], l[(i + 1) % n]);
-                    (a != b).then(|| {
-                        let (mut lo, mut hi) =
-                            (first + i as f64 * step, first + (i + 1) as f64 * step);
-                        for _ in 0..set.refine {
-                            let mid = 0.5 * (lo + hi);
-                            if same(a, end(pt, mid)) { lo = mid } else { hi = mid }
-                        }
-                        (0.5 * (lo + hi)).rem_euclid(360.0)
-                    })
-                })
-                .collect()
-        })
-        .collect();
+    let changes = change_points(&starts, &labels, (first, step, set.refine), &end, &same);
     let rests: Vec<f64> =
         clusters.means().into_iter().map(|m| snap(m, &statics.stable, period)).collect();
     let outcomes = Outcomes { first, step, labels, changes };
-    let reached: Vec<f64> = {
-        let mut ids: Vec<usize> = outcomes.labels.iter().flatten().flatten().copied().collect();
-        ids.sort_unstable();
-        ids.dedup();
-        ids.into_iter().map(|k| rests[k]).collect()
-    };
+    let reached = reached_rests(&outcomes.labels, &rests);
     // The static unstable rests stay boundaries: they are equilibria whatever the approach,
     // and a part starting near one lingers there (its outcome can also change there without
     // the change showing modulo the period, e.g. a square's diagonal rests).
@@ -354,6 +329,50 @@ pub fn dynamic_line_map(
         dynamic: Some(std::sync::Arc::new(DynamicImages { rests, outcomes })),
         evidence: None,
     })
+}
+
+/// Per start point and start orientation i of a dynamic map (`grid`: first orientation, step
+/// and bisections, deg): where the outcome changes between orientations i and i + 1, found by
+/// bisecting with `end` (a run's final orientation, `None` while still moving) and `same`
+/// (does an end belong to a label); `None` where the two share an outcome. In parallel,
+/// gathered in order.
+fn change_points(
+    starts: &[[f64; 2]],
+    labels: &[Vec<Option<usize>>],
+    (first, step, refine): (f64, f64, u32),
+    end: &(dyn Fn([f64; 2], f64) -> Option<f64> + Sync),
+    same: &(dyn Fn(Option<usize>, Option<f64>) -> bool + Sync),
+) -> Vec<Vec<Option<f64>>> {
+    starts
+        .par_iter()
+        .zip(labels)
+        .map(|(&pt, l)| {
+            let n = l.len();
+            (0..n)
+                .into_par_iter()
+                .map(|i| {
+                    let (a, b) = (l[i], l[(i + 1) % n]);
+                    (a != b).then(|| {
+                        let (mut lo, mut hi) =
+                            (first + i as f64 * step, first + (i + 1) as f64 * step);
+                        for _ in 0..refine {
+                            let mid = 0.5 * (lo + hi);
+                            if same(a, end(pt, mid)) { lo = mid } else { hi = mid }
+                        }
+                        (0.5 * (lo + hi)).rem_euclid(360.0)
+                    })
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// The rests (`rests[label]`) some run of a dynamic map reached, in label order.
+fn reached_rests(labels: &[Vec<Option<usize>>], rests: &[f64]) -> Vec<f64> {
+    let mut ids: Vec<usize> = labels.iter().flatten().flatten().copied().collect();
+    ids.sort_unstable();
+    ids.dedup();
+    ids.into_iter().map(|k| rests[k]).collect()
 }
 
 /// The exact static rest nearest a simulated one (within [`SNAP_DEG`], modulo the period),

@@ -429,7 +429,8 @@ fn simulate_starts(
             if dead[j].load(Ordering::Relaxed) {
                 return None;
             }
-            let r = sim::run(body, field, p, q);
+            // A run of a point found dead meanwhile is called off: its outcome no longer counts.
+            let r = sim::run_while(body, field, p, q, &|| !dead[j].load(Ordering::Relaxed))?;
             if outside_reach(body, mode, plate, r.pose) {
                 dead[j].store(true, Ordering::Relaxed);
             }

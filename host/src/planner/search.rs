@@ -343,18 +343,8 @@ impl<'a> Search<'a> {
                     return Some(self.path(&nodes, i));
                 }
                 let path = self.path(&nodes, i);
-                let pos = position(&path);
-                if pos.iter().all(Option::is_some) {
-                    match (target.pos_mm, pos.first().copied().flatten()) {
-                        (Some(g), Some(p)) => {
-                            let d = (p[0] - g[0]).hypot(p[1] - g[1]);
-                            // Positions within 0.5 mm are one node crossing: the cheaper wins.
-                            if nearest.is_none_or(|(bd, _, _)| d < bd - 0.5) {
-                                nearest = Some((d, c, i));
-                            }
-                        }
-                        _ => return Some(path),
-                    }
+                if let Some(path) = self.placed(path, (c, i), target, position, &mut nearest) {
+                    return Some(path);
                 }
             }
             if nodes[i].depth >= max_depth || nodes.len() > self.opt.max_states {
@@ -374,6 +364,34 @@ impl<'a> Search<'a> {
             }
         }
         nearest.map(|(_, _, i)| self.path(&nodes, i))
+    }
+
+    /// A path meeting the target when positions count (node `i` at cost `c`): the path itself
+    /// when every part's position is known and no goal position is asked for; with a goal
+    /// position, `nearest` keeps the node ending nearest to it (`None` returned).
+    fn placed(
+        &self,
+        path: Path,
+        (c, i): (u64, usize),
+        target: &Target,
+        position: &mut dyn FnMut(&Path) -> Vec<Option<[f64; 2]>>,
+        nearest: &mut Option<(f64, u64, usize)>,
+    ) -> Option<Path> {
+        let pos = position(&path);
+        if !pos.iter().all(Option::is_some) {
+            return None;
+        }
+        match (target.pos_mm, pos.first().copied().flatten()) {
+            (Some(g), Some(p)) => {
+                let d = (p[0] - g[0]).hypot(p[1] - g[1]);
+                // Positions within 0.5 mm are one node crossing: the cheaper wins.
+                if nearest.is_none_or(|(bd, _, _)| d < bd - 0.5) {
+                    *nearest = Some((d, c, i));
+                }
+                None
+            }
+            _ => Some(path),
+        }
     }
 
     fn path(&self, nodes: &[Node], mut g: usize) -> Path {
