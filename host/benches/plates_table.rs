@@ -9,8 +9,7 @@
 //!   point and clamps of its best row written into a plate file, `plate modes --count 6
 //!   --write-modes` on it, `plan` over the whole plate and `simulate`.
 //!
-//! A part that flips (`"flips": true`) is planned on both faces; `--feed` plans one face, so
-//! its feed row plans a face-up copy (flagged "face up" in the table).
+//! A part that flips (`"flips": true`) is planned on both faces, with `--feed` too.
 //!
 //! Prints the markdown table and the counts (stdout) and a line per case (stderr).
 //! `cargo bench -p chladni-host --bench plates_table` (release). Filters, comma-separated
@@ -100,7 +99,6 @@ struct Row {
     case: &'static str,
     part: String,
     flips: bool,
-    face_up_only: bool,
     planned: Planned,
     plan_wall_s: f64,
     success: Option<f64>,
@@ -250,17 +248,6 @@ fn solver_file(
     if r.ok { Ok(modes) } else { Err(short(&r.stderr)) }
 }
 
-/// A copy of a part file with `"flips": false` (the feed rows of a part that flips).
-fn face_up(root: &Path, part: &str, dir: &Path) -> String {
-    let mut v: Value =
-        serde_json::from_str(&std::fs::read_to_string(root.join(part)).expect("part file reads"))
-            .expect("part file is JSON");
-    v["flips"] = Value::Bool(false);
-    let path = dir.join("face-up.json");
-    std::fs::write(&path, v.to_string()).expect("temp part written");
-    path.to_string_lossy().into_owned()
-}
-
 fn flips(root: &Path, part: &str) -> bool {
     part.ends_with(".json")
         && std::fs::read_to_string(root.join(part))
@@ -274,12 +261,11 @@ fn rows_of(root: &Path, pc: &PlateCase, part: &str, dir: &Path, with_suggest: bo
     std::fs::create_dir_all(dir).expect("temp dir");
     let name = Path::new(part).file_stem().unwrap_or_default().to_string_lossy().into_owned();
     let fl = flips(root, part);
-    let row = |case, planned, plan_wall_s, success, suggest, face_up_only| Row {
+    let row = |case, planned, plan_wall_s, success, suggest| Row {
         plate: pc.name,
         case,
         part: name.clone(),
         flips: fl,
-        face_up_only,
         planned,
         plan_wall_s,
         success,
@@ -298,12 +284,11 @@ fn rows_of(root: &Path, pc: &PlateCase, part: &str, dir: &Path, with_suggest: bo
     let mut rows = Vec::new();
     if !pc.one_sided {
         let (p, w, s) = run(pc.modes, part, false);
-        rows.push(row("whole plate", p, w, s, None, false));
+        rows.push(row("whole plate", p, w, s, None));
         return rows;
     }
-    let feed_part = if fl { face_up(root, part, dir) } else { part.to_string() };
-    let (p, w, s) = run(pc.modes, &feed_part, true);
-    rows.push(row("feed (left)", p, w, s, None, fl));
+    let (p, w, s) = run(pc.modes, part, true);
+    rows.push(row("feed (left)", p, w, s, None));
     if !with_suggest {
         return rows;
     }
@@ -316,7 +301,7 @@ fn rows_of(root: &Path, pc: &PlateCase, part: &str, dir: &Path, with_suggest: bo
             Err(e) => (Planned::No(format!("plate modes: {e}")), 0.0, None),
         },
     };
-    rows.push(row("whole, suggest", p, w, s, Some(text), false));
+    rows.push(row("whole, suggest", p, w, s, Some(text)));
     rows
 }
 
@@ -347,7 +332,7 @@ fn wanted(var: &str, name: &str) -> bool {
 }
 
 fn cell(r: &Row) -> String {
-    let part = if r.face_up_only { format!("{} (face up)", r.part) } else { r.part.clone() };
+    let part = r.part.clone();
     let flips = if r.flips { "yes" } else { "no" };
     let (plan, steps, dur) = match &r.planned {
         Planned::Plan { steps, total_s } => {
