@@ -59,3 +59,18 @@ fn the_cantilever_rectangle_plan_holds_from_the_far_side_only_and_the_failure_na
     assert!(json["held_share"].as_f64().unwrap() < 1.0, "{json}");
     assert_eq!(json["feed_mm"].as_array().unwrap().len(), 4, "{json}");
 }
+
+#[test]
+fn a_plan_of_two_parts_says_its_whole_plate_hold_is_not_checked() {
+    // The check runs one part on one face: a plan of several (or of both faces of a part
+    // that flips) is marked unchecked, in the result and in `plan --json`, not passed.
+    let plate = cantilever_two_modes();
+    let rect = part("rectangle.json");
+    let opt = PlanOptions { sim_starts: 36, refine_rounds: 2, ..Default::default() };
+    let syn = planner::plan_parts(&[rect.clone(), rect], &plate, &opt, &[None, None]).unwrap();
+    let w = syn.whole_plate.as_ref().expect("marked");
+    assert!(!w.checked && w.drops == 0, "{w:?}");
+    let json = chladni::shapes::plan::with_whole_plate(serde_json::json!({}), Some(w));
+    assert_eq!(json["whole_plate"]["checked"], false);
+    assert!(json["whole_plate"]["why"].as_str().unwrap().contains("chladni simulate"));
+}

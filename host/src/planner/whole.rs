@@ -105,6 +105,10 @@ pub struct WholePlate {
     pub held: usize,
     /// Refinement rounds used (0: the first plan held).
     pub rounds: usize,
+    /// False for a plan of several parts or of both faces of a flipping part: the check runs
+    /// one part on one face, so whether such a plan holds over the whole plate is not known
+    /// (`drops` and `held` are 0; `chladni simulate` measures it).
+    pub checked: bool,
 }
 
 /// The drops a plan does not hold from: (drop point, start orientation deg, how it ended).
@@ -182,7 +186,13 @@ pub(super) fn refined(
     let grid = |k: usize| matches!(plate.modes[k].node, Node::Grid(_));
     let applies = opt.refine_rounds > 0 && opt.feed.is_none() && part.len() == 1;
     let mut syn = plan(&problems)?;
-    if !applies || !(0..plate.modes.len()).any(grid) {
+    if !(0..plate.modes.len()).any(grid) {
+        return Ok(syn);
+    }
+    if !applies {
+        if opt.refine_rounds > 0 && opt.feed.is_none() {
+            syn.whole_plate = Some(WholePlate { drops: 0, held: 0, rounds: 0, checked: false });
+        }
         return Ok(syn);
     }
     let body = Body::with_samples(part[0], 160);
@@ -194,7 +204,7 @@ pub(super) fn refined(
         })?;
         let (n, failed) = check(&body, plate, &syn);
         if failed.is_empty() {
-            syn.whole_plate = Some(WholePlate { drops: n, held: n, rounds: round });
+            syn.whole_plate = Some(WholePlate { drops: n, held: n, rounds: round, checked: true });
             return Ok(syn);
         }
         let modes: Vec<usize> = syn.steps.iter().map(|s| s.mode).filter(|&k| grid(k)).collect();

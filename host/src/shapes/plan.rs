@@ -93,6 +93,11 @@ pub fn with_margins(mut json: Value, steps: &[PlannedStep]) -> Value {
     json
 }
 
+/// Why a whole-plate plan of several parts or faces is not checked over the plate (text and
+/// `--json`).
+pub const WHOLE_UNCHECKED: &str = "not checked: the whole-plate check runs one part on one \
+    face; `chladni simulate` gives the share of drops this plan holds from";
+
 /// `plan --json` of a whole-plate plan on grid modes with what its drops over the plate gave,
 /// as `"whole_plate": {"drops", "held", "held_share", "rounds"}` (docs/plan.md, "Whole-plate
 /// plans on grid modes"); unchanged when the plan was not checked so.
@@ -100,9 +105,13 @@ pub fn with_whole_plate(
     mut json: Value,
     whole: Option<&crate::planner::whole::WholePlate>,
 ) -> Value {
-    if let Some(w) = whole {
-        json["whole_plate"] = json!({"drops": w.drops, "held": w.held,
-            "held_share": r4(w.held as f64 / w.drops.max(1) as f64), "rounds": w.rounds});
+    match whole {
+        Some(w) if w.checked => {
+            json["whole_plate"] = json!({"checked": true, "drops": w.drops, "held": w.held,
+                "held_share": r4(w.held as f64 / w.drops.max(1) as f64), "rounds": w.rounds});
+        }
+        Some(_) => json["whole_plate"] = json!({"checked": false, "why": WHOLE_UNCHECKED}),
+        None => {}
     }
     json
 }
