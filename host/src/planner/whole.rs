@@ -231,9 +231,7 @@ pub(super) fn refined(
         }
         syn = match plan(&problems) {
             Ok(s) => s,
-            Err(PlanFailure::OutOfTime { limit_s, stage }) => {
-                return Err(PlanFailure::OutOfTime { limit_s, stage });
-            }
+            Err(e @ PlanFailure::OutOfTime { .. }) => return Err(e),
             Err(_) => return Err(not_whole(part[0], plate, &body, n, &failed, round, opt)),
         };
     }
