@@ -517,6 +517,13 @@ pub struct SuggestArgs {
     /// (its row says so; not the first candidate that is planned).
     #[arg(long, default_value_t = 60, value_parser = usize_in("budget-s", 1, 3600))]
     budget_s: usize,
+    /// The whole-plate check of every plan found, as `plan --refine-rounds`: how many times the
+    /// step maps are refined with the drop points a plan does not hold from (docs/plan.md,
+    /// "Whole-plate plans on grid modes"); a plan no round makes hold is a `not_whole_plate`
+    /// row; 0: no check (a plan row may then be one `plan` refuses).
+    #[arg(long, value_name = "N", default_value_t = chladni::planner::whole::REFINE_ROUNDS,
+          value_parser = usize_in("refine-rounds", 0, 20))]
+    refine_rounds: usize,
     /// Print the rows as JSON.
     #[arg(long)]
     json: bool,
@@ -536,6 +543,7 @@ impl SuggestArgs {
                 margin_deg: self.margin_deg.0.unwrap_or(PlanOptions::default().margin_deg),
                 margin_auto: self.margin_deg.0.is_none(),
                 maps: chladni::planner::MapKind::Static,
+                refine_rounds: self.refine_rounds,
                 ..Default::default()
             },
         };
@@ -568,10 +576,10 @@ impl SuggestArgs {
 }
 
 /// The suggest table: drive point, clamps, plan found, plan length, predicted orientation,
-/// time, and why not; then each failing row's reason.
+/// the whole-plate check's drops held, time, and why not; then each failing row's reason.
 fn print_suggest(rows: &[suggest::Row]) {
     println!(
-        "{:>3} {:>12} {:<24} {:>5} {:>4} {:>5} {:>8} {:>14} {:>7}  why not",
+        "{:>3} {:>12} {:<24} {:>5} {:>4} {:>5} {:>8} {:>14} {:>7} {:>7}  why not",
         "row",
         "drive (mm)",
         "clamps (mm)",
@@ -580,6 +588,7 @@ fn print_suggest(rows: &[suggest::Row]) {
         "steps",
         "total s",
         "final θ (deg)",
+        "held",
         "wall s"
     );
     let pt = |c: &[f64; 2]| format!("({:.0}, {:.0})", c[0], c[1]);
@@ -590,27 +599,13 @@ fn print_suggest(rows: &[suggest::Row]) {
         } else {
             c.clamps_mm.iter().map(pt).collect::<Vec<_>>().join(" ")
         };
-        let (plan, steps, total, theta, why) = match &r.outcome {
-            suggest::Outcome::Plan(f) => (
-                "y",
-                f.steps.to_string(),
-                format!("{:.1}", f.total_s),
-                format!("{:.2} mod {}", f.final_orientation_deg, f.period_deg),
-                String::new(),
-            ),
-            suggest::Outcome::NoPlan { why, .. } => {
-                ("n", "-".into(), "-".into(), "-".into(), why.name().to_string())
-            }
-            suggest::Outcome::NotTried => {
-                ("?", "-".into(), "-".into(), "-".into(), "not tried (budget)".into())
-            }
-        };
+        let [plan, steps, total, theta, held, why] = suggest_cells(&r.outcome);
         let why = match r.same_as {
             Some(j) => format!("{why} (same modes as row {})", j + 1).trim_start().to_string(),
             None => why,
         };
         println!(
-            "{:>3} {:>12} {clamps:<24} {:>5} {plan:>4} {steps:>5} {total:>8} {theta:>14} {:>7.1}  {why}",
+            "{:>3} {:>12} {clamps:<24} {:>5} {plan:>4} {steps:>5} {total:>8} {theta:>14} {held:>7} {:>7.1}  {why}",
             k + 1,
             pt(&c.drive_mm),
             r.modes,
@@ -620,6 +615,38 @@ fn print_suggest(rows: &[suggest::Row]) {
     for (k, r) in rows.iter().enumerate().filter(|(_, r)| r.same_as.is_none()) {
         if let suggest::Outcome::NoPlan { reason, .. } = &r.outcome {
             println!("row {}: {reason}", k + 1);
+        }
+    }
+}
+
+/// A suggest row's outcome cells: plan y/n/?, steps, total s, final θ, the drops over the
+/// plate the plan held from ("48/48"; "-" when not checked), and why not.
+fn suggest_cells(outcome: &suggest::Outcome) -> [String; 6] {
+    let dash = || "-".to_string();
+    match outcome {
+        suggest::Outcome::Plan(f) => {
+            let held = match &f.whole_plate {
+                Some(w) if w.checked => format!("{}/{}", w.held, w.drops),
+                _ => dash(),
+            };
+            [
+                "y".into(),
+                f.steps.to_string(),
+                format!("{:.1}", f.total_s),
+                format!("{:.2} mod {}", f.final_orientation_deg, f.period_deg),
+                held,
+                String::new(),
+            ]
+        }
+        suggest::Outcome::NoPlan { why, .. } => {
+            let held = match why {
+                suggest::Why::NotWholePlate(h) => format!("{}/{}", h.held, h.drops),
+                _ => dash(),
+            };
+            ["n".into(), dash(), dash(), dash(), held, why.name().to_string()]
+        }
+        suggest::Outcome::NotTried => {
+            ["?".into(), dash(), dash(), dash(), dash(), "not tried (budget)".into()]
         }
     }
 }

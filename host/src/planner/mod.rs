@@ -88,7 +88,8 @@ pub use result::{PlannedStep, Synthesis};
 pub use settle::{LINGER_GAP, Settle, settle_time};
 pub(crate) use settle::{slowest_settled, start_points, step_duration_ms};
 pub use symmetry::{
-    centrally_symmetric, plan_period, symmetry_centre, symmetry_note, symmetry_order,
+    central_symmetry_sentence, centrally_symmetric, plan_period, symmetry_centre, symmetry_note,
+    symmetry_order,
 };
 
 /// Everything the search needs, computed once per part and plate.

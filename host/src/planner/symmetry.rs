@@ -84,28 +84,36 @@ pub fn symmetry_centre(plate: &PlateModel) -> Option<[f64; 2]> {
     centrally_symmetric(plate).then(|| plate.center())
 }
 
+/// What breaks a 180° twin: something one-sided (the remedies every symmetry sentence names).
+const ONE_SIDED_FIXES: &str = "what breaks it is one-sided: drive the plate off its centre \
+    (`drive_mm = [x, y]` in [plate]: unequal amplitude on the two sides of a node), clamp it at \
+    points (`clamps_mm = [[x, y], …]`), drop the parts on one side (`--feed X0 Y0 X1 Y1`), or \
+    use a mode whose field pushes the part against a wall (`edge = \"wall\"`)";
+
+/// The sentence naming a plate's central symmetry about `centre` (mm) and what breaks it: one
+/// home for the planner's failures ([`symmetry_note`]) and `plate suggest`'s refusal of a
+/// centrally symmetric plate before any map is made.
+pub fn central_symmetry_sentence(centre: [f64; 2]) -> String {
+    format!(
+        "every mode's field is centrally symmetric about the plate centre ({:.1}, {:.1}) mm, so \
+         a pose and its twin turned 180° about the centre are moved alike by every sequence; \
+         {ONE_SIDED_FIXES}",
+        centre[0], centre[1]
+    )
+}
+
 /// What to say when orientations 180° apart are left after every sequence (deg): the
 /// symmetry that keeps them apart and what breaks it; `None` when no two of `set` are 180°
 /// apart modulo the period `p`. `centre`: [`symmetry_centre`].
 pub fn symmetry_note(centre: Option<[f64; 2]>, set: &[f64], p: f64) -> Option<String> {
     let twins = |a: f64, b: f64| cdist(a, b, p) > 1.0 && cdist(a + 180.0, b, p) < 1.0;
     let (a, b) = set.iter().find_map(|&a| set.iter().find(|&&b| twins(a, b)).map(|&b| (a, b)))?;
-    let fixes = "what breaks it is one-sided: drive the plate off its centre (`drive_mm = [x, y]` \
-                 in [plate]: unequal amplitude on the two sides of a node), clamp it at points \
-                 (`clamps_mm = [[x, y], …]`), drop the parts on one side (`--feed X0 Y0 X1 Y1`), \
-                 or use a mode whose field pushes the part against a wall (`edge = \"wall\"`)";
-    Some(if let Some(c) = centre {
-        format!(
-            "{a:.2}° and {b:.2}° are 180° twins: every mode's field is centrally symmetric about \
-             the plate centre ({:.1}, {:.1}) mm, so a pose and its twin turned 180° about the \
-             centre are moved alike by every sequence; {fixes}",
-            c[0], c[1]
-        )
-    } else {
-        format!(
+    Some(match centre {
+        Some(c) => format!("{a:.2}° and {b:.2}° are 180° twins: {}", central_symmetry_sentence(c)),
+        None => format!(
             "{a:.2}° and {b:.2}° are 180° twins: a part straddling a node whose field is the same \
-             on both sides rests in such pairs wherever it was dropped; {fixes}"
-        )
+             on both sides rests in such pairs wherever it was dropped; {ONE_SIDED_FIXES}"
+        ),
     })
 }
 

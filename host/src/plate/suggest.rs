@@ -6,14 +6,19 @@
 //! ([`crate::plate::drive`]; a hinged-rod plate's forced rocking ahead, as `plate modes
 //! --write-modes` writes them) becomes a plate file in memory, and the planner's public entry
 //! points (`planner::check_input`, `planner::plan_parts`, as `chladni plan` calls them over the
-//! whole plate) say whether a plan exists.
+//! whole plate: both faces of a part that flips, and the whole-plate check of
+//! [`planner::whole`] with `chladni plan`'s default rounds) say whether a plan exists. A plan
+//! the whole-plate check refuses is a row of its own ([`Why::NotWholePlate`], with the share of
+//! the drops it held from), so that every plan a row lists is one `chladni plan` gives on the
+//! plate file written from that row's drive point and clamps.
 //!
 //! What keeps it inside its budget:
 //! - one modal solve per clamp set (the drive point only changes the forcing);
 //! - a drive point that excites the same single modes as one tried before on the same clamps
 //!   gives the same plate file up to each mode's sign and scale (a single mode's response is
 //!   φ_k(x_d) φ_k, and the planner's grid field depends on φ² normalised), so its row takes
-//!   that row's outcome ([`Row::same_as`]) instead of planning again;
+//!   that row's outcome ([`Row::same_as`]) instead of planning again (the whole-plate check
+//!   included: it runs the same plan on the same fields);
 //! - a plate whose every mode is centrally symmetric ([`planner::symmetry_centre`]) moves a pose
 //!   and its twin turned 180° about the centre alike: a part whose period does not divide 180°
 //!   has no whole-plate plan there, said without mapping ([`Why::Symmetric`]);
@@ -24,9 +29,10 @@
 use std::time::{Duration, Instant};
 
 use crate::model::modes_file;
-use crate::model::part::Part;
+use crate::model::part::{Part, mirror};
 use crate::model::plate::PlateModel;
 use crate::model::plate_file::{ModeEntry, Plate, PlateFile};
+use crate::planner::whole::{NotWhole, WholePlate};
 use crate::planner::{self, PlanFailure, PlanOptions};
 use crate::plate::solver::{self, ModalSolution};
 use crate::plate::{drive, rocking};
@@ -52,7 +58,7 @@ pub const CLAMP_FRACTIONS: [&[[f64; 2]]; 7] = [
 ];
 
 /// One drive point and clamp set.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Candidate {
     /// Drive point (mm).
     pub drive_mm: [f64; 2],
@@ -60,8 +66,8 @@ pub struct Candidate {
     pub clamps_mm: Vec<[f64; 2]>,
 }
 
-/// A plan found for a candidate.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+/// A plan found for a candidate (`--json`: `crate::shapes::plate::suggest_json`).
+#[derive(Debug, Clone, PartialEq)]
 pub struct Found {
     /// Plan steps.
     pub steps: usize,
@@ -71,10 +77,37 @@ pub struct Found {
     pub final_orientation_deg: f64,
     /// The part's symmetry period (deg).
     pub period_deg: f64,
+    /// What the whole-plate check gave (`Synthesis::whole_plate`): held from every drop, or
+    /// not checked (both faces); `None` with `--refine-rounds 0`.
+    pub whole_plate: Option<WholePlate>,
+}
+
+/// What the whole-plate check gave a plan it refused ([`Why::NotWholePlate`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Held {
+    /// Drops run over the plate.
+    pub drops: usize,
+    /// Drops the last plan held from.
+    pub held: usize,
+    /// The largest block of drop cells the last plan held from, as a `--feed` region (mm:
+    /// x0, y0, x1, y1).
+    pub feed_mm: Option<[f64; 4]>,
+}
+
+impl Held {
+    /// From the planner's failure.
+    pub fn of(n: &NotWhole) -> Held {
+        Held { drops: n.drops, held: n.drops.saturating_sub(n.failed), feed_mm: n.feed_mm }
+    }
+
+    /// held / drops.
+    pub fn share(&self) -> f64 {
+        self.held as f64 / self.drops.max(1) as f64
+    }
 }
 
 /// Why a candidate gives no plan (`--json`'s `why`: [`Why::name`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Why {
     /// Every mode is centrally symmetric and the part's period does not divide 180°: a pose
     /// and its 180° twin end apart whatever the sequence (found before any map is made).
@@ -89,6 +122,9 @@ pub enum Why {
     Map,
     /// The search found no sequence ([`PlanFailure::NoPlan`] and the goal failures).
     NoSequence,
+    /// A plan was found, but no plan the whole-plate check tried holds from every drop over
+    /// the plate ([`PlanFailure::NotWholePlate`]): `chladni plan` refuses it so.
+    NotWholePlate(Held),
     /// The time budget stopped the planning of this candidate.
     OutOfTime,
 }
@@ -103,20 +139,14 @@ impl Why {
             Why::Part => "part",
             Why::Map => "map",
             Why::NoSequence => "no_sequence",
+            Why::NotWholePlate(_) => "not_whole_plate",
             Why::OutOfTime => "out_of_time",
         }
     }
 }
 
-impl serde::Serialize for Why {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_str(self.name())
-    }
-}
-
 /// What one candidate gave.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-#[serde(tag = "outcome", rename_all = "snake_case")]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Outcome {
     /// A plan.
     Plan(Found),
@@ -132,13 +162,11 @@ pub enum Outcome {
 }
 
 /// A row of the table.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Row {
     /// The candidate.
-    #[serde(flatten)]
     pub candidate: Candidate,
     /// Its outcome.
-    #[serde(flatten)]
     pub outcome: Outcome,
     /// Resonances written for it (after unexcited ones are left out; the forced rocking of a
     /// hinged-rod plate counts).
@@ -162,7 +190,8 @@ pub struct Settings {
     pub grid: usize,
     /// No candidate starts after this.
     pub budget: Duration,
-    /// The planner's options.
+    /// The planner's options (`refine_rounds`: the whole-plate check, as `plan
+    /// --refine-rounds`).
     pub plan: PlanOptions,
 }
 
@@ -335,13 +364,15 @@ fn try_candidate(
         Ok(m) => m,
         Err(e) => return (no(Why::PlateModel, e.to_string()), false),
     };
-    if let Err(e) = planner::check_input(part, &model) {
+    // Both faces of a part that flips, as `chladni plan` plans it.
+    let faces = mirror::faces(std::slice::from_ref(part), false).parts;
+    if let Some(e) = faces.iter().find_map(|f| planner::check_input(f, &model).err()) {
         return (no(Why::Part, e.to_string()), false);
     }
     if let Some(reason) = symmetric_refusal(part, &model) {
         return (no(Why::Symmetric, reason), false);
     }
-    (plan_on(&model, part, opt), true)
+    (plan_on(&model, &faces, opt), true)
 }
 
 /// The refusal of a plate whose every mode is centrally symmetric for a part whose period
@@ -355,23 +386,41 @@ pub fn symmetric_refusal(part: &Part, model: &PlateModel) -> Option<String> {
         return None;
     }
     Some(format!(
-        "every mode's field is centrally symmetric about the plate centre ({:.1}, {:.1}) mm, so \
-         a pose and its twin turned 180° about the centre end 180° apart whatever the sequence \
-         ({} has period {p}°): no whole-plate plan; a clamp off the centre breaks the symmetry",
-        c[0], c[1], part.name
+        "no whole-plate plan for {} (period {p}°, so a pose and its twin turned 180° are two \
+         orientations): {}",
+        part.name,
+        planner::central_symmetry_sentence(c)
     ))
 }
 
-/// Whether `part` gets a whole-plate plan on `model`.
-fn plan_on(model: &PlateModel, part: &Part, opt: &PlanOptions) -> Outcome {
+/// Whether the faces of a part (one, or both of a part that flips) get a whole-plate plan on
+/// `model`, checked over the whole plate as `opt.refine_rounds` says.
+fn plan_on(model: &PlateModel, faces: &[Part], opt: &PlanOptions) -> Outcome {
+    outcome(planner::plan_parts(faces, model, opt, &vec![None; faces.len()]))
+}
+
+/// A row's outcome from the planner's answer: a plan with what the whole-plate check gave, or
+/// the typed failure (a plan the check refused is [`Why::NotWholePlate`] with its share).
+fn outcome(planned: Result<planner::Synthesis, PlanFailure>) -> Outcome {
     let no = |why: Why, reason: String| Outcome::NoPlan { why, reason };
-    match planner::plan_parts(std::slice::from_ref(part), model, opt, &[None]) {
-        Ok(syn) => Outcome::Plan(Found {
-            steps: syn.steps.len(),
-            total_s: syn.steps.iter().map(|s| f64::from(s.duration_ms)).sum::<f64>() / 1000.0,
-            final_orientation_deg: syn.final_orientation_deg,
-            period_deg: syn.period_deg,
-        }),
+    match planned {
+        Ok(syn) => {
+            // Both faces: the face-up part's prediction (the first of `syn.parts`).
+            let (theta, period) =
+                syn.parts.first().map_or((syn.final_orientation_deg, syn.period_deg), |p| {
+                    (p.final_orientation_deg, p.period_deg)
+                });
+            Outcome::Plan(Found {
+                steps: syn.steps.len(),
+                total_s: syn.steps.iter().map(|s| f64::from(s.duration_ms)).sum::<f64>() / 1e3,
+                final_orientation_deg: theta,
+                period_deg: period,
+                whole_plate: syn.whole_plate,
+            })
+        }
+        Err(PlanFailure::NotWholePlate(n)) => {
+            no(Why::NotWholePlate(Held::of(&n)), PlanFailure::NotWholePlate(n).to_string())
+        }
         Err(PlanFailure::OutOfTime { stage, .. }) => {
             no(Why::OutOfTime, format!("the time budget (--budget-s) ran out at {stage}"))
         }
@@ -403,6 +452,33 @@ mod tests {
         }
     }
 
+    #[test]
+    fn a_plan_the_whole_plate_check_refuses_is_a_not_whole_plate_row_with_its_share() {
+        let n = NotWhole {
+            part: "rectangle".into(),
+            drops: 48,
+            failed: 36,
+            region_mm: [21.0, 25.0, 179.0, 175.0],
+            ends: "36 inside the plate at another orientation".into(),
+            rounds: 1,
+            max_rounds: 3,
+            feed_mm: Some([33.3, 20.6, 100.0, 100.0]),
+        };
+        let message = PlanFailure::NotWholePlate(Box::new(n.clone())).to_string();
+        let got = outcome(Err(PlanFailure::NotWholePlate(Box::new(n))));
+        let Outcome::NoPlan { why: Why::NotWholePlate(h), reason } = got else { panic!("{got:?}") };
+        assert_eq!((h.drops, h.held, h.feed_mm), (48, 12, Some([33.3, 20.6, 100.0, 100.0])));
+        assert_eq!(h.share(), 0.25);
+        assert_eq!(reason, message, "the planner's own message, feed block included");
+        assert!(reason.contains("try --feed"), "{reason}");
+        assert_eq!(Why::NotWholePlate(h).name(), "not_whole_plate");
+        // A plan keeps what the check gave.
+        let w = WholePlate { drops: 48, held: 48, rounds: 2, checked: true };
+        let syn = planner::Synthesis { whole_plate: Some(w.clone()), ..Default::default() };
+        let Outcome::Plan(f) = outcome(Ok(syn)) else { panic!("a plan") };
+        assert_eq!(f.whole_plate, Some(w));
+    }
+
     /// The free 300 × 200 plate's forced modes from `drive`, with `clamps`, as a plate model.
     fn free_plate(clamps: &str, drive: [f64; 2]) -> PlateModel {
         let text = format!(
@@ -427,7 +503,10 @@ mod tests {
         for d in [[90.0, 74.0], [207.0, 56.0]] {
             let plain = free_plate("", d);
             let why = symmetric_refusal(&l, &plain).expect("refused");
-            assert!(why.contains("(150.0, 100.0) mm") && why.contains("clamp"), "{why}");
+            // The planner's sentence (one home), with the part's period and the remedies.
+            let c = planner::central_symmetry_sentence([150.0, 100.0]);
+            assert!(why.ends_with(&c) && why.contains("period 360°"), "{why}");
+            assert!(why.contains("(150.0, 100.0) mm") && why.contains("clamps_mm"), "{why}");
             // A rectangle's twin is itself (period 180°): not refused.
             assert_eq!(symmetric_refusal(&rect, &plain), None);
         }

@@ -8,6 +8,7 @@ use std::path::Path;
 use serde::Serialize;
 use serde_json::{Value, json};
 
+use crate::model::plan_file::r4;
 use crate::model::plate::Mode;
 use crate::plate::calibrate::Fit;
 use crate::plate::photo::{self, job::PhotoGrid};
@@ -60,9 +61,45 @@ pub fn photo_json(found: &photo::Found, grid: Option<&PhotoGrid>) -> Value {
            "lines": lines, "curves": curves, "grid": grid})
 }
 
-/// The `plate suggest --json` object: the part, the plate and every candidate's row.
+/// The `plate suggest --json` object: the part, the plate and every candidate's row
+/// ([`suggest_row_json`]).
 pub fn suggest_json(part: &str, plate: &str, rows: &[suggest::Row]) -> Value {
+    let rows: Vec<Value> = rows.iter().map(suggest_row_json).collect();
     json!({"part": part, "plate": plate, "rows": rows})
+}
+
+/// One `plate suggest --json` row: `drive_mm`, `clamps_mm`, `modes`, `wall_s`, `same_as` and
+/// the outcome: `"plan"` with `steps`, `total_s`, `final_orientation_deg`, `period_deg` and
+/// `whole_plate` (the key of `plan --json`, [`super::plan::with_whole_plate`]); `"no_plan"`
+/// with `why` and `reason` (a `not_whole_plate` row adds `drops`, `held`, `held_share` and
+/// `feed_mm`, as in `plan`'s failure); or `"not_tried"`.
+pub fn suggest_row_json(r: &suggest::Row) -> Value {
+    let c = &r.candidate;
+    let mut v = json!({"drive_mm": c.drive_mm, "clamps_mm": c.clamps_mm, "modes": r.modes,
+        "wall_s": r.wall_s, "same_as": r.same_as});
+    match &r.outcome {
+        suggest::Outcome::Plan(f) => {
+            v["outcome"] = json!("plan");
+            v["steps"] = json!(f.steps);
+            v["total_s"] = json!(f.total_s);
+            v["final_orientation_deg"] = json!(f.final_orientation_deg);
+            v["period_deg"] = json!(f.period_deg);
+            v = super::plan::with_whole_plate(v, f.whole_plate.as_ref());
+        }
+        suggest::Outcome::NoPlan { why, reason } => {
+            v["outcome"] = json!("no_plan");
+            v["why"] = json!(why.name());
+            v["reason"] = json!(reason);
+            if let suggest::Why::NotWholePlate(h) = why {
+                v["drops"] = json!(h.drops);
+                v["held"] = json!(h.held);
+                v["held_share"] = json!(r4(h.share()));
+                v["feed_mm"] = json!(h.feed_mm);
+            }
+        }
+        suggest::Outcome::NotTried => v["outcome"] = json!("not_tried"),
+    }
+    v
 }
 
 /// What `plate calibrate-speed` fitted, for [`calibrate_json`].
