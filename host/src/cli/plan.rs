@@ -517,13 +517,8 @@ fn print_plan(parts: &[Part], plate: &PlateModel, syn: &Synthesis) {
             print_reach(&p.reachable_deg, syn.max_steps);
         }
     }
-    match &syn.whole_plate {
-        Some(w) if w.checked => println!(
-            "whole plate  held from {} of {} drops on a grid over the plate ({} refinement round(s))",
-            w.held, w.drops, w.rounds
-        ),
-        Some(_) => println!("whole plate  {}", shapes::plan::WHOLE_UNCHECKED),
-        None => {}
+    if let Some(w) = &syn.whole_plate {
+        println!("whole plate  {}", w.describe());
     }
     if let Some(d) = syn.position_check_mm {
         println!("           (simulated from 40 starts: every final centroid within {d:.2} mm)");

@@ -3,12 +3,16 @@
 //!
 //! A grid mode's map is simulated from a handful of start points ([`super::map_starts`]), so
 //! a plan found on it may not hold from where the maps never looked. After the search finds a
-//! plan, it is run as `chladni simulate` runs it from a fixed grid of drop points over the
-//! whole plate ([`drops`]); the drop points whose runs end elsewhere become extra start points
-//! of the maps of the plan's grid modes, and the search runs again, at most
-//! [`PlanOptions::refine_rounds`] times. The answer is a plan confirmed from every drop point
-//! or [`PlanFailure::NotWholePlate`]: which share of the drops no plan holds from, where they
-//! lie and how they end, with a feed region that avoids them.
+//! plan, it is run as `chladni simulate` runs it, for every part of the plan (each face of a
+//! part that flips is a part here): one part, or the faces of one part (never on the plate
+//! together), alone from a fixed grid of drop points over the whole plate ([`drops`]); parts
+//! of several part files together, with contacts, from as many seeded random drops
+//! ([`TOGETHER_SEED`]). The drop points whose runs end elsewhere become extra start points of
+//! that part's maps of the plan's grid modes, and the search runs again, at most
+//! [`PlanOptions::refine_rounds`] times. The answer is a plan confirmed from every drop of
+//! every part or [`PlanFailure::NotWholePlate`] for the part that fails most: which share of
+//! its drops no plan holds from, where they lie and how they end, with a feed region that
+//! avoids them.
 
 use rayon::prelude::*;
 
@@ -16,8 +20,11 @@ use super::maps::{on_plate_edge, sampled_map_from};
 use super::{PlanFailure, PlanOptions, Problem, Synthesis, deadline};
 use crate::model::angle::cdist;
 use crate::model::part::Part;
+use crate::model::part::mirror::FLIPPED_SUFFIX;
 use crate::model::plate::{Node, PlateModel};
-use crate::motion::sim::{Body, FieldModel, Pose, simulate_plan};
+use crate::motion::bulk::{Drop, run_drops};
+use crate::motion::shape::Pieces;
+use crate::motion::sim::{Body, FieldModel, Pose, SimStep, simulate_plan};
 
 /// Drop points across the plate: columns (along x) and rows (along y) of the grid.
 pub const DROP_GRID: [usize; 2] = [6, 4];
@@ -30,6 +37,8 @@ pub const DROP_TOL_DEG: f64 = 5.0;
 pub const REFINE_ROUNDS: usize = 3;
 /// New start points added per round at most (each costs a map's runs per mode).
 const NEW_STARTS_PER_ROUND: usize = 6;
+/// Seed of the random drops of parts on the plate together (the same drops every round).
+pub const TOGETHER_SEED: u64 = 1;
 
 /// Why no plan holds over the whole plate ([`PlanFailure::NotWholePlate`]).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -99,20 +108,71 @@ impl PlateEdge {
 /// What a plan's drops over the whole plate gave.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WholePlate {
-    /// Drops run.
+    /// Drops run, over every part of the plan.
     pub drops: usize,
-    /// Drops that ended at the predicted orientation.
+    /// Drops that ended at the part's predicted orientation.
     pub held: usize,
     /// Refinement rounds used (0: the first plan held).
     pub rounds: usize,
-    /// False for a plan of several parts or of both faces of a flipping part: the check runs
-    /// one part on one face, so whether such a plan holds over the whole plate is not known
-    /// (`drops` and `held` are 0; `chladni simulate` measures it).
+    /// False when the check could not run: the parts of several part files do not fit on the
+    /// plate together (`drops` and `held` are 0; `chladni simulate` refuses the same drops).
     pub checked: bool,
+    /// Per part of the plan (each face of a part that flips is one), in the plan's order.
+    pub parts: Vec<PartHeld>,
+    /// Whether the parts were dropped together (several part files, contacts between them:
+    /// random drops) rather than each alone on the grid of [`drops`].
+    pub together: bool,
+}
+
+/// One part's (or face's) share of [`WholePlate`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PartHeld {
+    /// The part's name (`NAME (flipped)` for the other face).
+    pub name: String,
+    /// Its drops.
+    pub drops: usize,
+    /// Those that ended at its predicted orientation.
+    pub held: usize,
+}
+
+impl WholePlate {
+    /// The `plan` text after `whole plate  `: the drops held, per part when there are several.
+    pub fn describe(&self) -> String {
+        if !self.checked {
+            return "not checked: the plan's parts do not fit on the plate together; \
+                    `chladni simulate` drops them and says so"
+                .into();
+        }
+        let how = if self.together {
+            "random drops of the parts together"
+        } else {
+            "drops on a grid over the plate"
+        };
+        let per = if self.parts.len() > 1 {
+            let each: Vec<String> =
+                self.parts.iter().map(|p| format!("{} {}/{}", p.name, p.held, p.drops)).collect();
+            format!(": {}", each.join(", "))
+        } else {
+            String::new()
+        };
+        format!(
+            "held from {} of {} {how} ({} refinement round(s)){per}",
+            self.held, self.drops, self.rounds
+        )
+    }
+}
+
+/// One part's drops: how many ran and those the plan does not hold from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PartDrops {
+    /// Drops run.
+    pub drops: usize,
+    /// The failed ones.
+    pub failed: Failed,
 }
 
 /// The drops a plan does not hold from: (drop point, start orientation deg, how it ended).
-type Failed = Vec<([f64; 2], f64, DropEnd)>;
+pub type Failed = Vec<([f64; 2], f64, DropEnd)>;
 
 /// The drop grid: [`DROP_GRID`] cell centres, inset by the part's radius, [`DROP_TURNS`]
 /// orientations each (deterministic, spread so that neighbouring points differ).
@@ -135,27 +195,118 @@ pub fn drops(body: &Body, plate: &PlateModel) -> Vec<([f64; 2], f64)> {
     out
 }
 
-/// Runs `syn` from every drop of [`drops`]: the drops it does not hold from.
+/// Part `i`'s predicted final orientation and period in `syn` (deg).
+fn predicted(syn: &Synthesis, i: usize) -> (f64, f64) {
+    syn.parts.get(i).map_or((syn.final_orientation_deg, syn.period_deg), |p| {
+        (p.final_orientation_deg, p.period_deg)
+    })
+}
+
+/// Whether a run of the part ending at `e` held (on the plate, within [`DROP_TOL_DEG`] of
+/// `(final, period)`); if not, how it ended.
+fn held(body: &Body, plate: &PlateModel, e: Pose, lost: bool, pred: (f64, f64)) -> Option<DropEnd> {
+    let [w, h] = plate.size_mm;
+    let off = lost || e.x < 0.0 || e.y < 0.0 || e.x > w || e.y > h;
+    let ok = cdist(e.theta.to_degrees(), pred.0, pred.1);
+    if !off && ok <= DROP_TOL_DEG {
+        return None;
+    }
+    Some(ending(body, plate, e, off))
+}
+
+/// Runs `syn` (one part, or its first) from every drop of [`drops`]: the drops it does not
+/// hold from.
 pub fn check(body: &Body, plate: &PlateModel, syn: &Synthesis) -> (usize, Failed) {
     let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
-    let steps = syn.sim_steps();
+    let d = check_alone(body, plate, &fields, &syn.sim_steps(), predicted(syn, 0));
+    (d.drops, d.failed)
+}
+
+/// One part alone from every drop of [`drops`] against its prediction `pred`.
+fn check_alone(
+    body: &Body,
+    plate: &PlateModel,
+    fields: &[FieldModel],
+    steps: &[SimStep],
+    pred: (f64, f64),
+) -> PartDrops {
     let all = drops(body, plate);
-    let [w, h] = plate.size_mm;
     let failed = all
         .par_iter()
         .filter_map(|&(p, th)| {
             let start = Pose { x: p[0], y: p[1], theta: th.to_radians() };
-            let (poses, _, _) = simulate_plan(body, plate, &fields, &steps, start);
+            let (poses, _, _) = simulate_plan(body, plate, fields, steps, start);
             let e = poses.last().copied().unwrap_or(start);
-            let off = e.x < 0.0 || e.y < 0.0 || e.x > w || e.y > h;
-            let ok = cdist(e.theta.to_degrees(), syn.final_orientation_deg, syn.period_deg);
-            if !off && ok <= DROP_TOL_DEG {
-                return None;
-            }
-            Some((p, th, ending(body, plate, e, off)))
+            held(body, plate, e, false, pred).map(|end| (p, th, end))
         })
         .collect();
-    (all.len(), failed)
+    PartDrops { drops: all.len(), failed }
+}
+
+/// Which parts of `parts` lie on the plate at once, and whether any do: a part followed by
+/// its mirror image ([`Part::mirrored`], as `plan` lists a part that flips) is one part on
+/// two faces, never on the plate together. Parts of one part file run alone (one group each);
+/// parts of several files are dropped together, as `chladni simulate` drops them: a group of
+/// every face-up entry and, when a part flips, one with its flipped faces instead.
+pub fn plate_groups(parts: &[&Part]) -> (Vec<Vec<usize>>, bool) {
+    let flip = |j: usize| {
+        j > 0 && parts[j].name == format!("{}{FLIPPED_SUFFIX}", parts[j - 1].name) && {
+            let m = parts[j - 1].mirrored();
+            m.outline == parts[j].outline && m.holes == parts[j].holes
+        }
+    };
+    let flipped: Vec<bool> = (0..parts.len()).map(flip).collect();
+    let sources = flipped.iter().filter(|&&f| !f).count();
+    if sources < 2 {
+        return ((0..parts.len()).map(|i| vec![i]).collect(), false);
+    }
+    let up: Vec<usize> = (0..parts.len()).filter(|&i| !flipped[i]).collect();
+    let mut groups = vec![up];
+    if flipped.iter().any(|&f| f) {
+        let has_flip = |i: usize| flipped.get(i + 1).copied().unwrap_or(false);
+        groups.push((0..parts.len()).filter(|&i| !has_flip(i)).collect());
+    }
+    (groups, true)
+}
+
+/// Every part of `syn` dropped over the plate as [`plate_groups`] puts them (`bodies[i]` of
+/// `parts[i]`): each part's drops and failures; `None` when parts of a group do not fit on
+/// the plate together.
+pub fn check_parts(
+    parts: &[&Part],
+    bodies: &[Body],
+    plate: &PlateModel,
+    syn: &Synthesis,
+) -> Option<(Vec<PartDrops>, bool)> {
+    let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
+    let steps = syn.sim_steps();
+    let (groups, together) = plate_groups(parts);
+    let mut out = vec![PartDrops { drops: 0, failed: Vec::new() }; parts.len()];
+    for group in groups {
+        if !together {
+            let i = group[0];
+            out[i] = check_alone(&bodies[i], plate, &fields, &steps, predicted(syn, i));
+            continue;
+        }
+        let on: Vec<&Body> = group.iter().map(|&i| &bodies[i]).collect();
+        let pieces: Vec<Pieces> = on.iter().map(|b| Pieces::of(b)).collect();
+        let refs: Vec<&Pieces> = pieces.iter().collect();
+        let d =
+            Drop { bodies: &on, pieces: &refs, plate, fields: &fields, steps: &steps, feed: None };
+        let n = DROP_GRID[0] * DROP_GRID[1] * DROP_TURNS;
+        let runs = run_drops(&d, n as u32, TOGETHER_SEED, || ()).ok()?;
+        for (&i, t) in group.iter().zip(&runs.per_body) {
+            let pred = predicted(syn, i);
+            let o = &mut out[i];
+            o.drops += t.finals.len();
+            for ((q, e), &lost) in t.starts.iter().zip(&t.finals).zip(&t.lost) {
+                if let Some(end) = held(&bodies[i], plate, *e, lost, pred) {
+                    o.failed.push(([q.x, q.y], q.theta.to_degrees(), end));
+                }
+            }
+        }
+    }
+    Some((out, together))
 }
 
 /// How a failed drop ended at `e`.
@@ -174,67 +325,117 @@ fn ending(body: &Body, plate: &PlateModel, e: Pose, off: bool) -> DropEnd {
 }
 
 /// Plans with `plan` over `problems` and refines whole-plate plans on grid modes by
-/// counterexamples (see the module doc); other plans (a feed region, several parts, no grid
-/// mode, `refine_rounds` 0) are returned as `plan` gives them.
+/// counterexamples (see the module doc); other plans (a feed region, no grid mode,
+/// `refine_rounds` 0) are returned as `plan` gives them.
 pub(super) fn refined(
-    part: &[&Part],
+    parts: &[&Part],
     plate: &PlateModel,
     opt: &PlanOptions,
     mut problems: Vec<Problem>,
     plan: &dyn Fn(&[Problem]) -> Result<Synthesis, PlanFailure>,
 ) -> Result<Synthesis, PlanFailure> {
     let grid = |k: usize| matches!(plate.modes[k].node, Node::Grid(_));
-    let applies = opt.refine_rounds > 0 && opt.feed.is_none() && part.len() == 1;
     let mut syn = plan(&problems)?;
-    if !(0..plate.modes.len()).any(grid) {
+    if opt.refine_rounds == 0 || opt.feed.is_some() || !(0..plate.modes.len()).any(grid) {
         return Ok(syn);
     }
-    if !applies {
-        if opt.refine_rounds > 0 && opt.feed.is_none() {
-            syn.whole_plate = Some(WholePlate { drops: 0, held: 0, rounds: 0, checked: false });
-        }
-        return Ok(syn);
-    }
-    let body = Body::with_samples(part[0], 160);
-    let mut extra: Vec<Vec<[f64; 2]>> = vec![Vec::new(); plate.modes.len()];
+    let bodies: Vec<Body> = parts.iter().map(|p| Body::with_samples(p, 160)).collect();
+    let mut extra: Vec<Vec<Vec<[f64; 2]>>> = vec![vec![Vec::new(); plate.modes.len()]; parts.len()];
     let mut round = 0;
     loop {
         deadline::check(opt.deadline, || {
-            format!("{}: whole-plate check, round {round}", part[0].name)
+            format!("{}: whole-plate check, round {round}", names(parts))
         })?;
-        let (n, failed) = check(&body, plate, &syn);
-        if failed.is_empty() {
-            syn.whole_plate = Some(WholePlate { drops: n, held: n, rounds: round, checked: true });
+        let Some((checked, together)) = check_parts(parts, &bodies, plate, &syn) else {
+            syn.whole_plate = Some(unchecked());
+            return Ok(syn);
+        };
+        if checked.iter().all(|c| c.failed.is_empty()) {
+            syn.whole_plate = Some(whole_of(parts, &checked, round, together));
             return Ok(syn);
         }
-        let modes: Vec<usize> = syn.steps.iter().map(|s| s.mode).filter(|&k| grid(k)).collect();
-        let learned = learn(&mut extra, &modes, &failed);
-        if round == opt.refine_rounds || !learned {
-            return Err(not_whole(part[0], plate, &body, n, &failed, round, opt));
+        // The part that fails most is the one the failure names.
+        let worst = (0..parts.len()).max_by_key(|&i| checked[i].failed.len()).unwrap_or(0);
+        let fail = |round| {
+            let c = &checked[worst];
+            not_whole(parts[worst], plate, &bodies[worst], c.drops, &c.failed, round, opt)
+        };
+        let mut modes: Vec<usize> = syn.steps.iter().map(|s| s.mode).filter(|&k| grid(k)).collect();
+        modes.sort_unstable();
+        modes.dedup();
+        let learned: Vec<bool> =
+            (0..parts.len()).map(|i| learn(&mut extra[i], &modes, &checked[i].failed)).collect();
+        if round == opt.refine_rounds || !learned.contains(&true) {
+            return Err(fail(round));
         }
         round += 1;
-        for &k in &modes {
-            deadline::check(opt.deadline, || {
-                format!("{}: refined step map of mode {}", part[0].name, k + 1)
-            })?;
-            let old = &problems[0].maps[k];
-            let mut map = sampled_map_from(
-                &body,
-                &plate.modes[k],
-                plate,
-                opt.sim_starts,
-                problems[0].period,
-                &extra[k],
-            );
-            map.evidence = old.evidence;
-            problems[0].maps[k] = map;
+        for i in (0..parts.len()).filter(|&i| learned[i]) {
+            remap(&bodies[i], &parts[i].name, plate, opt, &mut problems[i], &modes, &extra[i])?;
         }
         syn = match plan(&problems) {
             Ok(s) => s,
             Err(e @ PlanFailure::OutOfTime { .. }) => return Err(e),
-            Err(_) => return Err(not_whole(part[0], plate, &body, n, &failed, round, opt)),
+            Err(_) => return Err(fail(round)),
         };
     }
+}
+
+/// The parts' names, for the stage of an out-of-time failure.
+fn names(parts: &[&Part]) -> String {
+    parts.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join(", ")
+}
+
+/// A plan whose parts could not be dropped together (see [`WholePlate::checked`]).
+fn unchecked() -> WholePlate {
+    WholePlate { drops: 0, held: 0, rounds: 0, checked: false, parts: Vec::new(), together: true }
+}
+
+/// The check's answer for a plan every part held in.
+fn whole_of(parts: &[&Part], checked: &[PartDrops], rounds: usize, together: bool) -> WholePlate {
+    let per: Vec<PartHeld> = parts
+        .iter()
+        .zip(checked)
+        .map(|(p, c)| PartHeld {
+            name: p.name.clone(),
+            drops: c.drops,
+            held: c.drops - c.failed.len(),
+        })
+        .collect();
+    WholePlate {
+        drops: per.iter().map(|p| p.drops).sum(),
+        held: per.iter().map(|p| p.held).sum(),
+        rounds,
+        checked: true,
+        parts: per,
+        together,
+    }
+}
+
+/// `problem`'s maps of `modes` made again with the extra start points `extra` (per mode).
+fn remap(
+    body: &Body,
+    name: &str,
+    plate: &PlateModel,
+    opt: &PlanOptions,
+    problem: &mut Problem,
+    modes: &[usize],
+    extra: &[Vec<[f64; 2]>],
+) -> Result<(), PlanFailure> {
+    for &k in modes {
+        deadline::check(opt.deadline, || format!("{name}: refined step map of mode {}", k + 1))?;
+        let old = &problem.maps[k];
+        let mut map = sampled_map_from(
+            body,
+            &plate.modes[k],
+            plate,
+            opt.sim_starts,
+            problem.period,
+            &extra[k],
+        );
+        map.evidence = old.evidence;
+        problem.maps[k] = map;
+    }
+    Ok(())
 }
 
 /// Adds up to [`NEW_STARTS_PER_ROUND`] failed drop points not yet there to the extra start

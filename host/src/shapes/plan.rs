@@ -93,24 +93,31 @@ pub fn with_margins(mut json: Value, steps: &[PlannedStep]) -> Value {
     json
 }
 
-/// Why a whole-plate plan of several parts or faces is not checked over the plate (text and
-/// `--json`).
-pub const WHOLE_UNCHECKED: &str = "not checked: the whole-plate check runs one part on one \
-    face; `chladni simulate` gives the share of drops this plan holds from";
-
 /// `plan --json` of a whole-plate plan on grid modes with what its drops over the plate gave,
-/// as `"whole_plate": {"drops", "held", "held_share", "rounds"}` (docs/plan.md, "Whole-plate
-/// plans on grid modes"); unchanged when the plan was not checked so.
+/// as `"whole_plate": {"checked": true, "drops", "held", "held_share", "rounds", "together",
+/// "parts": [{"part", "drops", "held", "failed"}]}` (one entry per part, each face of a part
+/// that flips one; docs/plan.md, "Whole-plate plans on grid modes"), or `{"checked": false,
+/// "why"}` when the parts could not be dropped together; unchanged when the plan was not
+/// checked so.
 pub fn with_whole_plate(
     mut json: Value,
     whole: Option<&crate::planner::whole::WholePlate>,
 ) -> Value {
     match whole {
         Some(w) if w.checked => {
+            let parts: Vec<Value> = w
+                .parts
+                .iter()
+                .map(|p| {
+                    json!({"part": p.name, "drops": p.drops, "held": p.held,
+                    "failed": p.drops - p.held})
+                })
+                .collect();
             json["whole_plate"] = json!({"checked": true, "drops": w.drops, "held": w.held,
-                "held_share": r4(w.held as f64 / w.drops.max(1) as f64), "rounds": w.rounds});
+                "held_share": r4(w.held as f64 / w.drops.max(1) as f64), "rounds": w.rounds,
+                "together": w.together, "parts": parts});
         }
-        Some(_) => json["whole_plate"] = json!({"checked": false, "why": WHOLE_UNCHECKED}),
+        Some(w) => json["whole_plate"] = json!({"checked": false, "why": w.describe()}),
         None => {}
     }
     json
