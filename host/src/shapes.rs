@@ -164,8 +164,8 @@ pub fn plan_failure_json(e: &PlanFailure) -> serde_json::Value {
         PlanFailure::PositionNotConfirmed { part, predicted_mm, worst_mm } => json!({
             "error": "position_not_confirmed", "part": part, "predicted_mm": predicted_mm,
             "worst_mm": worst_mm}),
-        PlanFailure::PartsApart { apart, searched } => json!({
-            "error": "parts_apart", "searched": searched,
+        PlanFailure::PartsApart { apart, searched, max_steps } => json!({
+            "error": "parts_apart", "searched": searched, "max_steps": max_steps,
             "apart": apart.iter().map(|(n, d, p)| json!({"part": n, "orientations_deg": d,
                 "period_deg": p})).collect::<Vec<_>>()}),
         PlanFailure::NotWholePlate(n) => {

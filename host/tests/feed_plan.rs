@@ -12,6 +12,7 @@ use chladni::planner::feed::{FeedRegion, FeedSearch};
 use chladni::planner::{self, PlanFailure, PlanOptions, cdist};
 
 mod support;
+use support::cli::{chladni, ex, json};
 use support::examples::root;
 
 /// The free plate's solver modes 2 and 4 (`chladni plate modes --count 4 --write-modes`).
@@ -53,7 +54,16 @@ fn triangle_on_free_plate_modes_plans_only_from_a_feed_region() {
     let opt = PlanOptions { feed: Some(region), feed_search, ..Default::default() };
     let syn = planner::plan(&part, &plate, &opt).unwrap();
     let modes: Vec<usize> = syn.steps.iter().map(|s| s.mode).collect();
-    assert!(modes.len() >= 2, "one mode cannot orient the triangle here: {modes:?}");
+    assert_eq!(modes.len(), 3, "the shortest plan here has 3 steps: {modes:?}");
+
+    // The step bound (`plan --max-steps`): at 2 the same search fails, naming the bound as
+    // what stopped it (sequences were left to extend).
+    let short = PlanOptions { feed_search: FeedSearch { depth: 2, ..feed_search }, ..opt };
+    let err = planner::plan(&part, &plate, &short).unwrap_err();
+    let msg = err.to_string();
+    assert!(matches!(err, PlanFailure::NoPlan(_)), "{msg}");
+    assert!(msg.contains("no sequence of up to 2 modes (--max-steps 2)"), "{msg}");
+    assert!(msg.contains("the search stopped at 2 modes (--max-steps 2;"), "{msg}");
     assert_eq!(syn.period_deg, 360.0);
     let check = syn.feed.as_ref().unwrap();
     assert_eq!(check.starts, 24);
@@ -97,4 +107,48 @@ fn both_faces_from_a_feed_region_fail_naming_the_face_left_apart() {
     assert!(msg.contains("triangle (flipped)'s tracked orientations spread"), "{msg}");
     // The face up alone plans from the same region (the test above).
     assert!(planner::feed::plan_parts(&parts[..1], &plate, &opt, &region, &bar).is_ok());
+}
+
+/// `plan --max-steps N`: checked before any work (1..=8, and only with `--feed`: the search
+/// over orientation sets has no step bound), one JSON failure each with `--json`.
+#[test]
+fn max_steps_is_refused_out_of_range_or_without_a_feed_region() {
+    let (part, plate) = (ex("parts/rectangle.json"), ex("plates/free-6-modes.toml"));
+    let feed = ["--feed", "40", "50", "90", "150"];
+    for bad in ["0", "9", "four"] {
+        let mut args = vec!["plan", &part, "--plate", &plate, "--json", "--max-steps", bad];
+        args.extend_from_slice(&feed);
+        let out = chladni(&args);
+        assert_eq!(out.status.code(), Some(2), "--max-steps {bad}");
+        let v = json(&out);
+        assert_eq!(v["error"], "usage", "{v}");
+        let msg = v["message"].as_str().unwrap();
+        assert!(msg.contains(&format!("'{bad}'")) && msg.contains("--max-steps"), "{msg}");
+        if bad != "four" {
+            assert!(msg.contains("1..=8"), "{msg}");
+        }
+    }
+    let out = chladni(&["plan", &part, "--plate", &plate, "--json", "--max-steps", "5"]);
+    assert_eq!(out.status.code(), Some(2));
+    let v = json(&out);
+    assert_eq!(v["error"], "bad_input", "{v}");
+    let msg = v["message"].as_str().unwrap();
+    assert!(msg.contains("--max-steps 5") && msg.contains("--feed"), "{msg}");
+}
+
+/// `--max-steps` reaches the search through the CLI: the rectangle from the free plate's left
+/// side needs 2 steps (docs/plan.md, the ordinary-parts table), so at 1 it gets `no_plan`
+/// naming the flag.
+#[test]
+fn max_steps_one_stops_the_feed_search_and_says_so() {
+    let (part, plate) = (ex("parts/rectangle.json"), ex("plates/free-6-modes.toml"));
+    let args =
+        ["plan", &part, "--plate", &plate, "--feed", "40", "50", "90", "150", "--max-steps", "1"];
+    let out = chladni(&[&args[..], &["--json"]].concat());
+    assert_eq!(out.status.code(), Some(1));
+    let v = json(&out);
+    assert_eq!(v["error"], "no_plan", "{v}");
+    let msg = v["message"].as_str().unwrap();
+    assert!(msg.contains("no sequence of up to 1 mode (--max-steps 1)"), "{msg}");
+    assert!(msg.contains("a larger value searches longer sequences"), "{msg}");
 }

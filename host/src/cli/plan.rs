@@ -170,6 +170,12 @@ pub struct PlanArgs {
     #[arg(long, value_name = "N", default_value_t = 200_000,
           value_parser = clap::value_parser!(u32).range(1..=50_000_000))]
     max_states: u32,
+    /// With --feed: the longest mode sequence the feed-region search tries (default 4; at
+    /// most 8: the sequences grow as (modes − 1)^N). The search over orientation sets has no
+    /// step bound (--max-states bounds it).
+    #[arg(long, value_name = "N",
+          value_parser = clap::value_parser!(u32).range(1..=feed::MAX_DEPTH as i64))]
+    max_steps: Option<u32>,
     /// Whole-plate plans on grid (solver) modes: how many times the step maps are refined with
     /// the drop points a plan does not hold from (docs/plan.md, "Whole-plate plans on grid
     /// modes"); 0: no whole-plate check.
@@ -197,6 +203,7 @@ impl PlanArgs {
             )));
         }
         self.one_part_flags(n, "parts were given")?;
+        self.check_max_steps()?;
         let goal_flags = self.goal_deg.is_some() || self.fix_position || self.goal_pos.is_some();
         if self.feed.is_some() && (goal_flags || self.minimize != MinimizeArg::Steps) {
             return Err(bad(
@@ -212,6 +219,23 @@ impl PlanArgs {
                 "--goal-deg takes one angle per part: {n} part(s), {} angle(s) given",
                 g.len()
             ))),
+        }
+    }
+
+    /// The feed-region search's settings: `--max-steps` or the default depth.
+    fn feed_search(&self) -> feed::FeedSearch {
+        let depth = self.max_steps.map_or(feed::DEPTH, |n| n as usize);
+        feed::FeedSearch { depth, ..Default::default() }
+    }
+
+    /// `--max-steps` bounds the feed-region search only: without `--feed` it is refused.
+    fn check_max_steps(&self) -> anyhow::Result<()> {
+        match self.max_steps {
+            Some(n) if self.feed.is_none() => Err(bad(format!(
+                "--max-steps {n} bounds the feed-region search: give --feed X0 Y0 X1 Y1 too \
+                 (the search over orientation sets has no step bound; --max-states bounds it)"
+            ))),
+            _ => Ok(()),
         }
     }
 
@@ -328,6 +352,7 @@ impl PlanArgs {
             goal_pos_mm: self.goal_pos.as_ref().map(|g| [g[0], g[1]]),
             deadline: Some(planner::Deadline::after_s(self.max_time_s)),
             max_states: self.max_states as usize,
+            feed_search: self.feed_search(),
             refine_rounds: self.refine_rounds as usize,
             ..Default::default()
         }

@@ -72,8 +72,9 @@ pub enum PlanFailure {
     /// Several parts: every part has a plan alone, but no sequence brings all of them to one
     /// orientation each.
     #[error(
-        "no sequence brings every part to one orientation ({searched} states searched); the \
+        "no sequence{} brings every part to one orientation ({searched} states searched); the \
          closest keeps {}",
+        max_steps.map(|n| format!(" of up to {n} mode(s) (--max-steps {n})")).unwrap_or_default(),
         apart.iter().map(|(n, d, p)| format!("{n} at {} (mod {p}°)", list_deg(d))).collect::<Vec<_>>().join(", ")
     )]
     PartsApart {
@@ -82,6 +83,9 @@ pub enum PlanFailure {
         apart: Vec<(String, Vec<f64>, f64)>,
         /// States searched.
         searched: usize,
+        /// The longest sequence searched when the search has a step bound (the feed-region
+        /// search, `--max-steps`); `None` for the search over orientation sets, which has none.
+        max_steps: Option<usize>,
     },
     /// A whole-plate plan on grid modes that does not hold from every drop point, after
     /// refining the maps with those drops ([`super::whole`]).

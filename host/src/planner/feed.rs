@@ -42,10 +42,16 @@ use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
 
 pub use crate::model::feed_region::{FeedError, FeedRegion};
 
+/// The feed-region search's default most steps (`plan --max-steps`).
+pub const DEPTH: usize = 4;
+
+/// The largest `--max-steps`: sequences grow as (modes − 1)^depth.
+pub const MAX_DEPTH: usize = 8;
+
 /// Feed-region search settings.
 #[derive(Debug, Clone, Copy)]
 pub struct FeedSearch {
-    /// Most steps.
+    /// Most steps (`plan --max-steps`).
     pub depth: usize,
     /// Start positions per side of the feed region (n × n grid; 1: its centre).
     pub points: usize,
@@ -59,7 +65,7 @@ pub struct FeedSearch {
 
 impl Default for FeedSearch {
     fn default() -> Self {
-        FeedSearch { depth: 4, points: 3, starts: 24, tol_deg: 2.0, candidates: 8 }
+        FeedSearch { depth: DEPTH, points: 3, starts: 24, tol_deg: 2.0, candidates: 8 }
     }
 }
 
@@ -198,6 +204,22 @@ struct Tracker<'a> {
     memo: HashMap<Key, Outcome>,
     /// Runs stopped at a step duration before they rested: (key, duration bits).
     fixed: HashMap<(Key, u64), Pose>,
+    /// The runs to rest of `memo` by start cell, for [`Tracker::near`].
+    near: HashMap<NearCell, Vec<(Pose, Outcome)>>,
+}
+
+/// A start cell of [`Tracker::near`]: (part, mode, 1° of orientation mod the period, 2 mm of x,
+/// 2 mm of y).
+type NearCell = (usize, usize, i64, i64, i64);
+
+/// The search's levels beyond this reuse a run from a start within the cluster tolerance
+/// ([`Tracker::near`]); levels up to it (the default `--max-steps`) run every tracked pose, so
+/// their answers do not depend on how deep the search may go.
+const EXACT_LEVELS: usize = DEPTH;
+
+fn near_cell(k: usize, (i, q): Tagged, period: f64) -> NearCell {
+    let th = q.theta.to_degrees().rem_euclid(period);
+    (i, k, th.floor() as i64, (q.x / 2.0).floor() as i64, (q.y / 2.0).floor() as i64)
 }
 
 impl<'a> Tracker<'a> {
@@ -207,31 +229,80 @@ impl<'a> Tracker<'a> {
             sim: Sim { bodies, plate, fields, periods },
             memo: HashMap::new(),
             fixed: HashMap::new(),
+            near: HashMap::new(),
+        }
+    }
+
+    /// A run to rest under mode `k` from a start of the same part within 1° (mod its period)
+    /// and 2 mm of `q` — the tolerance within which [`cluster`] already lets one pose stand
+    /// for others. The first found, cells and runs in a fixed order (the order runs were
+    /// simulated in, collected in order), so the search does not depend on the thread count.
+    fn near(&self, k: usize, q: Tagged) -> Option<Outcome> {
+        let period = self.sim.periods[q.0];
+        let (i, _, c, x, y) = near_cell(k, q, period);
+        let wrap = (period.ceil() as i64).max(1);
+        let close = |p: &Pose| {
+            cdist(p.theta.to_degrees(), q.1.theta.to_degrees(), period) < 1.0
+                && (p.x - q.1.x).hypot(p.y - q.1.y) < 2.0
+        };
+        for dc in -1..=1 {
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    let cell = (i, k, (c + dc).rem_euclid(wrap), x + dx, y + dy);
+                    let runs = self.near.get(&cell).map_or(&[][..], Vec::as_slice);
+                    if let Some((_, o)) = runs.iter().find(|(p, _)| close(p)) {
+                        return Some(*o);
+                    }
+                }
+            }
+        }
+        None
+    }
+
+    /// Remembers a run to rest (exact memo and start cells).
+    fn remember(&mut self, k: usize, q: Tagged, o: Outcome) {
+        if self.memo.insert(key(k, q), o).is_none() {
+            let cell = near_cell(k, q, self.sim.periods[q.0]);
+            self.near.entry(cell).or_default().push((q.1, o));
         }
     }
 
     /// The run to rest (limit 5000 T₀) of every job (mode, tagged pose), simulating those not
-    /// yet memoised in parallel.
-    fn outcomes(&mut self, jobs: &[(usize, Tagged)]) -> Vec<Outcome> {
+    /// yet memoised in parallel. With `near`, a job without a run of its own takes one from a
+    /// start within the cluster tolerance when there is one ([`Tracker::near`]; the search's
+    /// levels beyond [`EXACT_LEVELS`] only).
+    fn outcomes(&mut self, jobs: &[(usize, Tagged)], near: bool) -> Vec<Outcome> {
         let mut todo: Vec<(usize, Tagged)> = Vec::new();
         let mut queued = HashSet::new();
+        let mut borrowed: HashMap<Key, Outcome> = HashMap::new();
         for &(k, q) in jobs {
-            if !self.memo.contains_key(&key(k, q)) && queued.insert(key(k, q)) {
+            if self.memo.contains_key(&key(k, q)) || borrowed.contains_key(&key(k, q)) {
+                continue;
+            }
+            if let Some(o) = near.then(|| self.near(k, q)).flatten() {
+                borrowed.insert(key(k, q), o);
+            } else if queued.insert(key(k, q)) {
                 todo.push((k, q));
             }
         }
         let sim = &self.sim;
         let done: Vec<Outcome> =
             todo.par_iter().map(|&(k, q)| sim.run(k, q, sim.rest_limit(q.0, k))).collect();
-        self.memo.extend(todo.iter().map(|&(k, q)| key(k, q)).zip(done));
-        jobs.iter().map(|&(k, q)| self.memo[&key(k, q)]).collect()
+        for (&(k, q), o) in todo.iter().zip(done) {
+            self.remember(k, q, o);
+        }
+        jobs.iter()
+            .map(|&(k, q)| {
+                borrowed.get(&key(k, q)).copied().unwrap_or_else(|| self.memo[&key(k, q)])
+            })
+            .collect()
     }
 
     /// Every pose's rest under mode `k`, or `None` when one does not come to rest within
     /// 5000 T₀ or ends on the plate edge.
     fn rests(&mut self, k: usize, poses: &[Tagged]) -> Option<Vec<Outcome>> {
         let jobs: Vec<(usize, Tagged)> = poses.iter().map(|&q| (k, q)).collect();
-        let out = self.outcomes(&jobs);
+        let out = self.outcomes(&jobs, false);
         out.iter().zip(poses).all(|(o, q)| self.sim.ok(q.0, o)).then_some(out)
     }
 
@@ -256,7 +327,7 @@ impl<'a> Tracker<'a> {
         for (q, o) in todo.into_iter().zip(runs) {
             if o.rested && o.t_end < self.sim.rest_limit(q.0, k) {
                 // Also the run to rest (the same trajectory).
-                self.memo.insert(key(k, q), o);
+                self.remember(k, q, o);
             } else {
                 self.fixed.insert(fkey(q), o.pose);
             }
@@ -393,38 +464,52 @@ impl Tally {
 /// per part.
 struct Search<'a> {
     tracker: Tracker<'a>,
+    deadline: Option<super::Deadline>,
     seen: HashSet<Vec<[i64; 4]>>,
     tally: Tally,
 }
 
 impl Search<'_> {
-    /// Rests of `poses` under mode `k` (memoised: the same cluster pose recurs across
-    /// sequences), or `None` if one run fails.
-    fn apply(&mut self, k: usize, poses: &[Tagged]) -> Option<Vec<Tagged>> {
-        let rests = self.tracker.rests(k, poses)?;
-        Some(poses.iter().zip(rests).map(|(q, o)| (q.0, o.pose)).collect())
-    }
-
-    /// One BFS level: the children of `level`, and the sequences among them that succeed.
-    fn expand(&mut self, level: &[Node], tol: f64, bar: &ProgressBar) -> (Vec<Node>, Vec<Node>) {
+    /// BFS level `depth`: the children of `level`, and the sequences among them that
+    /// succeed; [`PlanFailure::OutOfTime`] when the deadline passes on the way (checked at
+    /// every node: a deep level takes minutes). Beyond [`EXACT_LEVELS`] runs may come from
+    /// starts within the cluster tolerance ([`Tracker::near`]).
+    fn expand(
+        &mut self,
+        level: &[Node],
+        (tol, depth): (f64, usize),
+        bar: &ProgressBar,
+    ) -> Result<(Vec<Node>, Vec<Node>), PlanFailure> {
         let nm = self.tracker.sim.plate.modes.len();
         let periods = self.tracker.sim.periods.clone();
+        let near = depth > EXACT_LEVELS;
         let (mut next, mut found) = (Vec::new(), Vec::new());
-        for node in level {
+        for (i, node) in level.iter().enumerate() {
+            super::deadline::check(self.deadline, || {
+                format!(
+                    "the feed-region search, {depth}-step sequences ({i} of {} extended)",
+                    level.len()
+                )
+            })?;
             // A mode applied twice in a row leaves every part where it rested.
             let modes: Vec<usize> = (0..nm).filter(|&k| node.seq.last() != Some(&k)).collect();
-            // Every run this node's children need, at once (in parallel).
+            // Every run this node's children need, at once (in parallel); memoised: the same
+            // cluster pose recurs across sequences.
             let jobs: Vec<(usize, Tagged)> =
                 modes.iter().flat_map(|&k| node.poses.iter().map(move |&q| (k, q))).collect();
-            self.tracker.outcomes(&jobs);
+            let outs = self.tracker.outcomes(&jobs, near);
             bar.inc((nm - modes.len()) as u64);
-            for k in modes {
+            let n = node.poses.len();
+            for (j, &k) in modes.iter().enumerate() {
                 bar.inc(1);
                 self.tally.tried += 1;
-                let Some(rests) = self.apply(k, &node.poses) else {
+                let runs = &outs[j * n..(j + 1) * n];
+                if !runs.iter().zip(&node.poses).all(|(o, q)| self.tracker.sim.ok(q.0, o)) {
                     self.tally.dead += 1;
                     continue;
-                };
+                }
+                let rests: Vec<Tagged> =
+                    node.poses.iter().zip(runs).map(|(q, o)| (q.0, o.pose)).collect();
                 let poses = cluster(&rests, &periods);
                 if !self.seen.insert(cells(&poses, &periods)) {
                     continue;
@@ -439,7 +524,7 @@ impl Search<'_> {
                 }
             }
         }
-        (next, found)
+        Ok((next, found))
     }
 }
 
@@ -480,9 +565,13 @@ pub fn plan_parts(
     let verify = tag(&|b| interleaved_starts(region, b, plate, &s));
     let names: Vec<&str> = parts.iter().map(|p| p.name.as_str()).collect();
     let tracker = Tracker::new(bodies, plate, periods);
-    let mut search = Search { tracker, seen: HashSet::new(), tally: Tally::default() };
+    let deadline = opt.deadline;
+    let mut search = Search { tracker, deadline, seen: HashSet::new(), tally: Tally::default() };
     let mut level = vec![Node { seq: Vec::new(), poses: starts.clone() }];
     let mut rejected = Vec::new();
+    // The depth after which no sequence left a pose set not seen before: longer ones add
+    // nothing, whatever the bound.
+    let mut exhausted = None;
     for depth in 1..=s.depth {
         super::deadline::check(opt.deadline, || {
             format!("the feed-region search, {depth}-step sequences")
@@ -490,7 +579,7 @@ pub fn plan_parts(
         bar.set_length((level.len() * plate.modes.len()) as u64);
         bar.set_position(0);
         bar.set_message(format!("feed plan: {depth}-step sequences"));
-        let (next, found) = search.expand(&level, s.tol_deg, bar);
+        let (next, found) = search.expand(&level, (s.tol_deg, depth), bar)?;
         let t = &mut search.tracker;
         // Durations first (every start tracked), then the check from the interleaved starts
         // in order of total duration: the first confirmed is the fastest, and slower ones
@@ -524,17 +613,51 @@ pub fn plan_parts(
         }
         level = next;
         if level.is_empty() {
+            exhausted = Some(depth);
             break;
         }
     }
-    Err(failure(&search, &rejected, s.depth, &names))
+    Err(failure(&search, &rejected, Bound { depth: s.depth, exhausted }, &names))
+}
+
+/// `1 mode`, `4 modes`.
+fn modes(n: usize) -> String {
+    if n == 1 { "1 mode".into() } else { format!("{n} modes") }
+}
+
+/// How far a failed search went: its step bound (`--max-steps`) and, when it ran out of new
+/// pose sets before that, the depth where it did.
+#[derive(Debug, Clone, Copy)]
+struct Bound {
+    depth: usize,
+    exhausted: Option<usize>,
+}
+
+impl Bound {
+    /// What the failure message says about the bound: whether a larger `--max-steps` could
+    /// find more.
+    fn note(&self) -> String {
+        match self.exhausted {
+            Some(d) => format!(
+                "; every sequence was searched: after {} none reaches a pose set not seen \
+                 before, so a larger --max-steps finds nothing more",
+                modes(d)
+            ),
+            None => format!(
+                "; the search stopped at {} (--max-steps {}; a larger value searches longer \
+                 sequences)",
+                modes(self.depth),
+                self.depth
+            ),
+        }
+    }
 }
 
 /// The failure of a search that found no plan: for one part (or when candidates failed the
 /// check), [`PlanFailure::NoPlan`] with [`explain`]; for several, the parts the closest
 /// sequence leaves with several orientations ([`PlanFailure::PartsApart`], naming the face
 /// that does not get there).
-fn failure(search: &Search, rejected: &[String], depth: usize, names: &[&str]) -> PlanFailure {
+fn failure(search: &Search, rejected: &[String], bound: Bound, names: &[&str]) -> PlanFailure {
     let periods = &search.tracker.sim.periods;
     let t = &search.tally;
     if names.len() > 1
@@ -546,18 +669,26 @@ fn failure(search: &Search, rejected: &[String], depth: usize, names: &[&str]) -
             .map(|i| (names[i].to_string(), o[i].clone(), periods[i]))
             .collect();
         if !apart.is_empty() {
-            return PlanFailure::PartsApart { apart, searched: t.tried };
+            return PlanFailure::PartsApart {
+                apart,
+                searched: t.tried,
+                max_steps: Some(bound.depth),
+            };
         }
     }
-    PlanFailure::NoPlan(explain(t, rejected, depth, periods[0], names))
+    PlanFailure::NoPlan(explain(t, rejected, bound, periods[0], names))
 }
 
-fn explain(t: &Tally, rejected: &[String], depth: usize, period: f64, names: &[&str]) -> String {
+fn explain(t: &Tally, rejected: &[String], bound: Bound, period: f64, names: &[&str]) -> String {
     let what = if names.len() > 1 { "every part" } else { "every start" };
+    let depth = bound.depth;
     let mut msg = format!(
-        "no sequence of up to {depth} modes brings {what} in the feed region to one \
-         orientation ({} sequences simulated, {} of them left a part unsettled or on the plate edge)",
-        t.tried, t.dead
+        "no sequence of up to {} (--max-steps {depth}) brings {what} in the feed \
+         region to one orientation ({} sequences simulated, {} of them left a part unsettled or \
+         on the plate edge)",
+        modes(depth),
+        t.tried,
+        t.dead
     );
     if let Some((_, seq, o)) = &t.best {
         let modes = seq.iter().map(|k| (k + 1).to_string()).collect::<Vec<_>>().join(", ");
@@ -573,6 +704,7 @@ fn explain(t: &Tally, rejected: &[String], depth: usize, period: f64, names: &[&
     if let Some(first) = rejected.first() {
         msg += &format!("; {} candidate(s) failed the check, e.g. {first}", rejected.len());
     }
+    msg += &bound.note();
     // From one side of the plate a central symmetry is already broken; a local one is not.
     if let Some(note) = t.best.as_ref().and_then(|b| super::symmetry_note(None, &b.2[0], period)) {
         msg += &format!(". {note}");
@@ -740,4 +872,47 @@ fn common_position(poses: &[Pose]) -> Option<[f64; 2]> {
         [poses.iter().map(|q| q.x).sum::<f64>() / n, poses.iter().map(|q| q.y).sum::<f64>() / n];
     let fixed = poses.iter().all(|q| (q.x - m[0]).hypot(q.y - m[1]) <= 2.0);
     fixed.then(|| [(m[0] * 1000.0).round() / 1000.0, (m[1] * 1000.0).round() / 1000.0])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tracker(plate: &PlateModel) -> Tracker<'_> {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let part = Part::load(&path.join("../examples/parts/triangle.json")).unwrap();
+        Tracker::new(vec![Body::with_samples(&part, 160)], plate, vec![360.0])
+    }
+
+    fn outcome(x: f64) -> Outcome {
+        let pose = Pose { x, y: 0.0, theta: 0.0 };
+        Outcome { pose, settle_s: 1.0, t_end: 1.0, rested: true }
+    }
+
+    /// The search's levels beyond the default depth reuse a run from a start within 1° (mod
+    /// the period, across 0°) and 2 mm of the same part under the same mode, the first
+    /// remembered; nothing farther, under another mode or when `near` is off.
+    #[test]
+    fn deep_levels_borrow_runs_from_starts_within_the_cluster_tolerance() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let plate = PlateModel::load(&path.join("../examples/plates/four-lines.toml")).unwrap();
+        let mut t = tracker(&plate);
+        let at = |x: f64, y: f64, deg: f64| (0, Pose { x, y, theta: deg.to_radians() });
+        t.remember(0, at(100.0, 50.0, 359.6), outcome(1.0));
+        t.remember(0, at(101.0, 50.0, 359.6), outcome(2.0));
+        let got = |t: &Tracker, k: usize, q: Tagged| t.near(k, q).map(|o| o.pose.x);
+        assert_eq!(got(&t, 0, at(100.0, 50.0, 359.6)), Some(1.0));
+        // Across 0° and a cell edge in y: both runs are near, the first remembered wins.
+        assert_eq!(got(&t, 0, at(101.9, 49.5, 0.3)), Some(1.0));
+        assert_eq!(got(&t, 0, at(102.5, 50.0, 0.3)), Some(2.0));
+        assert_eq!(got(&t, 0, at(100.0, 52.1, 359.6)), None, "2.1 mm away");
+        assert_eq!(got(&t, 0, at(100.0, 50.0, 1.0)), None, "1.4° away");
+        assert_eq!(got(&t, 1, at(100.0, 50.0, 359.6)), None, "another mode");
+        // `outcomes` borrows only when asked, and never stores a borrowed run as exact.
+        let q = at(100.5, 50.5, 359.8);
+        assert_eq!(t.outcomes(&[(0, q)], true)[0].pose.x, 1.0);
+        assert!(!t.memo.contains_key(&key(0, q)));
+        assert_ne!(t.outcomes(&[(0, q)], false)[0].pose.x, 1.0);
+        assert!(t.memo.contains_key(&key(0, q)));
+    }
 }

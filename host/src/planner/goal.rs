@@ -480,7 +480,7 @@ fn no_plan(
                 .collect()
         })
         .unwrap_or_default();
-    PlanFailure::PartsApart { apart, searched: reach.nodes.len() }
+    PlanFailure::PartsApart { apart, searched: reach.nodes.len(), max_steps: None }
 }
 
 #[cfg(test)]
