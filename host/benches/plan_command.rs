@@ -6,7 +6,9 @@
 //! Then the planning time on a solver's plate (docs/plan.md, "Planning time"): `chladni plan
 //! PART --plate examples/plates/cantilever-6-modes.toml --json` once per part of
 //! `examples/parts/ordinary/` and the example parts, with `--max-time-s 60`: the wall time and
-//! the outcome (steps, or the failure's name).
+//! the outcome (steps, or the failure's name); and three parts from the free plate's feed
+//! region. `CHLADNI_BENCH_PROFILE=PART.json` instead prints where one plan's CPU time goes
+//! ([`profile`]).
 //!
 //! `cargo bench -p chladni-host --bench plan_command` (N = 30; `CHLADNI_BENCH_RUNS=N`;
 //! `CHLADNI_BENCH_GRID=0` leaves the solver plate out, `CHLADNI_BENCH_PARTS=key,gear` keeps
@@ -81,7 +83,25 @@ fn solver_plate() {
     }
 }
 
+/// `chladni plan` from the free plate's left feed region (docs/plan.md, "Ordinary parts on
+/// the solver's plates") for three parts, one run each.
+fn free_feed() {
+    let plate = "../examples/plates/free-6-modes.toml";
+    for part in ["rectangle", "triangle", "ordinary/crank-lever"] {
+        let path = format!("../examples/parts/{part}.json");
+        let feed = ["--feed", "40", "50", "90", "150"];
+        let args = [&["plan", &path, "--plate", plate, "--max-time-s", "60", "--json"][..], &feed]
+            .concat();
+        let (s, outcome) = plan_once(&args);
+        println!("free-6-modes --feed 40 50 90 150, {part}: {s:.2} s, {outcome}");
+    }
+}
+
 fn main() {
+    if let Ok(spec) = std::env::var("CHLADNI_BENCH_PROFILE") {
+        profile(&spec);
+        return;
+    }
     let n = std::env::var("CHLADNI_BENCH_RUNS").ok().and_then(|v| v.parse().ok()).unwrap_or(30);
     let plan = ["plan", "benches/data/64-gon.json", "--plate", "benches/data/twelve-lines.toml"];
     let cases: [(&str, Vec<&str>); 3] = [
@@ -108,5 +128,142 @@ fn main() {
     }
     if std::env::var("CHLADNI_BENCH_GRID").as_deref() != Ok("0") {
         solver_plate();
+        free_feed();
     }
+}
+
+/// CPU time of the calling thread (s), from `/proc/thread-self/schedstat` (ns; Linux): the
+/// profile's times, which the machine's load does not inflate as it does wall times.
+fn thread_cpu_s() -> f64 {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|s| s.split_whitespace().next().and_then(|v| v.parse::<f64>().ok()))
+        .map_or(f64::NAN, |ns| ns * 1e-9)
+}
+
+/// `CHLADNI_BENCH_PROFILE=PART.json[,PLATE.toml]` (paths from the host crate's folder; the
+/// plate defaults to the cantilever's solver modes): where a plan's time goes, in-process on
+/// one thread, as CPU time ([`thread_cpu_s`]): the phases (the maps alone, the maps with their
+/// evidence margins, the whole plan without and with the whole-plate check), each grid mode's
+/// map and evidence margin, then every grid mode's step-map runs one by one
+/// ([`chladni::planner::map_starts`] × the distinct start orientations, the planner's run
+/// settings, no run called off; only with `CHLADNI_BENCH_PROFILE_RUNS=1`): per start point the runs, how many came to rest, the steps
+/// (sum, largest, runs stopped by the 20 000-step cap) and the time; per mode the cost of one
+/// field wrench (the per-step work: about two per Heun step).
+fn profile(spec: &str) {
+    use chladni::model::{part::Part, plate::PlateModel};
+    use chladni::motion::sim::Body;
+    use chladni::planner::{self, PlanOptions, Problem, plan_period, sampled_map};
+    let (part_path, plate_path) =
+        spec.split_once(',').unwrap_or((spec, "../examples/plates/cantilever-6-modes.toml"));
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let part = Part::load(&dir.join(part_path)).expect("the part loads");
+    let plate = PlateModel::load(&dir.join(plate_path)).expect("the plate loads");
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("a pool");
+    let name = &part.name;
+    let timed = |what: &str, f: &dyn Fn() -> String| {
+        let t = thread_cpu_s();
+        let out = f();
+        println!("profile {name}: {what}: {:.2} s CPU ({out})", thread_cpu_s() - t);
+    };
+    let outcome = |r: Result<planner::Synthesis, planner::PlanFailure>| match r {
+        Ok(s) => format!("{} steps", s.steps.len()),
+        Err(e) => e.to_string().chars().take(60).collect(),
+    };
+    let opt = PlanOptions::default();
+    pool.install(|| {
+        let maps_only = PlanOptions { margin_auto: false, ..opt };
+        let ok = |r: Result<Problem, planner::PlanFailure>| {
+            r.map_or_else(|e| e.to_string(), |_| "ok".into())
+        };
+        timed("maps", &|| ok(Problem::new(&part, &plate, &maps_only)));
+        timed("maps + evidence", &|| ok(Problem::new(&part, &plate, &opt)));
+        timed("plan, no whole-plate check", &|| outcome(planner::plan(&part, &plate, &opt)));
+        let whole = PlanOptions { refine_rounds: planner::whole::REFINE_ROUNDS, ..opt };
+        timed("plan (as `chladni plan`)", &|| outcome(planner::plan(&part, &plate, &whole)));
+    });
+    let body = Body::with_samples(&part, 160);
+    let n = opt.sim_starts;
+    let m = planner::symmetry_order(&part) as usize;
+    let distinct = if m > 1 && n.is_multiple_of(m) { n / m } else { n };
+    let period = plan_period(&part, &plate);
+    pool.install(|| {
+        for (k, mode) in plate.modes.iter().enumerate() {
+            let t = thread_cpu_s();
+            let map = sampled_map(&body, mode, &plate, n, period);
+            let t_map = thread_cpu_s() - t;
+            let margin = planner::margin::grid_margin(&body, mode, &plate, n, period, &map);
+            println!(
+                "profile {name} mode {}: map {t_map:.2} s CPU ({} rests, {} boundaries, dead starts {}), evidence margin {:.2} s CPU ({:?})",
+                k + 1,
+                map.stable.len(),
+                map.boundaries.len(),
+                map.dead_starts,
+                thread_cpu_s() - t - t_map,
+                margin.map(|m| m.deg),
+            );
+        }
+    });
+    if std::env::var("CHLADNI_BENCH_PROFILE_RUNS").as_deref() != Ok("1") {
+        return;
+    }
+    pool.install(|| {
+        for (k, mode) in plate.modes.iter().enumerate() {
+            run_profile(name, k, &body, mode, &plate, n, distinct);
+        }
+    });
+}
+
+/// The per-run part of [`profile`] for mode `k`.
+fn run_profile(
+    name: &str,
+    k: usize,
+    body: &chladni::motion::sim::Body,
+    mode: &chladni::model::plate::Mode,
+    plate: &chladni::model::plate::PlateModel,
+    n: usize,
+    distinct: usize,
+) {
+    use chladni::motion::sim::{self, FieldModel, Pose, Rim, SimParams};
+    let field = FieldModel::new(mode, plate);
+    let rim = Rim::of(plate);
+    let t0 = body.radius / (mode.speed_mm_s * field.max_gain());
+    let p = SimParams {
+        speed: mode.speed_mm_s,
+        t_limit: 5000.0 * t0,
+        run_to_limit: false,
+        rim: Some(rim),
+    };
+    let (mut mode_steps, mut mode_s, mut poses) = (0usize, 0.0, Vec::new());
+    for (j, s) in chladni::planner::map_starts(body, mode, plate).iter().enumerate() {
+        let (mut steps, mut big, mut capped, mut rested) = (0usize, 0usize, 0usize, 0usize);
+        let t = thread_cpu_s();
+        for i in 0..distinct {
+            let th = (i as f64 + 0.3) * 360.0 / n as f64;
+            let q = rim.project(body, Pose { x: s[0], y: s[1], theta: th.to_radians() });
+            let r = sim::run(body, &field, p, q);
+            steps += r.steps;
+            big = big.max(r.steps);
+            capped += usize::from(r.steps >= 20_000);
+            rested += usize::from(r.rested);
+            poses.extend(r.trace.iter().step_by(97).map(|x| x.1));
+        }
+        let secs = thread_cpu_s() - t;
+        (mode_steps, mode_s) = (mode_steps + steps, mode_s + secs);
+        println!(
+            "profile {name} mode {}: start {j} ({:.0}, {:.0}): {distinct} runs, {rested} rested, steps {steps} (max {big}, {capped} at the cap), {secs:.3} s CPU",
+            k + 1,
+            s[0],
+            s[1]
+        );
+    }
+    let t = thread_cpu_s();
+    let sink: f64 = poses.iter().map(|q| field.wrench(body, *q).fx).sum();
+    let per = (thread_cpu_s() - t) / poses.len().max(1) as f64;
+    println!(
+        "profile {name} mode {}: {mode_steps} steps, {mode_s:.2} s CPU, {:.2} µs/step, one wrench {:.2} µs ({sink:.1e})",
+        k + 1,
+        mode_s / mode_steps.max(1) as f64 * 1e6,
+        per * 1e6
+    );
 }

@@ -413,7 +413,7 @@ pub(super) fn rest_sets(labels: &[Vec<Option<usize>>], count: usize) -> Vec<Opti
 /// (`None`): near a cantilever's clamp the pull vanishes and a run can creep for its whole
 /// step budget. Which runs are skipped depends on the thread timing, the map does not: a
 /// skipped run belongs to a dropped point.
-fn simulate_starts(
+pub(super) fn simulate_starts(
     body: &Body,
     mode: &Mode,
     plate: &PlateModel,
@@ -423,9 +423,11 @@ fn simulate_starts(
     points: usize,
 ) -> Vec<Option<(Pose, bool)>> {
     let dead: Vec<AtomicBool> = (0..points).map(|_| AtomicBool::new(false)).collect();
-    poses
+    let order = spread_order(poses);
+    let ran: Vec<Option<(Pose, bool)>> = order
         .par_iter()
-        .map(|&(j, q)| {
+        .map(|&t| poses[t])
+        .map(|(j, q)| {
             if dead[j].load(Ordering::Relaxed) {
                 return None;
             }
@@ -436,7 +438,34 @@ fn simulate_starts(
             }
             Some((r.pose, r.rested && !r.lost))
         })
-        .collect()
+        .collect();
+    let mut out = vec![None; poses.len()];
+    for (&t, r) in order.iter().zip(ran) {
+        out[t] = r;
+    }
+    out
+}
+
+/// The order [`simulate_starts`] runs `poses` in (indices into them): every start point's
+/// k-th run before any point's (k+1)-th, and each point's start orientations in a
+/// low-discrepancy order (golden-ratio steps over the circle), so that the first runs of every
+/// point already cover the circle. A point outside the mode's reach is then found after a few
+/// of its runs, not after the runs of the orientations before the ones that end on the plate
+/// edge, and the rest of its runs are skipped. Only which runs are skipped changes, not the
+/// map (they belong to a dropped point).
+fn spread_order(poses: &[(usize, Pose)]) -> Vec<usize> {
+    let golden = 0.5 * (5f64.sqrt() - 1.0);
+    let mut first = std::collections::HashMap::new();
+    let mut keyed: Vec<(f64, usize, usize)> = poses
+        .iter()
+        .enumerate()
+        .map(|(t, &(j, _))| {
+            let i = t - *first.entry(j).or_insert(t);
+            ((i as f64 * golden).fract(), j, t)
+        })
+        .collect();
+    keyed.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    keyed.into_iter().map(|k| k.2).collect()
 }
 
 /// The field and run settings of a simulated map's runs: with the rim, to rest or 5000 T₀

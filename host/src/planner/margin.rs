@@ -17,11 +17,10 @@
 //! check simulates every straight-node transition of a plan anyway. `--margin-deg D` given by
 //! the user overrides every mode.
 
-use rayon::prelude::*;
-
 use super::cluster::{CLUSTER_DEG, Clusters};
 use super::maps::{
     StepMap, map_run, map_starts, map_thetas, outside_reach, rest_sets, sampled_map,
+    simulate_starts,
 };
 use super::options::PlanOptions;
 use super::symmetry::body_symmetry_order;
@@ -29,7 +28,7 @@ use crate::model::angle::cdist;
 use crate::model::grid::Grid;
 use crate::model::plate::{Mode, Node, PlateModel};
 use crate::motion::field::grid_eval;
-use crate::motion::sim::{self, Body, Pose, Rim};
+use crate::motion::sim::{Body, Pose, Rim};
 
 /// The smallest evidence margin (deg): below it a boundary's move is not resolved by the
 /// measurement (boundaries of simulated maps lie on the midpoints of their start spacing).
@@ -245,21 +244,28 @@ pub fn windowed_spread(
     let thetas = map_thetas(n);
     let (field, p) = map_run(body, mode, plate);
     let rim = Rim::of(plate);
-    let poses: Vec<Pose> = map_starts(body, mode, plate)
+    // Only the start points the map kept are run (the others are left out whatever their
+    // runs give), and a point is dropped, its runs called off, as soon as one of its windowed
+    // runs ends outside the mode's reach (`maps::simulate_starts`): the same answer as
+    // running them all, without paying for runs that creep where the pull vanishes.
+    let live: Vec<[f64; 2]> = map_starts(body, mode, plate)
+        .into_iter()
+        .enumerate()
+        .filter(|(point, _)| !map.dead_points.contains(point))
+        .map(|(_, s)| s)
+        .collect();
+    let (idx_ref, thetas_ref) = (&idx, &thetas);
+    let poses: Vec<(usize, Pose)> = live
         .iter()
-        .flat_map(|s| {
-            idx.iter().map(|&i| {
-                rim.project(body, Pose { x: s[0], y: s[1], theta: thetas[i].to_radians() })
+        .enumerate()
+        .flat_map(|(j, s)| {
+            idx_ref.iter().map(move |&i| {
+                let theta = thetas_ref[i].to_radians();
+                (j, rim.project(body, Pose { x: s[0], y: s[1], theta }))
             })
         })
         .collect();
-    let ends: Vec<(Pose, bool)> = poses
-        .par_iter()
-        .map(|&q| {
-            let r = sim::run(body, &field, p, q);
-            (r.pose, r.rested && !r.lost)
-        })
-        .collect();
+    let ends = simulate_starts(body, mode, plate, &field, p, &poses, live.len());
     // Ends are labelled by the map's own rests (the nearest within the clustering tolerance),
     // so that the windowed runs and the map tell rests apart alike; other ends are clustered
     // as new rests.
@@ -273,9 +279,7 @@ pub fn windowed_spread(
     };
     let labels: Vec<Vec<Option<usize>>> = ends
         .chunks(idx.len().max(1))
-        .enumerate()
-        .filter(|(point, _)| !map.dead_points.contains(point))
-        .map(|(_, runs)| runs)
+        .filter_map(|runs| runs.iter().copied().collect::<Option<Vec<(Pose, bool)>>>())
         .filter(|runs| !runs.iter().any(|r| outside_reach(body, mode, plate, r.0)))
         .map(|runs| runs.iter().map(|(q, ok)| ok.then(|| label(q.theta.to_degrees()))).collect())
         .collect();
