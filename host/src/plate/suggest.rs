@@ -473,7 +473,14 @@ mod tests {
         assert!(reason.contains("try --feed"), "{reason}");
         assert_eq!(Why::NotWholePlate(h).name(), "not_whole_plate");
         // A plan keeps what the check gave.
-        let w = WholePlate { drops: 48, held: 48, rounds: 2, checked: true };
+        let w = WholePlate {
+            drops: 48,
+            held: 48,
+            rounds: 2,
+            checked: true,
+            parts: Vec::new(),
+            together: false,
+        };
         let syn = planner::Synthesis { whole_plate: Some(w.clone()), ..Default::default() };
         let Outcome::Plan(f) = outcome(Ok(syn)) else { panic!("a plan") };
         assert_eq!(f.whole_plate, Some(w));
