@@ -3,7 +3,9 @@
 //! modes (`examples/plates/*-6-modes.toml`, written by `chladni plate modes … --count 6
 //! --write-modes`), through the whole `chladni` commands a user runs:
 //!
-//! - cantilever: `plan` over the whole plate, then `simulate` (200 trials);
+//! - cantilever: `plan` over the whole plate, then `simulate` (200 trials); then "outside the
+//!   capture zone": `plan --feed` and `simulate --feed` in the plate minus the clamp's capture
+//!   zone, the box that whole-plate `plan --json` names (`capture_zone.outside_mm`);
 //! - free and hinged-rod: `plan --feed` from a feed region on the left side ([`FEED`]) and
 //!   `simulate --feed`; then `plate suggest` (its wall time is the suggest timing), the drive
 //!   point and clamps of its best row written into a plate file, `plate modes --count 6
@@ -27,6 +29,9 @@ use serde_json::Value;
 
 /// Feed region (mm, x0 y0 x1 y1): a hopper dropping parts along the plate's left side.
 const FEED: [f64; 4] = [40.0, 50.0, 90.0, 150.0];
+/// The cantilever's second case: `--feed` the plate minus the clamp's capture zone (the box
+/// the whole-plate `plan --json` names in `capture_zone.outside_mm`).
+const OUTSIDE: &str = "outside the capture zone";
 /// Monte Carlo trials per plan (`simulate --trials`).
 const TRIALS: u32 = 200;
 /// A plan counts when `simulate` confirms at least this success rate.
@@ -97,6 +102,8 @@ enum Planned {
 struct Row {
     plate: &'static str,
     case: &'static str,
+    /// What the case column adds (the capture-zone case's `--feed` box).
+    note: Option<String>,
     part: String,
     flips: bool,
     planned: Planned,
@@ -117,18 +124,27 @@ fn short(msg: &str) -> String {
     s.replace('|', "/")
 }
 
+/// What one `plan` gave: the answer, its wall time (s), and the plate minus the clamp's
+/// capture zone (`capture_zone.outside_mm` of its `--json`, plan or failure) when it names one.
+type PlanRan = (Planned, f64, Option<[f64; 4]>);
+
 /// `chladni plan PART --plate P --json --out OUT [--feed …]`.
-fn plan(root: &Path, part: &str, plate: &str, feed: bool, out: &Path) -> (Planned, f64) {
+fn plan(root: &Path, part: &str, plate: &str, feed: Option<[f64; 4]>, out: &Path) -> PlanRan {
     let out_s = out.to_string_lossy().into_owned();
     let mut args = vec!["plan", part, "--plate", plate, "--json", "--out", &out_s];
-    let f: Vec<String> = FEED.iter().map(|v| v.to_string()).collect();
-    if feed {
+    let f: Vec<String> = feed.iter().flatten().map(|v| v.to_string()).collect();
+    if feed.is_some() {
         args.push("--feed");
         args.extend(f.iter().map(String::as_str));
     }
     let r = chladni(root, &args);
     let wall = r.wall.as_secs_f64();
     let v: Option<Value> = r.stdout.lines().rev().find_map(|l| serde_json::from_str(l).ok());
+    let outside = v.as_ref().and_then(|v| {
+        let b = v["capture_zone"]["outside_mm"].as_array()?;
+        let b: Vec<f64> = b.iter().filter_map(Value::as_f64).collect();
+        <[f64; 4]>::try_from(b).ok()
+    });
     let planned = match (r.ok, v) {
         (true, Some(v)) => {
             let steps = v["steps"].as_array().map_or(&[][..], Vec::as_slice);
@@ -142,18 +158,24 @@ fn plan(root: &Path, part: &str, plate: &str, feed: bool, out: &Path) -> (Planne
         )),
         _ => Planned::No(short(&r.stderr)),
     };
-    (planned, wall)
+    (planned, wall, outside)
 }
 
 /// `chladni simulate PART --plate P --plan PLAN --trials 200 --json [--feed …]`: the success
 /// rate over all trials (both faces of a part that flips).
-fn simulate(root: &Path, part: &str, plate: &str, plan: &Path, feed: bool) -> Option<f64> {
+fn simulate(
+    root: &Path,
+    part: &str,
+    plate: &str,
+    plan: &Path,
+    feed: Option<[f64; 4]>,
+) -> Option<f64> {
     let plan_s = plan.to_string_lossy().into_owned();
     let trials = TRIALS.to_string();
     let mut args =
         vec!["simulate", part, "--plate", plate, "--plan", &plan_s, "--trials", &trials, "--json"];
-    let f: Vec<String> = FEED.iter().map(|v| v.to_string()).collect();
-    if feed {
+    let f: Vec<String> = feed.iter().flatten().map(|v| v.to_string()).collect();
+    if feed.is_some() {
         args.push("--feed");
         args.extend(f.iter().map(String::as_str));
     }
@@ -264,6 +286,7 @@ fn rows_of(root: &Path, pc: &PlateCase, part: &str, dir: &Path, with_suggest: bo
     let row = |case, planned, plan_wall_s, success, suggest| Row {
         plate: pc.name,
         case,
+        note: None,
         part: name.clone(),
         flips: fl,
         planned,
@@ -272,22 +295,34 @@ fn rows_of(root: &Path, pc: &PlateCase, part: &str, dir: &Path, with_suggest: bo
         suggest,
     };
     let out = dir.join("plan.json");
-    let run = |plate: &str, part: &str, feed: bool| {
+    let run = |plate: &str, part: &str, feed: Option<[f64; 4]>| {
         let _ = std::fs::remove_file(&out);
-        let (planned, wall) = plan(root, part, plate, feed, &out);
+        let (planned, wall, outside) = plan(root, part, plate, feed, &out);
         let success = match planned {
             Planned::Plan { .. } => simulate(root, part, plate, &out, feed),
             Planned::No(_) => None,
         };
-        (planned, wall, success)
+        (planned, wall, success, outside)
     };
     let mut rows = Vec::new();
     if !pc.one_sided {
-        let (p, w, s) = run(pc.modes, part, false);
+        let (p, w, s, outside) = run(pc.modes, part, None);
         rows.push(row("whole plate", p, w, s, None));
+        // The plate minus the clamp's capture zone, as the whole-plate `plan --json` named it.
+        match outside {
+            Some(b) => {
+                let (p, w, s, _) = run(pc.modes, part, Some(b));
+                let case = format!("feed {:.0} {:.0} {:.0} {:.0}", b[0], b[1], b[2], b[3]);
+                rows.push(Row { note: Some(case), ..row(OUTSIDE, p, w, s, None) });
+            }
+            None => {
+                let why = Planned::No("plan --json named no capture zone".into());
+                rows.push(row(OUTSIDE, why, 0.0, None, None));
+            }
+        }
         return rows;
     }
-    let (p, w, s) = run(pc.modes, part, true);
+    let (p, w, s, _) = run(pc.modes, part, Some(FEED));
     rows.push(row("feed (left)", p, w, s, None));
     if !with_suggest {
         return rows;
@@ -297,7 +332,10 @@ fn rows_of(root: &Path, pc: &PlateCase, part: &str, dir: &Path, with_suggest: bo
     let (p, w, s) = match &sug.chosen {
         None => (Planned::No("no candidate plans (suggest)".into()), 0.0, None),
         Some(c) => match solver_file(root, pc.source, c, dir) {
-            Ok(m) => run(&m.to_string_lossy(), part, false),
+            Ok(m) => {
+                let (p, w, s, _) = run(&m.to_string_lossy(), part, None);
+                (p, w, s)
+            }
             Err(e) => (Planned::No(format!("plate modes: {e}")), 0.0, None),
         },
     };
@@ -342,9 +380,10 @@ fn cell(r: &Row) -> String {
     };
     let sim = r.success.map_or("–".to_string(), |s| format!("{:.1} %", s * 100.0));
     let sug = r.suggest.clone().unwrap_or_default();
+    let case = r.note.as_ref().map_or(r.case.to_string(), |n| format!("{} ({n})", r.case));
     format!(
-        "| {} | {} | {part} | {flips} | {plan} | {steps} | {dur} | {sim} | {:.2} s | {sug} |",
-        r.plate, r.case, r.plan_wall_s
+        "| {} | {case} | {part} | {flips} | {plan} | {steps} | {dur} | {sim} | {:.2} s | {sug} |",
+        r.plate, r.plan_wall_s
     )
 }
 

@@ -12,6 +12,7 @@ use chladni::model::plate::PlateModel;
 use chladni::motion::montecarlo::{self, Report, Setup, Stats, Trials};
 use chladni::motion::sim::{self, Body, FieldModel, Pose};
 use chladni::output::write_atomic;
+use chladni::planner::capture::CaptureZone;
 use chladni::planner::collide::EndOverlap;
 use chladni::planner::feed::{self, FeedRegion};
 use chladni::planner::{self, MapKind, Minimize, PlanFailure, PlanOptions, Synthesis};
@@ -277,12 +278,14 @@ impl PlanArgs {
             eprintln!("warning: {warning}");
         }
         let region = feed_region(&self.feed, &plate)?;
+        let (zone, in_zone) = if region.is_none() { capture_zone(&parts, &plate) } else { NO_ZONE };
+        let with_zone = |j| shapes::capture::with_zone(j, zone.as_ref(), &plate, in_zone);
         let opt = self.plan_options(region, &goals);
         let syn = match self.synthesize(&parts, &plate, region, &goals) {
             Ok(syn) => syn,
             Err(e) => {
                 if self.json {
-                    println!("{}", shapes::plan_failure_json(&e));
+                    println!("{}", with_zone(shapes::plan_failure_json(&e)));
                 }
                 eprintln!("error: {e}");
                 return Ok(ExitCode::from(1));
@@ -311,7 +314,7 @@ impl PlanArgs {
             json["end_overlaps"] = shapes::plan::end_overlaps_json(&parts, &overlaps);
         }
         if self.json {
-            let json = shapes::plan::with_whole_plate(json, syn.whole_plate.as_ref());
+            let json = with_zone(shapes::plan::with_whole_plate(json, syn.whole_plate.as_ref()));
             println!("{}", shapes::plan::with_margins(copies::with_bulk(json, &bulk), &syn.steps));
         } else {
             print_plan(&parts, &plate, &syn);
@@ -385,6 +388,30 @@ impl PlanArgs {
             }
         }
     }
+}
+
+/// No capture zone (a `--feed` plan): none, and no drop points in it.
+const NO_ZONE: (Option<CaptureZone>, (usize, usize)) = (None, (0, 0));
+
+/// The clamp's capture zone of a whole-plate plan ([`planner::capture`]), said up front on
+/// stderr when it covers drop points of the whole-plate check: the zone, and (drop points in
+/// it, drop points).
+fn capture_zone(parts: &[Part], plate: &PlateModel) -> (Option<CaptureZone>, (usize, usize)) {
+    let Some(zone) = planner::capture::zone_for_parts(plate, parts) else { return NO_ZONE };
+    let body = Body::with_samples(&parts[0], 160);
+    let drops = planner::whole::drops(&body, plate);
+    let n = drops.iter().filter(|(p, _)| zone.contains(plate, *p)).count();
+    if n > 0 {
+        let feed = zone.outside_mm(plate).map_or(String::new(), |b| {
+            format!("; try --feed {:.0} {:.0} {:.0} {:.0}", b[0], b[1], b[2], b[3])
+        });
+        eprintln!(
+            "warning: {n} of the {} drop points of the whole-plate check lie in {}{feed}",
+            drops.len(),
+            zone.describe(plate)
+        );
+    }
+    (Some(zone), (n, drops.len()))
 }
 
 /// The planned parts whose predicted end poses overlap (parts from different files: two faces

@@ -51,6 +51,7 @@ use crate::model::part::Part;
 use crate::model::plate::{Node, PlateModel};
 use crate::motion::sim::Body;
 
+pub mod capture;
 mod cluster;
 pub mod collide;
 mod confirm;

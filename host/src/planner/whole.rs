@@ -45,9 +45,10 @@ pub const TOGETHER_SEED: u64 = 1;
 #[error(
         "{part}: no plan holds over the whole plate: of {drops} drops on a grid over the \
          plate, {failed} ({:.0} %) end elsewhere ({ends}), from x {:.0}–{:.0} mm, y {:.0}–{:.0} \
-         mm, after {rounds} of at most {max_rounds} refinement rounds (--refine-rounds){}",
+         mm, after {rounds} of at most {max_rounds} refinement rounds (--refine-rounds){}{}",
         100.0 * self.failed as f64 / self.drops.max(1) as f64,
         self.region_mm[0], self.region_mm[2], self.region_mm[1], self.region_mm[3],
+        self.capture.as_ref().map(|c| format!("; {c}")).unwrap_or_default(),
         self.feed_mm.map(|f| format!("; the plan held from every drop in x {:.0}–{:.0} mm, y {:.0}–{:.0} mm: \
             try --feed {:.0} {:.0} {:.0} {:.0}", f[0], f[2], f[1], f[3], f[0], f[1], f[2], f[3])).unwrap_or_default()
     )]
@@ -66,8 +67,12 @@ pub struct NotWhole {
     pub rounds: usize,
     /// The bound on them ([`PlanOptions::refine_rounds`]).
     pub max_rounds: usize,
-    /// The largest block of drop cells the last plan held from (mm: x0, y0, x1, y1).
+    /// The largest block of drop cells the last plan held from (mm: x0, y0, x1, y1), outside
+    /// the clamp's capture zone.
     pub feed_mm: Option<[f64; 4]>,
+    /// The clamp's capture zone and how many of the failed drops lie in it
+    /// ([`super::capture`]; `None`: the plate has none).
+    pub capture: Option<super::capture::InZone>,
 }
 
 /// How a drop that the plan does not hold from ended.
@@ -494,6 +499,15 @@ fn not_whole(
         v.fold([f64::INFINITY, f64::NEG_INFINITY], |a, x| [a[0].min(x), a[1].max(x)])
     };
     let (sx, sy) = (span(&mut xs.clone()), span(&mut ys.clone()));
+    let zone = super::capture::zone(plate, body.radius);
+    let mut feed_mm = held_block(body, plate, failed);
+    if let Some(z) = &zone {
+        feed_mm = feed_mm.and_then(|b| z.clip(plate, b));
+    }
+    let capture = zone.map(|z| {
+        let failed_in = failed.iter().filter(|d| z.contains(plate, d.0)).count();
+        super::capture::InZone::new(z, plate, failed_in, failed.len())
+    });
     PlanFailure::NotWholePlate(Box::new(NotWhole {
         part: part.name.clone(),
         drops,
@@ -502,7 +516,8 @@ fn not_whole(
         ends: ends.join(", "),
         rounds,
         max_rounds: opt.refine_rounds,
-        feed_mm: held_block(body, plate, failed),
+        feed_mm,
+        capture,
     }))
 }
 
