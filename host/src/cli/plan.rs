@@ -406,9 +406,9 @@ fn capture_zone(parts: &[Part], plate: &PlateModel) -> (Option<CaptureZone>, (us
             format!("; try --feed {:.0} {:.0} {:.0} {:.0}", b[0], b[1], b[2], b[3])
         });
         eprintln!(
-            "warning: {n} of the {} drop points of the whole-plate check lie in {}{feed}",
-            drops.len(),
-            zone.describe(plate)
+            "warning: {}: {n} of the {} drop points of the whole-plate check lie in it{feed}",
+            zone.describe(plate),
+            drops.len()
         );
     }
     (Some(zone), (n, drops.len()))
