@@ -390,8 +390,13 @@ fn cell(r: &Row) -> String {
 fn summary(rows: &[Row]) {
     println!("\n| plate | case | ordinary parts confirmed ≥ 95 % | example parts confirmed |");
     println!("| --- | --- | --- | --- |");
-    let mut keys: Vec<(&str, &str)> = rows.iter().map(|r| (r.plate, r.case)).collect();
-    keys.dedup();
+    // Each (plate, case) once, in first-seen order: a plate's cases alternate part by part.
+    let mut keys: Vec<(&str, &str)> = Vec::new();
+    for k in rows.iter().map(|r| (r.plate, r.case)) {
+        if !keys.contains(&k) {
+            keys.push(k);
+        }
+    }
     for (plate, case) in keys {
         let of = |ordinary: bool| {
             let sel: Vec<&Row> = rows
