@@ -16,7 +16,7 @@
 //! Prints the markdown table and the counts (stdout) and a line per case (stderr).
 //! `cargo bench -p chladni-host --bench plates_table` (release). Filters, comma-separated
 //! substrings: `CHLADNI_TABLE_PLATES=free`, `CHLADNI_TABLE_PARTS=gear,key`;
-//! `CHLADNI_TABLE_SUGGEST=0` skips the suggest rows (each `plate suggest` stops at its
+//! `CHLADNI_TABLE_SUGGEST=0` skips the suggest rows, `only` runs them alone (each `plate suggest` stops at its
 //! default `--budget-s 60`, past it by at most the first candidate that is planned); `CHLADNI_TABLE_JOBS=2` runs two cases at
 //! once (default 1: the timings are per command on an otherwise idle machine).
 
@@ -278,8 +278,20 @@ fn flips(root: &Path, part: &str) -> bool {
             .is_some_and(|v| v["flips"] == Value::Bool(true))
 }
 
+/// Which rows of the free and hinged-rod plates run (`CHLADNI_TABLE_SUGGEST`: `0`, unset,
+/// `only`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Suggest {
+    /// The feed rows only.
+    Off,
+    /// The feed and the suggest rows.
+    On,
+    /// The suggest rows only.
+    Only,
+}
+
 /// Every row of one plate and one part.
-fn rows_of(root: &Path, pc: &PlateCase, part: &str, dir: &Path, with_suggest: bool) -> Vec<Row> {
+fn rows_of(root: &Path, pc: &PlateCase, part: &str, dir: &Path, suggest_rows: Suggest) -> Vec<Row> {
     std::fs::create_dir_all(dir).expect("temp dir");
     let name = Path::new(part).file_stem().unwrap_or_default().to_string_lossy().into_owned();
     let fl = flips(root, part);
@@ -322,9 +334,11 @@ fn rows_of(root: &Path, pc: &PlateCase, part: &str, dir: &Path, with_suggest: bo
         }
         return rows;
     }
-    let (p, w, s, _) = run(pc.modes, part, Some(FEED));
-    rows.push(row("feed (left)", p, w, s, None));
-    if !with_suggest {
+    if suggest_rows != Suggest::Only {
+        let (p, w, s, _) = run(pc.modes, part, Some(FEED));
+        rows.push(row("feed (left)", p, w, s, None));
+    }
+    if suggest_rows == Suggest::Off {
         return rows;
     }
     let sug = suggest(root, pc.source, part);
@@ -439,7 +453,11 @@ const ORDINARY: [&str; 10] = [
 fn main() {
     // `cargo bench` passes `--bench`; nothing else is taken.
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("workspace root").to_owned();
-    let with_suggest = !matches!(std::env::var("CHLADNI_TABLE_SUGGEST").as_deref(), Ok("0"));
+    let with_suggest = match std::env::var("CHLADNI_TABLE_SUGGEST").as_deref() {
+        Ok("0") => Suggest::Off,
+        Ok("only") => Suggest::Only,
+        _ => Suggest::On,
+    };
     let jobs: usize =
         std::env::var("CHLADNI_TABLE_JOBS").ok().and_then(|v| v.parse().ok()).unwrap_or(1).max(1);
     let tmp = std::env::temp_dir().join(format!("chladni-plates-table-{}", std::process::id()));
