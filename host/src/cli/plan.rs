@@ -510,7 +510,7 @@ fn note_self_mirrored(faces: &Faces) {
 /// The plan as a table: one line per step, the feed check, the final pose.
 fn print_plan(parts: &[Part], plate: &PlateModel, syn: &Synthesis) {
     for (i, part) in parts.iter().enumerate() {
-        let period = syn.parts.get(i).map_or(syn.period_deg, |p| p.period_deg);
+        let (_, period) = syn.predicted(i);
         println!("part       {} (symmetry period {period}°)", part.name);
     }
     println!("plate      {} ({} modes)", plate.name, plate.modes.len());

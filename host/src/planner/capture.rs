@@ -383,7 +383,7 @@ mod tests {
             z.compute_s
         );
         assert_eq!(band.edge, PlateEdge::Left);
-        // Measured: 55 mm (docs/plan.md); the band is more than the probe touching the clamp,
+        // Measured: 85 mm (docs/plan.md); the band is more than the probe touching the clamp,
         // and far from the plate's free end.
         assert!(band.width_mm > 40.0 && band.width_mm < 150.0, "{band:?}");
         assert!(z.contains(&cant, [30.0, 100.0]) && !z.contains(&cant, [250.0, 100.0]));

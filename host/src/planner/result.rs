@@ -58,6 +58,14 @@ pub struct Synthesis {
 }
 
 impl Synthesis {
+    /// Part `i`'s predicted final orientation and its period (deg): its own prediction in
+    /// [`Synthesis::parts`], or the plan's when there is none (one part).
+    pub fn predicted(&self, i: usize) -> (f64, f64) {
+        self.parts.get(i).map_or((self.final_orientation_deg, self.period_deg), |p| {
+            (p.final_orientation_deg, p.period_deg)
+        })
+    }
+
     /// The steps as the simulator runs them (each at its mode's own amplitude).
     pub fn sim_steps(&self) -> Vec<sim::SimStep> {
         self.steps.iter().map(|s| sim::SimStep::new(s.mode, s.duration_ms, 1.0)).collect()

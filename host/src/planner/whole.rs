@@ -200,13 +200,6 @@ pub fn drops(body: &Body, plate: &PlateModel) -> Vec<([f64; 2], f64)> {
     out
 }
 
-/// Part `i`'s predicted final orientation and period in `syn` (deg).
-fn predicted(syn: &Synthesis, i: usize) -> (f64, f64) {
-    syn.parts.get(i).map_or((syn.final_orientation_deg, syn.period_deg), |p| {
-        (p.final_orientation_deg, p.period_deg)
-    })
-}
-
 /// Whether a run of the part ending at `e` held (on the plate, within [`DROP_TOL_DEG`] of
 /// `(final, period)`); if not, how it ended.
 fn held(body: &Body, plate: &PlateModel, e: Pose, lost: bool, pred: (f64, f64)) -> Option<DropEnd> {
@@ -223,7 +216,7 @@ fn held(body: &Body, plate: &PlateModel, e: Pose, lost: bool, pred: (f64, f64)) 
 /// hold from.
 pub fn check(body: &Body, plate: &PlateModel, syn: &Synthesis) -> (usize, Failed) {
     let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
-    let d = check_alone(body, plate, &fields, &syn.sim_steps(), predicted(syn, 0));
+    let d = check_alone(body, plate, &fields, &syn.sim_steps(), syn.predicted(0));
     (d.drops, d.failed)
 }
 
@@ -290,7 +283,7 @@ pub fn check_parts(
     for group in groups {
         if !together {
             let i = group[0];
-            out[i] = check_alone(&bodies[i], plate, &fields, &steps, predicted(syn, i));
+            out[i] = check_alone(&bodies[i], plate, &fields, &steps, syn.predicted(i));
             continue;
         }
         let on: Vec<&Body> = group.iter().map(|&i| &bodies[i]).collect();
@@ -301,7 +294,7 @@ pub fn check_parts(
         let n = DROP_GRID[0] * DROP_GRID[1] * DROP_TURNS;
         let runs = run_drops(&d, n as u32, TOGETHER_SEED, || ()).ok()?;
         for (&i, t) in group.iter().zip(&runs.per_body) {
-            let pred = predicted(syn, i);
+            let pred = syn.predicted(i);
             let o = &mut out[i];
             o.drops += t.finals.len();
             for ((q, e), &lost) in t.starts.iter().zip(&t.finals).zip(&t.lost) {

@@ -406,10 +406,7 @@ fn outcome(planned: Result<planner::Synthesis, PlanFailure>) -> Outcome {
     match planned {
         Ok(syn) => {
             // Both faces: the face-up part's prediction (the first of `syn.parts`).
-            let (theta, period) =
-                syn.parts.first().map_or((syn.final_orientation_deg, syn.period_deg), |p| {
-                    (p.final_orientation_deg, p.period_deg)
-                });
+            let (theta, period) = syn.predicted(0);
             Outcome::Plan(Found {
                 steps: syn.steps.len(),
                 total_s: syn.steps.iter().map(|s| f64::from(s.duration_ms)).sum::<f64>() / 1e3,
