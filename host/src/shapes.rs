@@ -173,7 +173,7 @@ pub fn plan_failure_json(e: &PlanFailure) -> serde_json::Value {
             json!({"error": "not_whole_plate", "part": n.part, "drops": n.drops,
             "failed": n.failed, "held_share": r4(1.0 - n.failed as f64 / n.drops.max(1) as f64),
             "failed_region_mm": n.region_mm, "ends": n.ends, "rounds": n.rounds,
-            "max_rounds": n.max_rounds, "feed_mm": n.feed_mm,
+            "max_rounds": n.max_rounds, "feed_mm": n.feed_mm, "together": n.together,
             "capture_zone": n.capture.as_ref().map(capture::in_zone_json)})
         }
         PlanFailure::OutOfTime { limit_s, stage } => {

@@ -4,14 +4,17 @@
 //! for both faces from a feed region holds in `chladni simulate` over that region.
 
 use chladni::model::part::Part;
+use chladni::model::part::mirror::{self, FLIPPED_SUFFIX};
 use chladni::model::plate::{Node, PlateModel};
 use chladni::motion::sim::Body;
-use chladni::planner::whole::{DROP_GRID, DROP_TURNS, DropEnd, check, check_parts, plate_groups};
+use chladni::planner::whole::{
+    DROP_GRID, DROP_TURNS, DropEnd, OnPlate, check, check_parts, plate_groups,
+};
 use chladni::planner::{self, PlanFailure, PlanOptions};
 
 mod support;
-use support::cli::{ok_json, tmp, triangle_on_four_lines};
-use support::examples::{part, plate};
+use support::cli::{chladni, ex, floats, json, ok_json, tmp, triangle_on_four_lines, write_tmp};
+use support::examples::{part, plate, plate_entries};
 
 /// The cantilever's solver-made bending and torsion modes (the first two of the committed
 /// six-mode file): the torsion mode's node runs along y = 100 mm, and near the clamp (x = 0)
@@ -100,9 +103,8 @@ fn a_plan_for_both_faces_is_checked_on_every_face_and_a_face_that_fails_is_named
     // of its drops fails, and none of the face up's.
     let mut wrong = syn.clone();
     wrong.parts[1].final_orientation_deg += 90.0;
-    let refs: Vec<&Part> = faces.iter().collect();
     let bodies: Vec<Body> = faces.iter().map(|p| Body::with_samples(p, 160)).collect();
-    let (per, together) = check_parts(&refs, &bodies, &plate, &wrong).unwrap();
+    let (per, together) = check_parts(&bodies, OnPlate::Alone, &plate, &wrong).unwrap();
     assert!(!together);
     assert_eq!((per[0].drops, per[0].failed.len()), (one, 0));
     assert_eq!((per[1].drops, per[1].failed.len()), (one, one));
@@ -124,13 +126,28 @@ fn a_plan_for_both_faces_is_checked_on_every_face_and_a_face_that_fails_is_named
 #[test]
 fn parts_of_two_files_are_grouped_to_be_dropped_together_and_faces_alone() {
     let (tri, rect) = (part("triangle.json"), part("rectangle.json"));
-    let flip = tri.mirrored();
+    let groups = |given: &[Part], both: bool| {
+        let f = mirror::faces(given, both);
+        plate_groups(f.parts.len(), OnPlate::Faces(&f.of))
+    };
     // One part on both faces: each face alone.
-    assert_eq!(plate_groups(&[&tri, &flip]), (vec![vec![0], vec![1]], false));
-    // Two files, one of them on both faces: the face-up drop and the flipped one, the other
-    // part in both (as `chladni simulate` drops them).
-    assert_eq!(plate_groups(&[&tri, &flip, &rect]), (vec![vec![0, 2], vec![1, 2]], true));
-    assert_eq!(plate_groups(&[&rect, &tri]), (vec![vec![0, 1]], true));
+    assert_eq!(groups(std::slice::from_ref(&tri), true), (vec![vec![0], vec![1]], false));
+    // Two files, one of them on both faces (the rectangle has a mirror axis: one face): the
+    // face-up drop and the flipped one, the other part in both (as `chladni simulate` drops
+    // them).
+    assert_eq!(groups(&[tri.clone(), rect.clone()], true), (vec![vec![0, 2], vec![1, 2]], true));
+    assert_eq!(groups(&[rect.clone(), tri.clone()], false), (vec![vec![0, 1]], true));
+    // The grouping is where the parts come from, not their names: a part file the user named
+    // `triangle (flipped)` holding the triangle's mirror image is a second part on the plate
+    // with the triangle, and a library caller that says nothing drops each part alone.
+    let m = tri.mirrored();
+    let named = Part::new(format!("{}{FLIPPED_SUFFIX}", tri.name), m.outline, m.holes).unwrap();
+    assert_eq!(named.name, "triangle (flipped)");
+    assert_eq!(groups(&[tri.clone(), named], false), (vec![vec![0, 1]], true));
+    assert_eq!(plate_groups(2, OnPlate::Alone), (vec![vec![0], vec![1]], false));
+    // An `of` that does not match the parts says nothing either.
+    let f = mirror::faces(&[tri, rect], false);
+    assert_eq!(plate_groups(3, OnPlate::Faces(&f.of)), (vec![vec![0], vec![1], vec![2]], false));
 }
 
 #[test]
@@ -152,4 +169,137 @@ fn a_both_face_feed_plan_is_confirmed_by_simulate_over_the_feed_region() {
         assert_eq!(p["trials"], 100, "{p}");
         assert!(p["success_rate"].as_f64().unwrap() >= 0.95, "{p}");
     }
+}
+
+/// The cantilever's bending mode (the first of the committed six-mode file), a grid mode with
+/// no interior node: added to a plate of straight nodes, it makes the whole-plate check run
+/// while the plans use the straight nodes.
+fn cantilever_bending_entry() -> String {
+    plate_entries("cantilever-6-modes.toml").1.swap_remove(0)
+}
+
+/// A part file for the CLI: `part` as JSON (name and outline).
+fn part_file(tag: &str, p: &Part) -> String {
+    let text = serde_json::json!({"name": p.name, "outline": p.outline}).to_string();
+    write_tmp(tag, &format!("{}.json", p.name.replace(' ', "-")), text)
+}
+
+#[test]
+fn a_part_file_the_user_named_flipped_is_a_part_of_its_own_on_the_plate_with_the_other() {
+    // The triangle and a part file of its mirror image that the user named "triangle
+    // (flipped)": two part files, so the check drops them together, whatever their names. The
+    // plan brings both to the same node crossing, where they block each other. (Planned as the
+    // two faces of the triangle, `--both-faces`, each face is dropped alone and the same plan
+    // holds from all 96 drops:
+    // `a_plan_for_both_faces_is_checked_on_every_face_and_a_face_that_fails_is_named`.)
+    let (head, mut modes) = plate_entries("four-lines.toml");
+    modes.push(cantilever_bending_entry());
+    let plate = write_tmp("whole-named", "plate.toml", head + &modes.concat());
+    let named = part_file("whole-named", &part("triangle.json").mirrored());
+    let tri = ex("parts/triangle.json");
+    let out = chladni(&["plan", &tri, &named, "--plate", &plate, "--refine-rounds", "1", "--json"]);
+    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
+    let j = json(&out);
+    assert_eq!(
+        (j["error"].as_str(), j["together"].as_bool()),
+        (Some("not_whole_plate"), Some(true))
+    );
+    let msg = j["message"].as_str().unwrap();
+    assert!(msg.contains("of 48 random drops of the parts together"), "{msg}");
+}
+
+/// One horizontal straight node across the middle of a `width` × 200 mm plate, and the
+/// cantilever's bending mode stretched over it (there for the check to run).
+fn line_plate_text(width: f64) -> String {
+    let head =
+        format!("[plate]\nname = \"one line, {width} mm\"\nsize_mm = [{width:.1}, 200.0]\n\n");
+    let line = "[[mode]]\nname = \"horizontal\"\nfreq_hz = 60.0\namplitude = 0.8\nfield = \"sign\"\n\
+                node = { kind = \"line\", angle_deg = 0.0, offset_mm = 0.0 }\n\n";
+    head + line + &cantilever_bending_entry()
+}
+
+#[test]
+fn parts_that_hold_alone_can_block_each_other_together_and_hold_where_they_do_not_meet() {
+    // A 12 × 3 mm pin and a 3 × 9 mm peg: one step on the horizontal node lays both along it
+    // (the pin at 0°, the peg at 90°, mod 180°), from anywhere, each alone. Dropped together
+    // (48 random drops, seed 1) on a 300 mm plate, a part reaching the node where the other
+    // already lies stops against it at its drop orientation; on a 1200 mm plate the same drops
+    // spread them far enough apart that none meets the other.
+    let pin =
+        Part::new("pin".into(), vec![[0.0, 0.0], [12.0, 0.0], [12.0, 3.0], [0.0, 3.0]], Vec::new())
+            .unwrap();
+    let peg =
+        Part::new("peg".into(), vec![[0.0, 0.0], [3.0, 0.0], [3.0, 9.0], [0.0, 9.0]], Vec::new())
+            .unwrap();
+    let text = line_plate_text(300.0);
+    let model = PlateModel::parse(&text, "one line").unwrap();
+    let opt = PlanOptions { refine_rounds: 1, ..Default::default() };
+    // The library, told nothing about where the parts come from, drops each alone.
+    let syn =
+        planner::plan_parts(&[pin.clone(), peg.clone()], &model, &opt, &[None, None]).unwrap();
+    let w = syn.whole_plate.as_ref().expect("checked");
+    assert!(!w.together && w.held == w.drops && w.drops == 96, "{w:?}");
+    assert_eq!(syn.steps.len(), 1);
+    let (pin_f, peg_f) = (part_file("whole-pins", &pin), part_file("whole-pins", &peg));
+    let plan = |width: f64| {
+        let plate = write_tmp("whole-pins", &format!("plate-{width}.toml"), line_plate_text(width));
+        chladni(&["plan", &pin_f, &peg_f, "--plate", &plate, "--json"])
+    };
+    // Two part files through the CLI: together, and on 300 mm they block each other.
+    let out = plan(300.0);
+    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
+    let j = json(&out);
+    assert_eq!(
+        (j["error"].as_str(), j["together"].as_bool()),
+        (Some("not_whole_plate"), Some(true))
+    );
+    let failed = j["failed"].as_u64().unwrap();
+    assert!(failed > 0 && failed < 48, "{j}");
+    let msg = j["message"].as_str().unwrap();
+    assert!(msg.contains("random drops of the parts together"), "{msg}");
+    assert!(j["ends"].as_str().unwrap().contains("inside the plate"), "{j}");
+    // On 1200 mm they hold together.
+    let j = ok_json(&plan(1200.0));
+    let w = &j["whole_plate"];
+    assert_eq!(
+        (w["together"].as_bool(), w["drops"].as_u64(), w["held"].as_u64()),
+        (Some(true), Some(96), Some(96)),
+        "{w}"
+    );
+}
+
+#[test]
+fn the_clamp_capture_zone_is_said_up_front_and_its_outside_box_lies_beyond_it() {
+    // The cantilever's bending mode alone (the cheapest plate with a clamp): `plan` warns
+    // before planning, and the JSON (here of the failure: one mode gives no plan) names the
+    // zone and the plate outside it as a `--feed` box.
+    let (head, modes) = plate_entries("cantilever-6-modes.toml");
+    let plate = write_tmp("whole-capture", "plate.toml", head + &modes[0]);
+    let out = chladni(&["plan", &ex("parts/rectangle.json"), "--plate", &plate, "--json"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let j = json(&out);
+    let z = &j["capture_zone"];
+    let warning =
+        stderr.lines().find(|l| l.starts_with("warning: ")).unwrap_or_else(|| panic!("{stderr}"));
+    assert!(warning.contains("(clamped edge x = 0) is the clamp's capture zone"), "{warning}");
+    assert!(warning.contains("drop points of the whole-plate check lie in it"), "{warning}");
+    assert_eq!(z["bands"][0]["edge"], "x = 0", "{z}");
+    let width = z["bands"][0]["width_mm"].as_f64().unwrap();
+    let b = floats(&z["outside_mm"]);
+    // The box lies inside the 300 × 200 mm plate, beyond the band: a part dropped in it is not
+    // in the zone, and the warning's --feed is that box.
+    assert!(
+        b[0] >= width
+            && b[0] < b[2]
+            && b[2] <= 300.0
+            && b[1] >= 0.0
+            && b[1] < b[3]
+            && b[3] <= 200.0,
+        "{z}"
+    );
+    let feed = format!("try --feed {:.0} {:.0} {:.0} {:.0}", b[0], b[1], b[2], b[3]);
+    assert!(warning.ends_with(&feed), "{warning}");
+    let drops_in = z["drops_in"].as_u64().unwrap();
+    assert!(drops_in > 0 && drops_in <= z["drops"].as_u64().unwrap(), "{z}");
+    assert!(warning.contains(&format!(": {drops_in} of the")), "{warning}");
 }

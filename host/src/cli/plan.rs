@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use chladni::model::part::Part;
-use chladni::model::part::mirror::{self, Face, Faces};
+use chladni::model::part::mirror::{self, Face, FaceOf, Faces};
 use chladni::model::plan_file::PlanFile;
 use chladni::model::plate::PlateModel;
 use chladni::motion::montecarlo::{self, Report, Setup, Stats, Trials};
@@ -15,6 +15,7 @@ use chladni::output::write_atomic;
 use chladni::planner::capture::CaptureZone;
 use chladni::planner::collide::EndOverlap;
 use chladni::planner::feed::{self, FeedRegion};
+use chladni::planner::whole::OnPlate;
 use chladni::planner::{self, MapKind, Minimize, PlanFailure, PlanOptions, Synthesis};
 use chladni::plot::plan as plan_plot;
 use chladni_shared::icd::plan::DeviceLimits;
@@ -281,7 +282,7 @@ impl PlanArgs {
         let (zone, in_zone) = if region.is_none() { capture_zone(&parts, &plate) } else { NO_ZONE };
         let with_zone = |j| shapes::capture::with_zone(j, zone.as_ref(), &plate, in_zone);
         let opt = self.plan_options(region, &goals);
-        let syn = match self.synthesize(&parts, &plate, region, &goals) {
+        let syn = match self.synthesize(&parts, &faces.of, &plate, region, &goals) {
             Ok(syn) => syn,
             Err(e) => {
                 if self.json {
@@ -361,11 +362,12 @@ impl PlanArgs {
         }
     }
 
-    /// The plan: over orientation sets (one part or several), or by tracking poses from the
-    /// feed region.
+    /// The plan: over orientation sets (one part or several; `of[i]`: where part `i` comes
+    /// from), or by tracking poses from the feed region.
     fn synthesize(
         &self,
         parts: &[Part],
+        of: &[FaceOf],
         plate: &PlateModel,
         region: Option<FeedRegion>,
         goals: &[Option<f64>],
@@ -380,9 +382,11 @@ impl PlanArgs {
             }
             None => {
                 let bar = LateBar::new(self.json);
-                let syn = planner::plan_parts_progress(parts, plate, &opt, goals, &|w, d, n| {
-                    bar.update(w, d, n)
-                });
+                let on = OnPlate::Faces(of);
+                let syn =
+                    planner::plan_parts_progress(parts, on, plate, &opt, goals, &|w, d, n| {
+                        bar.update(w, d, n)
+                    });
                 bar.finish();
                 syn
             }

@@ -16,6 +16,7 @@ use crate::motion::sim::{self, Body, FieldModel, Pose};
 
 use super::position::{self, POSITION_TOL_MM};
 use super::search::{Minimize, Path, Reach, Search, State, Target};
+use super::whole::OnPlate;
 use super::{
     PlanFailure, PlanOptions, PlannedStep, Problem, Progress, Settle, Synthesis, cdist,
     confirm_any, deadline, settle_time, slowest_settled, start_points, step_duration_ms,
@@ -110,19 +111,24 @@ impl Durations<'_> {
 }
 
 /// The plan for several parts at once (one for a single part): one sequence that brings each
-/// part to one orientation of its own, `goals[i]` for part `i` when given.
+/// part to one orientation of its own, `goals[i]` for part `i` when given. The whole-plate
+/// check drops each part alone ([`OnPlate::Alone`]); [`plan_parts_progress`] takes where the
+/// parts come from.
 pub fn plan_parts(
     parts: &[Part],
     plate: &PlateModel,
     opt: &PlanOptions,
     goals: &[Option<f64>],
 ) -> Result<Synthesis, PlanFailure> {
-    plan_parts_progress(parts, plate, opt, goals, &|_, _, _| {})
+    plan_parts_progress(parts, OnPlate::Alone, plate, opt, goals, &|_, _, _| {})
 }
 
-/// [`plan_parts`], calling `progress` as the maps are made (and made again for the fallback).
+/// [`plan_parts`] of `parts` that lie on the plate as `on` says (the faces of given part
+/// files: [`OnPlate::Faces`], as `chladni plan` plans them), calling `progress` as the maps
+/// are made (and made again for the fallback).
 pub fn plan_parts_progress(
     parts: &[Part],
+    on: OnPlate<'_>,
     plate: &PlateModel,
     opt: &PlanOptions,
     goals: &[Option<f64>],
@@ -136,7 +142,7 @@ pub fn plan_parts_progress(
     // Whole-plate plans on grid modes are refined by the drops they do not hold from.
     let plan =
         |problems: &[Problem]| planned_or_fallback(&parts, plate, opt, problems, goals, progress);
-    super::whole::refined(&parts, plate, opt, problems, &plan)
+    super::whole::refined(&parts, on, plate, opt, problems, &plan)
 }
 
 /// [`plan_parts_with`] over `problems`, then over the [`super::fallback`] maps when that gives

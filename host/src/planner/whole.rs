@@ -7,7 +7,8 @@
 //! part that flips is a part here): one part, or the faces of one part (never on the plate
 //! together), alone from a fixed grid of drop points over the whole plate ([`drops`]); parts
 //! of several part files together, with contacts, from as many seeded random drops
-//! ([`TOGETHER_SEED`]). The drop points whose runs end elsewhere become extra start points of
+//! ([`TOGETHER_SEED`]). Which planned parts come from which part file the caller says
+//! ([`OnPlate`]): the planner does not guess it from names or outlines. The drop points whose runs end elsewhere become extra start points of
 //! that part's maps of the plan's grid modes, and the search runs again, at most
 //! [`PlanOptions::refine_rounds`] times. The answer is a plan confirmed from every drop of
 //! every part or [`PlanFailure::NotWholePlate`] for the part that fails most: which share of
@@ -20,7 +21,7 @@ use super::maps::{on_plate_edge, sampled_map_from};
 use super::{PlanFailure, PlanOptions, Problem, Synthesis, deadline};
 use crate::model::angle::cdist;
 use crate::model::part::Part;
-use crate::model::part::mirror::FLIPPED_SUFFIX;
+use crate::model::part::mirror::{Face, FaceOf};
 use crate::model::plate::{Node, PlateModel};
 use crate::motion::bulk::{Drop, run_drops};
 use crate::motion::shape::Pieces;
@@ -43,9 +44,10 @@ pub const TOGETHER_SEED: u64 = 1;
 /// Why no plan holds over the whole plate ([`PlanFailure::NotWholePlate`]).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error(
-        "{part}: no plan holds over the whole plate: of {drops} drops on a grid over the \
-         plate, {failed} ({:.0} %) end elsewhere ({ends}), from x {:.0}–{:.0} mm, y {:.0}–{:.0} \
-         mm, after {rounds} of at most {max_rounds} refinement rounds (--refine-rounds){}{}",
+        "{part}: no plan holds over the whole plate: of {drops} {}, {failed} ({:.0} %) end \
+         elsewhere ({ends}), from x {:.0}–{:.0} mm, y {:.0}–{:.0} mm, after {rounds} of at most \
+         {max_rounds} refinement rounds (--refine-rounds){}{}",
+        drops_how(self.together),
         100.0 * self.failed as f64 / self.drops.max(1) as f64,
         self.region_mm[0], self.region_mm[2], self.region_mm[1], self.region_mm[3],
         self.capture.as_ref().map(|c| format!("; {c}")).unwrap_or_default(),
@@ -73,6 +75,15 @@ pub struct NotWhole {
     /// The clamp's capture zone and how many of the failed drops lie in it
     /// ([`super::capture`]; `None`: the plate has none).
     pub capture: Option<super::capture::InZone>,
+    /// Whether the drops were those of the parts together (parts of several files, contacts
+    /// between them: random drops, [`TOGETHER_SEED`]) rather than the part alone on the grid
+    /// of [`drops`].
+    pub together: bool,
+}
+
+/// What the drops were, after their count: the grid of [`drops`] or the parts together.
+fn drops_how(together: bool) -> &'static str {
+    if together { "random drops of the parts together" } else { "drops on a grid over the plate" }
 }
 
 /// How a drop that the plan does not hold from ended.
@@ -148,11 +159,7 @@ impl WholePlate {
                     `chladni simulate` drops them and says so"
                 .into();
         }
-        let how = if self.together {
-            "random drops of the parts together"
-        } else {
-            "drops on a grid over the plate"
-        };
+        let how = drops_how(self.together);
         let per = if self.parts.len() > 1 {
             let each: Vec<String> =
                 self.parts.iter().map(|p| format!("{} {}/{}", p.name, p.held, p.drops)).collect();
@@ -174,6 +181,8 @@ pub struct PartDrops {
     pub drops: usize,
     /// The failed ones.
     pub failed: Failed,
+    /// Where every drop started (mm), held or not.
+    pub starts: Vec<[f64; 2]>,
 }
 
 /// The drops a plan does not hold from: (drop point, start orientation deg, how it ended).
@@ -238,48 +247,59 @@ fn check_alone(
             held(body, plate, e, false, pred).map(|end| (p, th, end))
         })
         .collect();
-    PartDrops { drops: all.len(), failed }
+    PartDrops { drops: all.len(), failed, starts: all.iter().map(|d| d.0).collect() }
 }
 
-/// Which parts of `parts` lie on the plate at once, and whether any do: a part followed by
-/// its mirror image ([`Part::mirrored`], as `plan` lists a part that flips) is one part on
-/// two faces, never on the plate together. Parts of one part file run alone (one group each);
-/// parts of several files are dropped together, as `chladni simulate` drops them: a group of
-/// every face-up entry and, when a part flips, one with its flipped faces instead.
-pub fn plate_groups(parts: &[&Part]) -> (Vec<Vec<usize>>, bool) {
-    let flip = |j: usize| {
-        j > 0 && parts[j].name == format!("{}{FLIPPED_SUFFIX}", parts[j - 1].name) && {
-            let m = parts[j - 1].mirrored();
-            m.outline == parts[j].outline && m.holes == parts[j].holes
-        }
-    };
-    let flipped: Vec<bool> = (0..parts.len()).map(flip).collect();
-    let sources = flipped.iter().filter(|&&f| !f).count();
-    if sources < 2 {
-        return ((0..parts.len()).map(|i| vec![i]).collect(), false);
+/// Which of a plan's parts lie on the plate at once in the whole-plate check: what the caller
+/// knows of where each planned part comes from. `chladni plan` knows it ([`Faces::of`]); the
+/// planner does not guess it (a part the user named `x (flipped)` is a part of its own).
+///
+/// [`Faces::of`]: crate::model::part::mirror::Faces::of
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub enum OnPlate<'a> {
+    /// Each part alone on the plate, from the grid of [`drops`]: one part, or a library caller
+    /// that plans parts without saying where they come from.
+    #[default]
+    Alone,
+    /// `of[i]`: the part file and face planned part `i` comes from, one entry per part
+    /// ([`crate::model::part::mirror::faces`]); an `of` of another length than the parts says
+    /// nothing, as [`OnPlate::Alone`].
+    Faces(&'a [FaceOf]),
+}
+
+/// Which of `n` planned parts lie on the plate at once, and whether any do ([`OnPlate`]). The
+/// faces of one part file are never on the plate together, so parts of one file run alone
+/// (one group each); parts of several files are dropped together, as `chladni simulate` drops
+/// them: a group of every face-up entry and, when a part flips, one with its flipped faces
+/// instead.
+pub fn plate_groups(n: usize, on: OnPlate<'_>) -> (Vec<Vec<usize>>, bool) {
+    let alone = || ((0..n).map(|i| vec![i]).collect(), false);
+    let OnPlate::Faces(of) = on else { return alone() };
+    if of.len() != n || of.iter().all(|o| o.source == of[0].source) {
+        return alone();
     }
-    let up: Vec<usize> = (0..parts.len()).filter(|&i| !flipped[i]).collect();
+    let up: Vec<usize> = (0..n).filter(|&i| of[i].face != Some(Face::Flipped)).collect();
     let mut groups = vec![up];
-    if flipped.iter().any(|&f| f) {
-        let has_flip = |i: usize| flipped.get(i + 1).copied().unwrap_or(false);
-        groups.push((0..parts.len()).filter(|&i| !has_flip(i)).collect());
+    if of.iter().any(|o| o.face == Some(Face::Flipped)) {
+        groups.push((0..n).filter(|&i| of[i].face != Some(Face::Up)).collect());
     }
     (groups, true)
 }
 
-/// Every part of `syn` dropped over the plate as [`plate_groups`] puts them (`bodies[i]` of
-/// `parts[i]`): each part's drops and failures; `None` when parts of a group do not fit on
-/// the plate together.
+/// Every part of `syn` (`bodies[i]` the body of planned part `i`) dropped over the plate as
+/// [`plate_groups`] puts them: each part's drops and failures, and whether they were dropped
+/// together; `None` when parts of a group do not fit on the plate together.
 pub fn check_parts(
-    parts: &[&Part],
     bodies: &[Body],
+    on: OnPlate<'_>,
     plate: &PlateModel,
     syn: &Synthesis,
 ) -> Option<(Vec<PartDrops>, bool)> {
     let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
     let steps = syn.sim_steps();
-    let (groups, together) = plate_groups(parts);
-    let mut out = vec![PartDrops { drops: 0, failed: Vec::new() }; parts.len()];
+    let (groups, together) = plate_groups(bodies.len(), on);
+    let mut out =
+        vec![PartDrops { drops: 0, failed: Vec::new(), starts: Vec::new() }; bodies.len()];
     for group in groups {
         if !together {
             let i = group[0];
@@ -297,6 +317,7 @@ pub fn check_parts(
             let pred = syn.predicted(i);
             let o = &mut out[i];
             o.drops += t.finals.len();
+            o.starts.extend(t.starts.iter().map(|q| [q.x, q.y]));
             for ((q, e), &lost) in t.starts.iter().zip(&t.finals).zip(&t.lost) {
                 if let Some(end) = held(&bodies[i], plate, *e, lost, pred) {
                     o.failed.push(([q.x, q.y], q.theta.to_degrees(), end));
@@ -323,10 +344,11 @@ fn ending(body: &Body, plate: &PlateModel, e: Pose, off: bool) -> DropEnd {
 }
 
 /// Plans with `plan` over `problems` and refines whole-plate plans on grid modes by
-/// counterexamples (see the module doc); other plans (a feed region, no grid mode,
-/// `refine_rounds` 0) are returned as `plan` gives them.
+/// counterexamples (see the module doc), the parts on the plate as `on` says; other plans (a
+/// feed region, no grid mode, `refine_rounds` 0) are returned as `plan` gives them.
 pub(super) fn refined(
     parts: &[&Part],
+    on: OnPlate<'_>,
     plate: &PlateModel,
     opt: &PlanOptions,
     mut problems: Vec<Problem>,
@@ -344,7 +366,7 @@ pub(super) fn refined(
         deadline::check(opt.deadline, || {
             format!("{}: whole-plate check, round {round}", names(parts))
         })?;
-        let Some((checked, together)) = check_parts(parts, &bodies, plate, &syn) else {
+        let Some((checked, together)) = check_parts(&bodies, on, plate, &syn) else {
             syn.whole_plate = Some(unchecked());
             return Ok(syn);
         };
@@ -356,7 +378,8 @@ pub(super) fn refined(
         let worst = (0..parts.len()).max_by_key(|&i| checked[i].failed.len()).unwrap_or(0);
         let fail = |round| {
             let c = &checked[worst];
-            not_whole(parts[worst], plate, &bodies[worst], c.drops, &c.failed, round, opt)
+            let n = not_whole(parts[worst], plate, &bodies[worst], c, round, opt);
+            PlanFailure::NotWholePlate(Box::new(NotWhole { together, ..n }))
         };
         let mut modes: Vec<usize> = syn.steps.iter().map(|s| s.mode).filter(|&k| grid(k)).collect();
         modes.sort_unstable();
@@ -456,16 +479,17 @@ fn learn(extra: &mut [Vec<[f64; 2]>], modes: &[usize], failed: &Failed) -> bool 
 }
 
 /// The failure after the last round: the share of the drops held, where the others lie and
-/// how they ended, and the largest block of drop cells the plan held from as a feed region.
+/// how they ended, and the largest block of drop cells the plan held from as a feed region
+/// (the drops of the part alone; [`NotWhole::together`] is the caller's).
 fn not_whole(
     part: &Part,
     plate: &PlateModel,
     body: &Body,
-    drops: usize,
-    failed: &Failed,
+    c: &PartDrops,
     rounds: usize,
     opt: &PlanOptions,
-) -> PlanFailure {
+) -> NotWhole {
+    let (drops, failed) = (c.drops, &c.failed);
     let count = |f: &dyn Fn(DropEnd) -> bool| failed.iter().filter(|d| f(d.2)).count();
     let mut ends = Vec::new();
     for edge in [PlateEdge::Left, PlateEdge::Right, PlateEdge::Bottom, PlateEdge::Top] {
@@ -493,7 +517,7 @@ fn not_whole(
     };
     let (sx, sy) = (span(&mut xs.clone()), span(&mut ys.clone()));
     let zone = super::capture::zone(plate, body.radius);
-    let mut feed_mm = held_block(body, plate, failed);
+    let mut feed_mm = held_block(body, plate, &c.starts, failed);
     if let Some(z) = &zone {
         feed_mm = feed_mm.and_then(|b| z.clip(plate, b));
     }
@@ -501,7 +525,7 @@ fn not_whole(
         let failed_in = failed.iter().filter(|d| z.contains(plate, d.0)).count();
         super::capture::InZone::new(z, plate, failed_in, failed.len())
     });
-    PlanFailure::NotWholePlate(Box::new(NotWhole {
+    NotWhole {
         part: part.name.clone(),
         drops,
         failed: failed.len(),
@@ -511,12 +535,19 @@ fn not_whole(
         max_rounds: opt.refine_rounds,
         feed_mm,
         capture,
-    }))
+        together: false,
+    }
 }
 
-/// The largest rectangle of [`DROP_GRID`] cells with no failed drop (mm: x0, y0, x1, y1),
-/// if any cell held.
-fn held_block(body: &Body, plate: &PlateModel, failed: &Failed) -> Option<[f64; 4]> {
+/// The largest rectangle of [`DROP_GRID`] cells each holding a drop (of `starts`) and no failed
+/// drop (mm: x0, y0, x1, y1), if any cell held: random drops (the parts together) can leave a
+/// cell empty, and a cell no drop started in is not one the plan held from.
+fn held_block(
+    body: &Body,
+    plate: &PlateModel,
+    starts: &[[f64; 2]],
+    failed: &Failed,
+) -> Option<[f64; 4]> {
     let [nx, ny] = DROP_GRID;
     let [w, h] = plate.size_mm;
     let cell = |p: [f64; 2]| {
@@ -525,13 +556,14 @@ fn held_block(body: &Body, plate: &PlateModel, failed: &Failed) -> Option<[f64; 
         (i, j)
     };
     let bad: Vec<(usize, usize)> = failed.iter().map(|d| cell(d.0)).collect();
+    let tried: Vec<(usize, usize)> = starts.iter().map(|&p| cell(p)).collect();
+    let held = |i: usize, j: usize| tried.contains(&(i, j)) && !bad.contains(&(i, j));
     let mut best: Option<(usize, [usize; 4])> = None;
     for i0 in 0..nx {
         for i1 in i0..nx {
             for j0 in 0..ny {
                 for j1 in j0..ny {
-                    let clean =
-                        !bad.iter().any(|&(i, j)| (i0..=i1).contains(&i) && (j0..=j1).contains(&j));
+                    let clean = (i0..=i1).all(|i| (j0..=j1).all(|j| held(i, j)));
                     let area = (i1 - i0 + 1) * (j1 - j0 + 1);
                     if clean && best.is_none_or(|b| area > b.0) {
                         best = Some((area, [i0, j0, i1, j1]));
@@ -582,12 +614,20 @@ mod tests {
             ([25.0, 25.0], 0.0, DropEnd::Edge(PlateEdge::Left)),
             ([25.0, 175.0], 0.0, DropEnd::Interior),
         ];
-        let f = held_block(&b, &p, &failed).unwrap();
+        let starts: Vec<[f64; 2]> = drops(&b, &p).iter().map(|d| d.0).collect();
+        let f = held_block(&b, &p, &starts, &failed).unwrap();
         assert_eq!(f, [50.0, b.radius, 300.0 - b.radius, 200.0 - b.radius]);
-        assert_eq!(held_block(&b, &p, &Vec::new()).unwrap()[0], b.radius);
+        assert_eq!(held_block(&b, &p, &starts, &Vec::new()).unwrap()[0], b.radius);
         // One failure in every cell: no block.
         let all: Failed = drops(&b, &p).into_iter().map(|(q, t)| (q, t, DropEnd::Lost)).collect();
-        assert!(held_block(&b, &p, &all).is_none());
+        assert!(held_block(&b, &p, &starts, &all).is_none());
+        // A cell no drop started in is not held: drops in the last column only, every one
+        // failed but one, give that one's cell, not the empty rest of the plate.
+        let last: Vec<[f64; 2]> = starts.iter().copied().filter(|q| q[0] > 250.0).collect();
+        let failed: Failed =
+            last.iter().filter(|&&q| q != last[0]).map(|&q| (q, 0.0, DropEnd::Interior)).collect();
+        let f = held_block(&b, &p, &last, &failed).unwrap();
+        assert_eq!(f, [250.0, b.radius, 300.0 - b.radius, 50.0]);
     }
 
     #[test]

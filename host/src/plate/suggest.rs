@@ -461,6 +461,7 @@ mod tests {
             max_rounds: 3,
             feed_mm: Some([33.3, 20.6, 100.0, 100.0]),
             capture: None,
+            together: false,
         };
         let message = PlanFailure::NotWholePlate(Box::new(n.clone())).to_string();
         let got = outcome(Err(PlanFailure::NotWholePlate(Box::new(n))));

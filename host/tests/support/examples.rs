@@ -66,3 +66,13 @@ pub fn line_grid_plate(angles: &[f64], gain_right: f64) -> PlateModel {
         .collect();
     plate
 }
+
+/// The text of `examples/plates/NAME` split at its `[[mode]]` entries: what comes before the
+/// first (the `[plate]` table) and each entry from its `[[mode]]` line, to write plate files
+/// made of the examples' modes.
+pub fn plate_entries(name: &str) -> (String, Vec<String>) {
+    let text = std::fs::read_to_string(root().join("examples/plates").join(name)).unwrap();
+    let mut pieces = text.split("\n[[mode]]");
+    let head = pieces.next().unwrap_or_default().to_string() + "\n";
+    (head, pieces.map(|e| format!("[[mode]]{e}\n")).collect())
+}
