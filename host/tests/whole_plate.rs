@@ -198,14 +198,22 @@ fn a_part_file_the_user_named_flipped_is_a_part_of_its_own_on_the_plate_with_the
     let named = part_file("whole-named", &part("triangle.json").mirrored());
     let tri = ex("parts/triangle.json");
     let out = chladni(&["plan", &tri, &named, "--plate", &plate, "--refine-rounds", "1", "--json"]);
+    let j = together_failure(&out);
+    assert!(j["message"].as_str().unwrap().contains("of 48 random drops"), "{j}");
+}
+
+/// The `--json` failure of a `plan` whose parts of several files block each other on the
+/// plate: `not_whole_plate` of the together drops, exit 1.
+fn together_failure(out: &std::process::Output) -> serde_json::Value {
     assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
-    let j = json(&out);
+    let j = json(out);
     assert_eq!(
         (j["error"].as_str(), j["together"].as_bool()),
         (Some("not_whole_plate"), Some(true))
     );
     let msg = j["message"].as_str().unwrap();
-    assert!(msg.contains("of 48 random drops of the parts together"), "{msg}");
+    assert!(msg.contains("random drops of the parts together"), "{msg}");
+    j
 }
 
 /// One horizontal straight node across the middle of a `width` × 200 mm plate, and the
@@ -246,17 +254,9 @@ fn parts_that_hold_alone_can_block_each_other_together_and_hold_where_they_do_no
         chladni(&["plan", &pin_f, &peg_f, "--plate", &plate, "--json"])
     };
     // Two part files through the CLI: together, and on 300 mm they block each other.
-    let out = plan(300.0);
-    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
-    let j = json(&out);
-    assert_eq!(
-        (j["error"].as_str(), j["together"].as_bool()),
-        (Some("not_whole_plate"), Some(true))
-    );
+    let j = together_failure(&plan(300.0));
     let failed = j["failed"].as_u64().unwrap();
     assert!(failed > 0 && failed < 48, "{j}");
-    let msg = j["message"].as_str().unwrap();
-    assert!(msg.contains("random drops of the parts together"), "{msg}");
     assert!(j["ends"].as_str().unwrap().contains("inside the plate"), "{j}");
     // On 1200 mm they hold together.
     let j = ok_json(&plan(1200.0));
