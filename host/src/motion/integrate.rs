@@ -150,6 +150,19 @@ pub fn run_while(
     start: Pose,
     go: &dyn Fn() -> bool,
 ) -> Option<Run> {
+    run_stuck_after(body, field, p, start, go, STUCK_STEPS)
+}
+
+/// [`run_while`] ending a run after `stuck_steps` consecutive steps that move the part only
+/// by rounding (`usize::MAX`: never; the tests compare the two).
+fn run_stuck_after(
+    body: &Body,
+    field: &FieldModel,
+    p: SimParams,
+    start: Pose,
+    go: &dyn Fn() -> bool,
+    stuck_steps: usize,
+) -> Option<Run> {
     let r = body.radius.max(1e-6);
     let t0 = r / (p.speed * field.max_gain().max(1e-9));
     // Curved nodes let a part creep slowly along them: a creep below 10⁻³ R per T0 counts as rest.
@@ -163,6 +176,7 @@ pub fn run_while(
     let mut v0 = flow.vel(pose);
     let mut rested = false;
     let mut steps = 0;
+    let mut stuck = 0;
     while t < p.t_limit && steps < 20_000 && !lost {
         if steps % GO_EVERY == 0 && !go() {
             return None;
@@ -185,6 +199,13 @@ pub fn run_while(
             rested = true;
             break;
         }
+        stuck = if moved_by_rounding(pose, next, r) { stuck + 1 } else { 0 };
+        if stuck >= stuck_steps {
+            // The step has collapsed to the rounding scale (a contact switching on and off
+            // within an ulp): the run cannot advance; it ends where it is, not at rest, as it
+            // would at the step cap, with the pose moved by ~1e-13 mm per remaining step.
+            break;
+        }
         dt_next = dt_after;
         t += dt;
         pose = next;
@@ -198,6 +219,20 @@ pub fn run_while(
     }
     let settle = settle_time(&trace, pose, 0.02 * r / t0);
     Some(Run { pose, settle_s: settle, t_end: t, trace, rested, steps, lost })
+}
+
+/// Consecutive steps that move the part only by rounding ([`moved_by_rounding`]) after which
+/// [`run_while`] ends the run, not at rest: such a run would otherwise creep by one ulp per
+/// step to the 20 000-step cap (measured: runs pushed along a wall on the cantilever's grid
+/// modes, 3 Heun evaluations per step, steps of 10⁻¹⁵ T₀; docs/plan.md, "Planning time").
+pub const STUCK_STEPS: usize = 64;
+
+/// Did a step from `a` to `b` move a part of radius `r` by no more than rounding (10⁻⁹ R in
+/// position and 10⁻⁹ rad)? A run still coming to rest moves ≥ 10⁻⁶ R per step (speed above
+/// the rest tolerance 10⁻³ R/T₀) takes steps that grow by up to 2× each when accepted, so
+/// it never stays 64 steps at the rounding scale.
+fn moved_by_rounding(a: Pose, b: Pose, r: f64) -> bool {
+    (b.x - a.x).hypot(b.y - a.y) <= 1e-9 * r && (b.theta - a.theta).abs() <= 1e-9
 }
 
 /// Settle time: the last time the part was still moving across its node (speed above
@@ -219,8 +254,49 @@ fn settle_time(trace: &[(f64, Pose)], end: Pose, v_move: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::model::grid::Grid;
+    use crate::model::part::Part;
     use crate::model::plate::Node;
+    use crate::model::plate::PlateModel;
     use crate::motion::testkit::{mode, plate, rect};
+
+    #[test]
+    fn a_run_stuck_at_the_rounding_scale_ends_where_the_step_cap_would_end_it() {
+        // The crank lever on the cantilever's first solver mode, dropped at the inset corner:
+        // pushed along the bottom wall, the step collapses to 10⁻¹⁵ T₀ (a contact switching
+        // within an ulp) and, without the stop, creeps one ulp per step to the step cap.
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let part = Part::load(&dir.join("examples/parts/ordinary/crank-lever.json")).unwrap();
+        let plate = PlateModel::load(&dir.join("examples/plates/cantilever-6-modes.toml")).unwrap();
+        let body = Body::with_samples(&part, 160);
+        let mode = &plate.modes[0];
+        let f = FieldModel::new(mode, &plate);
+        let rim = Rim::of(&plate);
+        let t0 = body.radius / (mode.speed_mm_s * f.max_gain());
+        let p = SimParams {
+            speed: mode.speed_mm_s,
+            t_limit: 5e3 * t0,
+            run_to_limit: false,
+            rim: Some(rim),
+        };
+        let start = rim.project(&body, Pose { x: 264.87, y: 35.13, theta: 65.2f64.to_radians() });
+        let run = |n| run_stuck_after(&body, &f, p, start, &|| true, n).unwrap();
+        let (cut, full) = (run(STUCK_STEPS), run(usize::MAX));
+        eprintln!(
+            "stuck: {} steps (t {:.3e} s) against {} (t {:.3e} s)",
+            cut.steps, cut.t_end, full.steps, full.t_end
+        );
+        assert_eq!(full.steps, 20_000, "the case no longer gets stuck: choose another");
+        assert!(cut.steps < 2_000, "{}", cut.steps);
+        assert!(!cut.rested && !full.rested && !cut.lost && !full.lost);
+        let d = (cut.pose.x - full.pose.x).hypot(cut.pose.y - full.pose.y);
+        assert!(
+            d < 1e-6 && (cut.pose.theta - full.pose.theta).abs() < 1e-9,
+            "{:?} {:?}",
+            cut.pose,
+            full.pose
+        );
+        assert!((cut.settle_s - full.settle_s).abs() < 1e-9 * t0);
+    }
 
     #[test]
     fn a_symmetric_part_turned_by_its_symmetry_runs_the_same() {
