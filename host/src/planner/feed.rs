@@ -42,6 +42,9 @@ use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
 
 pub use crate::model::feed_region::{FeedError, FeedRegion};
 
+mod twins;
+use twins::twins;
+
 /// The feed-region search's default most steps (`plan --max-steps`).
 pub const DEPTH: usize = 4;
 
@@ -61,11 +64,15 @@ pub struct FeedSearch {
     pub tol_deg: f64,
     /// Most sequences of the shortest length confirmed.
     pub candidates: usize,
+    /// Refinement rounds: when every candidate of a depth fails the check, the checked starts
+    /// that ended off are added to the tracked starts and the search runs again (runs stay
+    /// memoised), at most this many times.
+    pub refine: usize,
 }
 
 impl Default for FeedSearch {
     fn default() -> Self {
-        FeedSearch { depth: DEPTH, points: 3, starts: 24, tol_deg: 2.0, candidates: 8 }
+        FeedSearch { depth: DEPTH, points: 3, starts: 24, tol_deg: 2.0, candidates: 8, refine: 2 }
     }
 }
 
@@ -565,59 +572,142 @@ pub fn plan_parts(
     let verify = tag(&|b| interleaved_starts(region, b, plate, &s));
     let names: Vec<&str> = parts.iter().map(|p| p.name.as_str()).collect();
     let tracker = Tracker::new(bodies, plate, periods);
-    let deadline = opt.deadline;
-    let mut search = Search { tracker, deadline, seen: HashSet::new(), tally: Tally::default() };
-    let mut level = vec![Node { seq: Vec::new(), poses: starts.clone() }];
-    let mut rejected = Vec::new();
-    // The depth after which no sequence left a pose set not seen before: longer ones add
-    // nothing, whatever the bound.
-    let mut exhausted = None;
-    for depth in 1..=s.depth {
-        super::deadline::check(opt.deadline, || {
-            format!("the feed-region search, {depth}-step sequences")
-        })?;
-        bar.set_length((level.len() * plate.modes.len()) as u64);
-        bar.set_position(0);
-        bar.set_message(format!("feed plan: {depth}-step sequences"));
-        let (next, found) = search.expand(&level, (s.tol_deg, depth), bar)?;
-        let t = &mut search.tracker;
-        // Durations first (every start tracked), then the check from the interleaved starts
-        // in order of total duration: the first confirmed is the fastest, and slower ones
-        // need no check. Rejections are listed in the order the search found them.
-        let mut why: Vec<(usize, String)> = Vec::new();
-        let mut drafts: Vec<(usize, Draft)> = Vec::new();
-        for (i, cand) in found.iter().take(s.candidates).enumerate() {
-            match track(t, &cand.seq, &starts, (opt, &names)) {
-                Ok(d) => drafts.push((i, d)),
-                Err(e) => why.push((i, e)),
-            }
-        }
-        drafts.sort_by_key(|(i, d)| (d.total_ms(), *i));
-        let mut best = None;
-        for (i, d) in drafts {
-            match check(t, d, (region, &starts, &verify), (opt, &names)) {
-                Ok(syn) => {
-                    best = Some(syn);
-                    break;
+    let mut search =
+        Search { tracker, deadline: opt.deadline, seen: HashSet::new(), tally: Tally::default() };
+    let (mut starts, mut rejected) = (starts, Vec::new());
+    for round in 0..=s.refine {
+        let rounds = (round, s.refine);
+        match search.levels(&starts, &verify, (opt, region, &names), rounds, bar)? {
+            Round::Plan(mut syn) => {
+                if let Some(f) = syn.feed.as_mut() {
+                    f.rejected += rejected.len();
                 }
-                Err(e) => why.push((i, e)),
+                return Ok(*syn);
             }
-        }
-        why.sort_by_key(|w| w.0);
-        rejected.extend(why.into_iter().map(|w| w.1));
-        if let Some(mut syn) = best {
-            if let Some(f) = syn.feed.as_mut() {
-                f.rejected = rejected.len();
+            Round::Refine(why, off) => {
+                // The check found starts the tracked ones missed (a basin boundary between
+                // them): track those too and search again; memoised runs are reused.
+                rejected.extend(why);
+                starts.extend(off);
+                search.seen.clear();
+                search.tally = Tally::default();
             }
-            return Ok(syn);
-        }
-        level = next;
-        if level.is_empty() {
-            exhausted = Some(depth);
-            break;
+            Round::Fail(why, bound) => {
+                rejected.extend(why);
+                let twins = twins(&mut search, &starts);
+                return Err(failure(&search, &rejected, bound, &names, twins.as_deref()));
+            }
         }
     }
-    Err(failure(&search, &rejected, Bound { depth: s.depth, exhausted }, &names))
+    unreachable!("the last round never refines")
+}
+
+/// Most starts one refinement round adds (those of the first failing batch of the check).
+const REFINE_STARTS: usize = 16;
+
+/// How one search over the tracked starts ended.
+enum Round {
+    /// A confirmed plan.
+    Plan(Box<Synthesis>),
+    /// Candidates failed the check: the rejections and the checked starts that ended off.
+    Refine(Vec<String>, Vec<Tagged>),
+    /// No plan: the rejections and how far the search went.
+    Fail(Vec<String>, Bound),
+}
+
+impl Search<'_> {
+    /// Breadth-first over the depths from `starts`: the first depth with a confirmed candidate
+    /// gives the plan; a depth whose candidates all fail the check ends the round with the
+    /// starts that ended off when refinement rounds are left (`rounds`: this one, the most).
+    fn levels(
+        &mut self,
+        starts: &[Tagged],
+        verify: &[Tagged],
+        (opt, region, names): (&PlanOptions, &FeedRegion, &[&str]),
+        rounds: (usize, usize),
+        bar: &ProgressBar,
+    ) -> Result<Round, PlanFailure> {
+        let s = opt.feed_search;
+        let nm = self.tracker.sim.plate.modes.len();
+        let mut level = vec![Node { seq: Vec::new(), poses: starts.to_vec() }];
+        let mut rejected = Vec::new();
+        for depth in 1..=s.depth {
+            super::deadline::check(opt.deadline, || {
+                format!("the feed-region search, {depth}-step sequences")
+            })?;
+            bar.set_length((level.len() * nm) as u64);
+            bar.set_position(0);
+            bar.set_message(if rounds.0 == 0 {
+                format!("feed plan: {depth}-step sequences")
+            } else {
+                format!(
+                    "feed plan: {depth}-step sequences (refined {}, {} starts)",
+                    rounds.0,
+                    starts.len()
+                )
+            });
+            let (next, found) = self.expand(&level, (s.tol_deg, depth), bar)?;
+            let (best, why, off) =
+                confirm(&mut self.tracker, &found, (starts, verify), (opt, region, names));
+            rejected.extend(why);
+            if let Some(syn) = best {
+                let mut syn = syn;
+                if let Some(f) = syn.feed.as_mut() {
+                    f.rejected = rejected.len();
+                }
+                return Ok(Round::Plan(Box::new(syn)));
+            }
+            if !off.is_empty() && rounds.0 < rounds.1 {
+                return Ok(Round::Refine(rejected, off));
+            }
+            level = next;
+            if level.is_empty() {
+                return Ok(Round::Fail(rejected, Bound { depth: s.depth, exhausted: Some(depth) }));
+            }
+        }
+        Ok(Round::Fail(rejected, Bound { depth: s.depth, exhausted: None }))
+    }
+}
+
+/// The candidates of one depth: durations first (every start tracked), then the check from
+/// the interleaved starts in order of total duration: the first confirmed is the fastest, and
+/// slower ones need no check. Returns the plan, the rejections in the order the search found
+/// them, and the checked starts that ended off (first failing batch of each, at most
+/// [`REFINE_STARTS`] in all).
+fn confirm(
+    t: &mut Tracker,
+    found: &[Node],
+    (starts, verify): (&[Tagged], &[Tagged]),
+    (opt, region, names): (&PlanOptions, &FeedRegion, &[&str]),
+) -> (Option<Synthesis>, Vec<String>, Vec<Tagged>) {
+    let mut why: Vec<(usize, String)> = Vec::new();
+    let mut drafts: Vec<(usize, Draft)> = Vec::new();
+    for (i, cand) in found.iter().take(opt.feed_search.candidates).enumerate() {
+        match track(t, &cand.seq, starts, (opt, names)) {
+            Ok(d) => drafts.push((i, d)),
+            Err(e) => why.push((i, e)),
+        }
+    }
+    drafts.sort_by_key(|(i, d)| (d.total_ms(), *i));
+    let (mut best, mut off) = (None, Vec::new());
+    for (i, d) in drafts {
+        match check(t, d, (region, starts, verify), (opt, names)) {
+            Ok(syn) => {
+                best = Some(syn);
+                break;
+            }
+            Err((e, bad)) => {
+                why.push((i, e));
+                for q in bad {
+                    if off.len() < REFINE_STARTS && !off.contains(&q) && !starts.contains(&q) {
+                        off.push(q);
+                    }
+                }
+            }
+        }
+    }
+    why.sort_by_key(|w| w.0);
+    (best, why.into_iter().map(|w| w.1).collect(), off)
 }
 
 /// `1 mode`, `4 modes`.
@@ -657,7 +747,13 @@ impl Bound {
 /// check), [`PlanFailure::NoPlan`] with [`explain`]; for several, the parts the closest
 /// sequence leaves with several orientations ([`PlanFailure::PartsApart`], naming the face
 /// that does not get there).
-fn failure(search: &Search, rejected: &[String], bound: Bound, names: &[&str]) -> PlanFailure {
+fn failure(
+    search: &Search,
+    rejected: &[String],
+    bound: Bound,
+    names: &[&str],
+    twins: Option<&str>,
+) -> PlanFailure {
     let periods = &search.tracker.sim.periods;
     let t = &search.tally;
     if names.len() > 1
@@ -676,10 +772,17 @@ fn failure(search: &Search, rejected: &[String], bound: Bound, names: &[&str]) -
             };
         }
     }
-    PlanFailure::NoPlan(explain(t, rejected, bound, periods[0], names))
+    PlanFailure::NoPlan(explain(t, rejected, bound, periods[0], names, twins))
 }
 
-fn explain(t: &Tally, rejected: &[String], bound: Bound, period: f64, names: &[&str]) -> String {
+fn explain(
+    t: &Tally,
+    rejected: &[String],
+    bound: Bound,
+    period: f64,
+    names: &[&str],
+    twins: Option<&str>,
+) -> String {
     let what = if names.len() > 1 { "every part" } else { "every start" };
     let depth = bound.depth;
     let mut msg = format!(
@@ -706,7 +809,12 @@ fn explain(t: &Tally, rejected: &[String], bound: Bound, period: f64, names: &[&
     }
     msg += &bound.note();
     // From one side of the plate a central symmetry is already broken; a local one is not.
-    if let Some(note) = t.best.as_ref().and_then(|b| super::symmetry_note(None, &b.2[0], period)) {
+    // The measured twin test says which it is; without one, the generic note.
+    if let Some(tw) = twins {
+        msg += &format!(". {tw}");
+    } else if let Some(note) =
+        t.best.as_ref().and_then(|b| super::symmetry_note(None, &b.2[0], period))
+    {
         msg += &format!(". {note}");
     }
     msg
@@ -783,7 +891,7 @@ fn check(
     d: Draft,
     (region, starts, verify): (&FeedRegion, &[Tagged], &[Tagged]),
     (opt, names): (&PlanOptions, &[&str]),
-) -> Result<Synthesis, String> {
+) -> Result<Synthesis, (String, Vec<Tagged>)> {
     // Tracked starts settled within their step durations unless some lingered (left out of
     // the durations); only then can they end elsewhere when run with the fixed durations.
     let lingered = d.steps.iter().any(|s| s.settle.lingering > 0);
@@ -791,13 +899,14 @@ fn check(
     let runs: Vec<Tagged> = again.iter().chain(verify).copied().collect();
     let bound = opt.margin_deg.max(opt.feed_search.tol_deg);
     let thetas: Vec<f64> = d.spreads.iter().map(|s| s.0).collect();
-    let (checked, part) = checked_error(t, &d.steps, &runs, &thetas, bound);
+    let (checked, part, off) = checked_error(t, &d.steps, &runs, &thetas, bound);
     let dev = d.spreads.iter().map(|s| s.1).fold(0.0, f64::max);
     let worst = checked.max(dev);
     if worst > bound {
         let modes = &d.modes;
         let of = if names.len() > 1 { format!(" of {}", names[part]) } else { String::new() };
-        return Err(format!("modes {modes}: a start{of} ends {worst:.2}° off (bound {bound}°)"));
+        let msg = format!("modes {modes}: a start{of} ends {worst:.2}° off (bound {bound}°)");
+        return Err((msg, off));
     }
     let periods = &t.sim.periods;
     let parts = if names.len() < 2 {
@@ -834,34 +943,37 @@ fn check(
 /// The largest final orientation error (deg, mod the part's period) of the plan run as the
 /// simulator runs it (fixed step durations,
 /// [`simulate_plan`](crate::motion::sim::simulate_plan)) from `starts`, each part against its
-/// own prediction `thetas[part]`, and the part it was measured on. Starts go in batches of
-/// 64 (each batch in parallel); after a batch with an error above `bound` the rest are
-/// skipped, so a rejected plan costs less (the result then exceeds `bound` but need not be
-/// the largest).
+/// own prediction `thetas[part]`, the part it was measured on, and the starts whose error
+/// exceeds `bound`. Starts go in batches of 64 (each batch in parallel); after a batch with an
+/// error above `bound` the rest are skipped, so a rejected plan costs less (the result then
+/// exceeds `bound` but need not be the largest).
 fn checked_error(
     t: &mut Tracker,
     steps: &[PlannedStep],
     starts: &[Tagged],
     thetas: &[f64],
     bound: f64,
-) -> (f64, usize) {
-    let mut worst = (0.0f64, 0);
+) -> (f64, usize, Vec<Tagged>) {
+    let (mut worst, mut off) = ((0.0f64, 0), Vec::new());
     for batch in starts.chunks(64) {
         let mut poses = batch.to_vec();
         for s in steps {
             poses = t.after(s.mode, s.duration_ms as f64 / 1000.0, &poses);
         }
-        for &(i, q) in &poses {
+        for (&(i, q), &start) in poses.iter().zip(batch) {
             let err = cdist(q.theta.to_degrees(), thetas[i], t.sim.periods[i]);
             if err > worst.0 {
                 worst = (err, i);
+            }
+            if err > bound {
+                off.push(start);
             }
         }
         if worst.0 > bound {
             break;
         }
     }
-    worst
+    (worst.0, worst.1, off)
 }
 
 /// The mean centroid when every final pose lies within 2 mm of it (the nodes fix the
