@@ -221,7 +221,7 @@ fn run_stuck_after(
     Some(Run { pose, settle_s: settle, t_end: t, trace, rested, steps, lost })
 }
 
-/// Consecutive steps that move the part only by rounding ([`moved_by_rounding`]) after which
+/// Consecutive steps that move the part only by rounding (`moved_by_rounding`) after which
 /// [`run_while`] ends the run, not at rest: such a run would otherwise creep by one ulp per
 /// step to the 20 000-step cap (measured: runs pushed along a wall on the cantilever's grid
 /// modes, 3 Heun evaluations per step, steps of 10⁻¹⁵ T₀; docs/plan.md, "Planning time").
