@@ -227,13 +227,7 @@ fn run_profile(
     use chladni::motion::sim::{self, FieldModel, Pose, Rim, SimParams};
     let field = FieldModel::new(mode, plate);
     let rim = Rim::of(plate);
-    let t0 = body.radius / (mode.speed_mm_s * field.max_gain());
-    let p = SimParams {
-        speed: mode.speed_mm_s,
-        t_limit: 5000.0 * t0,
-        run_to_limit: false,
-        rim: Some(rim),
-    };
+    let p = SimParams::to_rest(body, mode, &field, plate);
     let (mut mode_steps, mut mode_s, mut poses) = (0usize, 0.0, Vec::new());
     for (j, s) in chladni::planner::map_starts(body, mode, plate).iter().enumerate() {
         let (mut steps, mut big, mut capped, mut rested) = (0usize, 0usize, 0usize, 0usize);

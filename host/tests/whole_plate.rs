@@ -303,3 +303,23 @@ fn the_clamp_capture_zone_is_said_up_front_and_its_outside_box_lies_beyond_it() 
     assert!(drops_in > 0 && drops_in <= z["drops"].as_u64().unwrap(), "{z}");
     assert!(warning.contains(&format!(": {drops_in} of the")), "{warning}");
 }
+
+#[test]
+fn the_rectangle_plans_from_the_feed_box_outside_the_clamp_capture_zone() {
+    // The cantilever's six solver modes: the whole-plate plan fails in the clamp's capture
+    // zone and names the plate beyond it; a feed region there plans. The zone ends half a
+    // column past the first column of drops none of which is captured: ending it half-way to
+    // that column (86 mm), or at it (90.6 mm), left captured starts in the box, and the feed
+    // search found no plan.
+    let plate = ex("plates/cantilever-6-modes.toml");
+    let rect = ex("parts/rectangle.json");
+    let whole = json(&chladni(&["plan", &rect, "--plate", &plate, "--json"]));
+    assert_eq!(whole["error"], "not_whole_plate", "{whole}");
+    let b = floats(&whole["capture_zone"]["outside_mm"]);
+    assert!(b[0] > 90.7, "{whole}");
+    let feed: Vec<String> = b.iter().map(|v| format!("{v}")).collect();
+    let mut args = vec!["plan", &rect, "--plate", &plate, "--json", "--feed"];
+    args.extend(feed.iter().map(String::as_str));
+    let plan = ok_json(&chladni(&args));
+    assert!(!plan["steps"].as_array().unwrap().is_empty(), "{plan}");
+}

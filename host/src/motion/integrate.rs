@@ -4,6 +4,7 @@
 //!
 //! Units: mm, s, rad.
 
+use crate::model::plate::{Mode, PlateModel};
 use crate::motion::body::{Body, Pose};
 use crate::motion::contact::Rim;
 use crate::motion::field::FieldModel;
@@ -38,6 +39,35 @@ pub struct SimParams {
     pub run_to_limit: bool,
     /// The plate's rim ([`Rim::of`]); `None`: an unbounded plane (the field alone).
     pub rim: Option<Rim>,
+}
+
+/// A run to rest stops at this many T₀ ([`t0`]): the limit of simulated maps, feed-region runs
+/// and dynamic maps' crossings. A part not at rest by then is creeping or cycling.
+pub const REST_LIMIT_T0: f64 = 5000.0;
+
+/// T₀ (s), the time scale of every run: how long a part of radius `radius` (mm) takes to travel
+/// one radius at the field's full pull at settle speed `speed`.
+pub fn t0(radius: f64, speed: f64, field: &FieldModel) -> f64 {
+    radius / (speed * field.max_gain().max(1e-9))
+}
+
+impl SimParams {
+    /// A run under `mode` on `plate`, stopped at `t_limit` (s) or at rest: the mode's own
+    /// speed inside the plate's rim (as `simulate_plan` runs a step at the mode's amplitude).
+    pub fn under(mode: &Mode, plate: &PlateModel, t_limit: f64) -> SimParams {
+        SimParams {
+            speed: mode.speed_mm_s,
+            t_limit,
+            run_to_limit: false,
+            rim: Some(Rim::of(plate)),
+        }
+    }
+
+    /// A run of `body` to rest under `mode` (its `field`) on `plate`: [`SimParams::under`]
+    /// stopped at [`REST_LIMIT_T0`] T₀.
+    pub fn to_rest(body: &Body, mode: &Mode, field: &FieldModel, plate: &PlateModel) -> SimParams {
+        SimParams::under(mode, plate, REST_LIMIT_T0 * t0(body.radius, mode.speed_mm_s, field))
+    }
 }
 
 /// Local error allowed per integration step, as a fraction of the part's radius R (angles
@@ -164,7 +194,7 @@ fn run_stuck_after(
     stuck_steps: usize,
 ) -> Option<Run> {
     let r = body.radius.max(1e-6);
-    let t0 = r / (p.speed * field.max_gain().max(1e-9));
+    let t0 = t0(r, p.speed, field);
     // Curved nodes let a part creep slowly along them: a creep below 10⁻³ R per T0 counts as rest.
     let flow = Flow { body, field, p, r, t0, v_tol: 1e-3 * r / t0, w_tol: 1e-4 / t0 };
     let tol = STEP_TOL * r;
@@ -271,13 +301,8 @@ mod tests {
         let mode = &plate.modes[0];
         let f = FieldModel::new(mode, &plate);
         let rim = Rim::of(&plate);
-        let t0 = body.radius / (mode.speed_mm_s * f.max_gain());
-        let p = SimParams {
-            speed: mode.speed_mm_s,
-            t_limit: 5e3 * t0,
-            run_to_limit: false,
-            rim: Some(rim),
-        };
+        let p = SimParams::to_rest(&body, mode, &f, &plate);
+        let t0 = t0(body.radius, mode.speed_mm_s, &f);
         let start = rim.project(&body, Pose { x: 264.87, y: 35.13, theta: 65.2f64.to_radians() });
         let run = |n| run_stuck_after(&body, &f, p, start, &|| true, n).unwrap();
         let (cut, full) = (run(STUCK_STEPS), run(usize::MAX));

@@ -2,21 +2,31 @@
 //!
 //! The physics: a clamped edge is a node of every mode (the plate does not move there:
 //! φ = 0 and ∂φ/∂n = 0), so near it φ ≈ a·d² (d the distance from the edge) and the pull
-//! f = −∇(φ²) points at the edge and falls off like d³. Whatever mode the plate is driven in,
-//! a part near the clamp creeps towards it, or jams against it, until some mode has a node
-//! farther out to pull it to. The capture zone is the band along a clamped rim where no mode
-//! does: from every point of it, every mode's field carries the part towards the clamped rim,
-//! or moves it less than its own radius r away from it within the device's limit T (one hour,
-//! [`DeviceLimits::DEFAULT`]), i.e. slower than the floor r / T. No plan can hold from there.
+//! f = −∇(φ²) points at the edge and falls off like d³. A part that reaches the clamp stays:
+//! no mode pulls it off, and a "rest" there is a creep the model cannot place (the feed
+//! search refuses it). A mode takes a drop to the clamp when, within the device's limit T
+//! (one hour, [`DeviceLimits::DEFAULT`]), the part ends against the clamped rim, or is still
+//! creeping less than its own radius r away from it (slower than the floor r / T).
 //!
-//! How it is computed, cheaply: a clamped rim is a plate edge along which every mode's
-//! sampled shape stays below [`RIM_NODE`] of its largest (grid modes only; a straight-node
-//! mode moves parts anywhere, so a plate with one has no zone). A round probe of the part's
-//! radius is run (the motion model, with the rim) under each mode for T from columns of start
-//! points parallel to the rim, [`COLUMN_STEP_MM`] apart, beginning where it touches the rim;
-//! the zone ends at the first column from which some mode takes the probe a radius farther
-//! from the rim. Zones are cached per plate and radius (the CLI and the whole-plate failure
-//! ask for the same one).
+//! The capture zone is what a plan has to stay out of: the band along a clamped rim in each
+//! column of which every mode takes some drop to the clamp, so whichever mode a plan starts
+//! with, some part dropped there ends at the clamp. A feed region past it holds no such
+//! column that the zone's sampling sees; a whole-plate failure counts its failed drops in it.
+//!
+//! How it is computed: a clamped rim is a plate edge along which every mode's sampled shape
+//! stays below [`RIM_NODE`] of its largest (grid modes only; a straight-node mode moves parts
+//! anywhere, so a plate with one has no zone). The part itself is run (the motion model, with
+//! the rim) under each mode for T from columns of drops parallel to the rim, [`COLUMN_STEP_MM`]
+//! apart, beginning where it touches the rim: [`ROWS`] positions along the rim × [`ANGLES`]
+//! orientations (the orientation decides whether a long part reaches a mode's node). The zone
+//! ends half a column past the first column that some mode keeps entirely off the clamp: the
+//! drops are samples, and the boundary lies between them. On the cantilever's solver modes the
+//! rectangle's first such column is at x = 90.6 mm, yet the feed search (216 starts) finds no
+//! plan from `--feed 90.6 0 300 200` and plans from 90.8 mm; the zone ends at 95.6 mm. (The
+//! earlier rule, a round probe every mode kept within its radius of where it started, ending
+//! half-way to the first column it left, said 86 mm, and counted a part at rest on a node far
+//! from the clamp as captured.) Zones are cached per plate and part (the CLI and the
+//! whole-plate failure ask for the same one).
 
 use std::collections::HashMap;
 use std::hash::{Hash, Hasher};
@@ -24,6 +34,7 @@ use std::sync::{Mutex, OnceLock};
 
 use rayon::prelude::*;
 
+use super::maps::map_thetas;
 use super::whole::PlateEdge;
 use crate::model::part::Part;
 use crate::model::plate::{Mode, Node, PlateModel};
@@ -35,10 +46,13 @@ use chladni_shared::icd::plan::DeviceLimits;
 pub const RIM_NODE: f64 = 0.01;
 /// Distance between two columns of probe start points (mm): the zone's resolution.
 pub const COLUMN_STEP_MM: f64 = 10.0;
-/// Probe start points per column, spread along the rim.
-pub const ROWS: usize = 6;
-/// Sides of the round probe's polygon.
-const PROBE_SIDES: usize = 24;
+/// Drop positions per column, spread along the rim.
+pub const ROWS: usize = 7;
+/// Drop orientations per position (90° apart, 0.3 of a step off 0° as a simulated map's).
+pub const ANGLES: usize = 4;
+/// Outline samples of the part's body for the zone's runs (the whole-plate check's 160 give
+/// the same columns at four times the cost).
+const ZONE_SAMPLES: usize = 40;
 
 /// The device's limit on a plan (s): the time a mode has at most to move a part.
 pub fn device_limit_s() -> f64 {
@@ -59,12 +73,12 @@ pub struct Band {
 pub struct CaptureZone {
     /// One band per clamped rim that captures (at least its first column).
     pub bands: Vec<Band>,
-    /// The probe's radius (mm): the part's.
+    /// The part's radius (mm): the widest, for several parts.
     pub radius_mm: f64,
     /// The floor r / T (mm/s): slower than this, a part does not move its own radius within
     /// the device's limit.
     pub floor_mm_s: f64,
-    /// The probe runs the computation took.
+    /// The runs the computation took.
     pub runs: usize,
     /// Its wall time (s).
     pub compute_s: f64,
@@ -140,12 +154,13 @@ impl CaptureZone {
         bands.join(" and ")
     }
 
-    /// What the zone means: "the clamp's capture zone for a part of radius 20 mm: every mode …".
+    /// What the zone means: "the clamp's capture zone for this part (radius 20 mm): …".
     pub fn meaning(&self) -> String {
         format!(
-            "the clamp's capture zone for a part of radius {:.0} mm: every mode carries a part \
-             there towards the clamped edge, where the plate does not move, or moves it less \
-             than its radius away within the device's {:.0} min limit; no plan can hold from it",
+            "the clamp's capture zone for this part (radius {:.0} mm): in every 10 mm of it \
+             each mode takes some drop to the clamped edge, where the plate does not move (the \
+             part ends there, or creeps less than its radius away within the device's {:.0} min \
+             limit); whichever mode a plan starts with, some part dropped there ends at the clamp",
             self.radius_mm,
             device_limit_s() / 60.0
         )
@@ -213,45 +228,60 @@ pub fn clamped_rims(plate: &PlateModel) -> Vec<PlateEdge> {
         .collect()
 }
 
-/// A round part of radius `r` (the probe).
-fn probe(r: f64) -> Option<Body> {
-    let outline = (0..PROBE_SIDES)
-        .map(|k| {
-            let a = std::f64::consts::TAU * k as f64 / PROBE_SIDES as f64;
-            [r * a.cos(), r * a.sin()]
-        })
-        .collect();
-    let part = Part::new("probe".into(), outline, Vec::new()).ok()?;
-    Some(Body::with_samples(&part, 40))
+/// Does a part at `q` touch one of the `rims` (its centroid within the part's radius of it)?
+pub fn touches(rims: &[PlateEdge], body: &Body, plate: &PlateModel, q: Pose) -> bool {
+    let [w, h] = plate.size_mm;
+    let r = body.radius;
+    rims.iter().any(|e| match e {
+        PlateEdge::Left => q.x < r,
+        PlateEdge::Right => q.x > w - r,
+        PlateEdge::Bottom => q.y < r,
+        PlateEdge::Top => q.y > h - r,
+    })
 }
 
-/// The capture zone of `plate` for parts of radius `radius_mm` (None: no clamped rim, or no
-/// band captures even where the part touches the rim). Cached per plate and radius.
-pub fn zone(plate: &PlateModel, radius_mm: f64) -> Option<CaptureZone> {
+/// The capture zone of `plate` for `part` (None: no clamped rim, or no drop is captured even
+/// where the part touches the rim). Cached per plate and part.
+pub fn zone(plate: &PlateModel, part: &Part) -> Option<CaptureZone> {
     static CACHE: OnceLock<Mutex<HashMap<u64, Option<CaptureZone>>>> = OnceLock::new();
-    let key = plate_key(plate, radius_mm);
+    let key = plate_key(plate, part);
     let cache = CACHE.get_or_init(Default::default);
     if let Some(z) = cache.lock().ok().and_then(|c| c.get(&key).cloned()) {
         return z;
     }
-    let z = compute(plate, radius_mm);
+    let z = compute(plate, &Body::with_samples(part, ZONE_SAMPLES));
     if let Ok(mut c) = cache.lock() {
         c.insert(key, z.clone());
     }
     z
 }
 
-/// The zone of the widest band over several parts (one plan's parts).
+/// The zone of several parts (one plan's): along each clamped rim the widest of their bands.
 pub fn zone_for_parts(plate: &PlateModel, parts: &[Part]) -> Option<CaptureZone> {
-    let r = parts.iter().map(|p| Body::with_samples(p, 40).radius).fold(0.0, f64::max);
-    (r > 0.0).then(|| zone(plate, r)).flatten()
+    let mut zones = parts.iter().filter_map(|p| zone(plate, p));
+    let mut all = zones.next()?;
+    for z in zones {
+        for b in z.bands {
+            match all.bands.iter_mut().find(|a| a.edge == b.edge) {
+                Some(a) => a.width_mm = a.width_mm.max(b.width_mm),
+                None => all.bands.push(b),
+            }
+        }
+        all.radius_mm = all.radius_mm.max(z.radius_mm);
+        all.floor_mm_s = all.floor_mm_s.max(z.floor_mm_s);
+        all.runs += z.runs;
+        all.compute_s += z.compute_s;
+    }
+    Some(all)
 }
 
-/// A hash of everything the zone depends on.
-fn plate_key(plate: &PlateModel, r: f64) -> u64 {
+/// A hash of everything the zone depends on: the part's geometry and the plate.
+fn plate_key(plate: &PlateModel, part: &Part) -> u64 {
     let mut h = std::collections::hash_map::DefaultHasher::new();
     let bits = |h: &mut std::collections::hash_map::DefaultHasher, v: f64| v.to_bits().hash(h);
-    bits(&mut h, r);
+    for p in part.outline.iter().chain(part.holes.iter().flatten()) {
+        p.iter().for_each(|&v| bits(&mut h, v));
+    }
     plate.size_mm.iter().for_each(|&v| bits(&mut h, v));
     format!("{:?}{}", plate.edge, plate.friction).hash(&mut h);
     for m in &plate.modes {
@@ -267,18 +297,18 @@ fn plate_key(plate: &PlateModel, r: f64) -> u64 {
 }
 
 /// [`zone`], uncached.
-fn compute(plate: &PlateModel, r: f64) -> Option<CaptureZone> {
+fn compute(plate: &PlateModel, body: &Body) -> Option<CaptureZone> {
     let start = std::time::Instant::now();
     let rims = clamped_rims(plate);
     if rims.is_empty() {
         return None;
     }
-    let body = probe(r)?;
+    let r = body.radius;
     let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
     let runs = std::sync::atomic::AtomicUsize::new(0);
     let mut bands = Vec::new();
     for &edge in &rims {
-        let width = band_width(&body, plate, &fields, edge, &runs);
+        let width = band_width(body, plate, &fields, edge, &runs);
         if width > 0.0 {
             bands.push(Band { edge, width_mm: width });
         }
@@ -292,8 +322,8 @@ fn compute(plate: &PlateModel, r: f64) -> Option<CaptureZone> {
     })
 }
 
-/// The width of the band along `edge` whose columns every mode captures (0: not even the
-/// column where the probe touches the rim).
+/// The width of the band along `edge` in each column of which some drop is captured (0: not
+/// even in the column where the part touches the rim).
 fn band_width(
     body: &Body,
     plate: &PlateModel,
@@ -314,15 +344,22 @@ fn band_width(
             PlateEdge::Top => [s, h - d],
         }
     };
+    let thetas = map_thetas(ANGLES);
     let mut last = None;
     let mut d = r;
     while d <= across - r {
-        let column: Vec<[f64; 2]> =
-            (0..ROWS).map(|k| point(d, (k as f64 + 0.5) / ROWS as f64)).collect();
-        let held = column.par_iter().all(|&p| {
-            plate.modes.iter().zip(fields).all(|(m, f)| {
+        let column: Vec<Pose> = (0..ROWS)
+            .flat_map(|k| {
+                let [x, y] = point(d, (k as f64 + 0.5) / ROWS as f64);
+                thetas.iter().map(move |th| Pose { x, y, theta: th.to_radians() })
+            })
+            .collect();
+        // In the zone when no mode keeps every drop of the column off the clamp: whichever
+        // mode a plan starts with, some part dropped here ends there.
+        let held = plate.modes.iter().zip(fields).all(|(m, f)| {
+            column.par_iter().any(|&q| {
                 runs.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                captured_by(body, plate, m, f, edge, p)
+                captured_by(body, plate, m, f, edge, q)
             })
         });
         if !held {
@@ -331,32 +368,35 @@ fn band_width(
         last = Some(d);
         d += COLUMN_STEP_MM;
     }
-    // The band ends half-way to the first column a mode frees (or at the last column).
-    last.map_or(0.0, |d| (d + 0.5 * COLUMN_STEP_MM).min(across))
+    // The band ends half a column past the first column with no captured drop (or at the
+    // plate's far edge): its drops are samples, and captured ones lie between them.
+    last.map_or(0.0, |d| (d + 1.5 * COLUMN_STEP_MM).min(across))
 }
 
-/// Whether `mode` leaves the probe dropped at `p` captured by the clamped `edge`: after the
-/// device's limit it is less than its radius farther from the edge than it started.
+/// Whether `mode` leaves the part dropped at `q` captured by the clamped `edge`: within the
+/// device's limit it ends against that edge, or it is still creeping and less than its radius
+/// farther from the edge than it started. A part that came to rest elsewhere (on a node, or
+/// where it was dropped) is not captured: a plan can orient it there.
 fn captured_by(
     body: &Body,
     plate: &PlateModel,
     mode: &Mode,
     field: &FieldModel,
     edge: PlateEdge,
-    p: [f64; 2],
+    q: Pose,
 ) -> bool {
-    let params = SimParams {
-        speed: mode.speed_mm_s,
-        t_limit: device_limit_s(),
-        run_to_limit: false,
-        rim: Some(Rim::of(plate)),
-    };
-    let end = run(body, field, params, Pose { x: p[0], y: p[1], theta: 0.0 });
+    let params = SimParams::under(mode, plate, device_limit_s());
+    let start = Rim::of(plate).project(body, q);
+    let end = run(body, field, params, start);
     if end.lost {
         return false;
     }
-    let e = [end.pose.x, end.pose.y];
-    from_edge(edge, e, plate.size_mm) - from_edge(edge, p, plate.size_mm) < body.radius
+    if touches(&[edge], body, plate, end.pose) {
+        return true;
+    }
+    let (e, p) = ([end.pose.x, end.pose.y], [start.x, start.y]);
+    !end.rested
+        && from_edge(edge, e, plate.size_mm) - from_edge(edge, p, plate.size_mm) < body.radius
 }
 
 #[cfg(test)]
@@ -369,39 +409,52 @@ mod tests {
         PlateModel::load(&path).unwrap()
     }
 
+    fn part(name: &str) -> Part {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/parts").join(name);
+        Part::load(&path).unwrap()
+    }
+
     #[test]
     fn the_cantilever_has_a_band_at_its_clamp_and_the_free_plate_none() {
         let cant = example("cantilever-6-modes.toml");
         assert_eq!(clamped_rims(&cant), vec![PlateEdge::Left]);
-        let z = zone(&cant, 20.0).expect("a capture zone at the clamp");
+        let rect = part("rectangle.json");
+        let z = zone(&cant, &rect).expect("a capture zone at the clamp");
         assert_eq!(z.bands.len(), 1);
         let band = z.bands[0];
         eprintln!(
-            "cantilever, r = 20 mm: {} ({} runs, {:.2} s)",
+            "cantilever, rectangle: {} ({} runs, {:.2} s)",
             z.describe(&cant),
             z.runs,
             z.compute_s
         );
         assert_eq!(band.edge, PlateEdge::Left);
-        // Measured: 85 mm (docs/plan.md); the band is more than the probe touching the clamp,
-        // and far from the plate's free end.
+        // Measured: 95.6 mm (docs/plan.md; the feed search plans from x = 90.8 mm, not from
+        // the round probe's 86): more than the part touching the clamp, far from the free end.
         assert!(band.width_mm > 40.0 && band.width_mm < 150.0, "{band:?}");
         assert!(z.contains(&cant, [30.0, 100.0]) && !z.contains(&cant, [250.0, 100.0]));
         let out = z.outside_mm(&cant).unwrap();
         assert_eq!(out, [band.width_mm, 0.0, 300.0, 200.0]);
         assert_eq!(z.clip(&cant, [0.0, 10.0, 100.0, 50.0]).unwrap()[0], band.width_mm);
         assert!(z.describe(&cant).starts_with(&format!("x < {:.0} mm", band.width_mm)));
-        assert_eq!(zone(&cant, 20.0), Some(z.clone()), "cached");
+        assert_eq!(zone(&cant, &rect), Some(z.clone()), "cached");
+        // Several parts: the widest band of each rim.
+        let key = part("l-shape.json");
+        let wide = zone_for_parts(&cant, &[rect.clone(), key.clone()]).unwrap();
+        let each = [&rect, &key].map(|p| zone(&cant, p).unwrap().bands[0].width_mm);
+        assert_eq!(wide.bands.len(), 1);
+        assert_eq!(wide.bands[0].width_mm, each[0].max(each[1]));
         // A whole-plate failure names how many of its failed drops start in the zone.
         let inz = InZone::new(z.clone(), &cant, 3, 4);
         let msg = inz.to_string();
         assert!(msg.starts_with("3 of the 4 failed drops start in x < "), "{msg}");
-        assert!(msg.contains("no plan can hold from it"), "{msg}");
+        assert!(msg.contains("whichever mode a plan starts with"), "{msg}");
 
         let free = example("free-6-modes.toml");
         assert!(clamped_rims(&free).is_empty());
-        assert!(zone(&free, 20.0).is_none());
+        assert!(zone(&free, &rect).is_none());
         // Straight-node plates: no grid mode, no zone.
-        assert!(zone(&example("four-lines.toml"), 20.0).is_none());
+        assert!(zone(&example("four-lines.toml"), &rect).is_none());
     }
 }

@@ -36,7 +36,7 @@ use super::{Backend, MapError, StepMap, cdist, line_map};
 use crate::model::field::Law;
 use crate::model::part::Part;
 use crate::model::plate::{Mode, Node, PlateModel};
-use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
+use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
 
 /// Which model gives straight-node step maps ([`super::PlanOptions::maps`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -276,13 +276,7 @@ pub fn dynamic_line_map(
     }
     let body = Body::with_samples(part, 160);
     let field = FieldModel::new(mode, plate);
-    let t0 = body.radius / (mode.speed_mm_s * field.max_gain().max(1e-9));
-    let p = SimParams {
-        speed: mode.speed_mm_s,
-        t_limit: 5000.0 * t0,
-        run_to_limit: false,
-        rim: Some(Rim::of(plate)),
-    };
+    let p = SimParams::to_rest(&body, mode, &field, plate);
     let n = set.orientations.max(4);
     let step = 360.0 / n as f64;
     let first = 0.3 * step;

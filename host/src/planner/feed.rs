@@ -8,7 +8,8 @@
 //!    orientations (offset 0.3 of a step off 0°, as [`super::sampled_map`] does).
 //! 2. **Search.** Breadth-first over mode sequences up to `depth` steps. Applying a mode
 //!    simulates every tracked pose to rest (limit 5000 T₀, as for simulated maps); a run that
-//!    does not rest or ends on the plate edge kills the sequence. Rest poses are clustered (1°
+//!    does not rest, falls off an open edge or ends against a clamped rim kills the sequence
+//!    (a rest against a free wall counts: the rim is an orienting feature). Rest poses are clustered (1°
 //!    mod the period, 2 mm) and only one pose per cluster is tracked further; a sequence whose
 //!    pose set falls into the same coarse cells (2°, 4 mm) as one already seen is pruned.
 //! 3. **Success.** Every tracked pose within `tol_deg` of one orientation (mod the period).
@@ -32,13 +33,15 @@ use std::collections::{HashMap, HashSet};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 
+use super::capture::{clamped_rims, touches};
+use super::whole::PlateEdge;
 use super::{
-    PartPlan, PlanFailure, PlanOptions, PlannedStep, Settle, Synthesis, cdist, on_plate_edge,
-    plan_period, slowest_settled, step_duration_ms,
+    PartPlan, PlanFailure, PlanOptions, PlannedStep, Settle, Synthesis, cdist, plan_period,
+    slowest_settled, step_duration_ms,
 };
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
-use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
+use crate::motion::sim::{self, Body, FieldModel, Pose, REST_LIMIT_T0, SimParams};
 
 pub use crate::model::feed_region::{FeedError, FeedRegion};
 
@@ -151,6 +154,8 @@ struct Outcome {
     t_end: f64,
     /// Came to rest within 5000 T₀.
     rested: bool,
+    /// Fell off an open edge.
+    lost: bool,
 }
 
 /// A tracked pose: the index of its part (face) and the pose.
@@ -170,37 +175,66 @@ struct Sim<'a> {
     fields: Vec<FieldModel>,
     /// Each part's period (deg).
     periods: Vec<f64>,
+    /// The plate's clamped rims ([`clamped_rims`]).
+    clamped: Vec<PlateEdge>,
 }
 
 impl Sim<'_> {
     /// Settings of a run under mode `k` stopped at `t_limit` (s): the mode's own speed, as
     /// `simulate_plan` runs a step at the mode's amplitude.
     fn params(&self, k: usize, t_limit: f64) -> SimParams {
-        SimParams {
-            speed: self.plate.modes[k].speed_mm_s,
-            t_limit,
-            run_to_limit: false,
-            rim: Some(Rim::of(self.plate)),
-        }
+        SimParams::under(&self.plate.modes[k], self.plate, t_limit)
     }
 
     /// 5000 T₀ of mode `k` for part `i`: the limit of a run to rest, as for simulated maps.
     fn rest_limit(&self, i: usize, k: usize) -> f64 {
         let (mode, field) = (&self.plate.modes[k], &self.fields[k]);
-        5000.0 * (self.bodies[i].radius / (mode.speed_mm_s * field.max_gain()))
+        REST_LIMIT_T0 * sim::t0(self.bodies[i].radius, mode.speed_mm_s, field)
     }
 
     /// The run under mode `k` from the tagged pose, stopped at `t_limit` or at rest.
     fn run(&self, k: usize, (i, pose): Tagged, t_limit: f64) -> Outcome {
         let run = sim::run(&self.bodies[i], &self.fields[k], self.params(k, t_limit), pose);
-        Outcome { pose: run.pose, settle_s: run.settle_s, t_end: run.t_end, rested: run.rested }
+        let (pose, settle_s, t_end) = (run.pose, run.settle_s, run.t_end);
+        Outcome { pose, settle_s, t_end, rested: run.rested, lost: run.lost }
     }
 
-    /// A run to rest of part `i` that counts: it rested and not on the plate edge.
+    /// A run to rest of part `i` that counts: it rested on the plate, in the interior or
+    /// against a free wall (the field pushing the part against the rim is an orienting
+    /// feature, as the whole-plate check takes it), not against a clamped rim, where every
+    /// mode's field fades (φ ≈ a·d²) and the rest is a creep the model cannot place.
     fn ok(&self, i: usize, o: &Outcome) -> bool {
-        o.rested && !on_plate_edge(&self.bodies[i], self.plate, o.pose)
+        self.fault(i, o).is_none()
+    }
+
+    /// Why a run of part `i` does not count ([`Sim::ok`]), or `None` when it does.
+    fn fault(&self, i: usize, o: &Outcome) -> Option<RunFault> {
+        let [w, h] = self.plate.size_mm;
+        let on = (0.0..=w).contains(&o.pose.x) && (0.0..=h).contains(&o.pose.y);
+        if o.lost || !on {
+            Some(RunFault::Off)
+        } else if !o.rested {
+            Some(RunFault::Unsettled)
+        } else if touches(&self.clamped, &self.bodies[i], self.plate, o.pose) {
+            Some(RunFault::Clamped)
+        } else {
+            None
+        }
     }
 }
+
+/// Why a run kills a sequence ([`Sim::fault`]); the failure counts each.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum RunFault {
+    /// Not at rest within 5000 T₀.
+    Unsettled = 0,
+    /// Fell off an open edge or ended off the plate.
+    Off = 1,
+    /// At rest against a clamped rim.
+    Clamped = 2,
+}
+
+impl Sim<'_> {}
 
 /// Simulates parts to rest under the plate's modes, each (part, mode, pose) once: runs are
 /// memoised, and the runs a batch still needs are simulated in parallel (`rayon`; results are
@@ -233,7 +267,7 @@ impl<'a> Tracker<'a> {
     fn new(bodies: Vec<Body>, plate: &'a PlateModel, periods: Vec<f64>) -> Self {
         let fields = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
         Tracker {
-            sim: Sim { bodies, plate, fields, periods },
+            sim: Sim { bodies, plate, fields, periods, clamped: clamped_rims(plate) },
             memo: HashMap::new(),
             fixed: HashMap::new(),
             near: HashMap::new(),
@@ -306,7 +340,7 @@ impl<'a> Tracker<'a> {
     }
 
     /// Every pose's rest under mode `k`, or `None` when one does not come to rest within
-    /// 5000 T₀ or ends on the plate edge.
+    /// 5000 T₀, falls off or ends against a clamped rim ([`Sim::ok`]).
     fn rests(&mut self, k: usize, poses: &[Tagged]) -> Option<Vec<Outcome>> {
         let jobs: Vec<(usize, Tagged)> = poses.iter().map(|&q| (k, q)).collect();
         let out = self.outcomes(&jobs, false);
@@ -453,6 +487,8 @@ type Closest = (usize, Vec<usize>, Vec<Vec<f64>>);
 struct Tally {
     tried: usize,
     dead: usize,
+    /// The runs that killed those sequences, by [`RunFault`].
+    faults: [usize; 3],
     best: Option<Closest>,
 }
 
@@ -511,8 +547,12 @@ impl Search<'_> {
                 bar.inc(1);
                 self.tally.tried += 1;
                 let runs = &outs[j * n..(j + 1) * n];
-                if !runs.iter().zip(&node.poses).all(|(o, q)| self.tracker.sim.ok(q.0, o)) {
+                let sim = &self.tracker.sim;
+                let faults: Vec<RunFault> =
+                    runs.iter().zip(&node.poses).filter_map(|(o, q)| sim.fault(q.0, o)).collect();
+                if !faults.is_empty() {
                     self.tally.dead += 1;
+                    faults.iter().for_each(|&f| self.tally.faults[f as usize] += 1);
                     continue;
                 }
                 let rests: Vec<Tagged> =
@@ -787,11 +827,14 @@ fn explain(
     let depth = bound.depth;
     let mut msg = format!(
         "no sequence of up to {} (--max-steps {depth}) brings {what} in the feed \
-         region to one orientation ({} sequences simulated, {} of them left a part unsettled or \
-         on the plate edge)",
+         region to one orientation ({} sequences simulated, {} of them ended runs that do not \
+         count: {} not at rest within 5000 T₀, {} off the plate, {} against a clamped rim)",
         modes(depth),
         t.tried,
-        t.dead
+        t.dead,
+        t.faults[RunFault::Unsettled as usize],
+        t.faults[RunFault::Off as usize],
+        t.faults[RunFault::Clamped as usize],
     );
     if let Some((_, seq, o)) = &t.best {
         let modes = seq.iter().map(|k| (k + 1).to_string()).collect::<Vec<_>>().join(", ");
@@ -998,7 +1041,29 @@ mod tests {
 
     fn outcome(x: f64) -> Outcome {
         let pose = Pose { x, y: 0.0, theta: 0.0 };
-        Outcome { pose, settle_s: 1.0, t_end: 1.0, rested: true }
+        Outcome { pose, settle_s: 1.0, t_end: 1.0, rested: true, lost: false }
+    }
+
+    /// A run to rest counts in the interior and against a free wall, not against the clamped
+    /// rim, off the plate, lost or unrested.
+    #[test]
+    fn rests_against_a_free_wall_count_and_against_the_clamp_do_not() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let plate =
+            PlateModel::load(&path.join("../examples/plates/cantilever-6-modes.toml")).unwrap();
+        let t = tracker(&plate);
+        assert_eq!(t.sim.clamped, vec![PlateEdge::Left]);
+        let [w, h] = plate.size_mm;
+        let r = t.sim.bodies[0].radius;
+        let at = |x: f64, y: f64| Outcome { pose: Pose { x, y, theta: 0.0 }, ..outcome(0.0) };
+        let ok = |o: Outcome| t.sim.ok(0, &o);
+        assert!(ok(at(w / 2.0, h / 2.0)), "interior");
+        assert!(ok(at(w - 0.5 * r, h / 2.0)), "against the free wall x = W");
+        assert!(ok(at(w / 2.0, 0.5 * r)), "against the free wall y = 0");
+        assert!(!ok(at(0.5 * r, h / 2.0)), "against the clamped rim x = 0");
+        assert!(!ok(at(w + 1.0, h / 2.0)), "off the plate");
+        assert!(!ok(Outcome { lost: true, ..at(w / 2.0, h / 2.0) }), "lost");
+        assert!(!ok(Outcome { rested: false, ..at(w / 2.0, h / 2.0) }), "not at rest");
     }
 
     /// The search's levels beyond the default depth reuse a run from a start within 1° (mod

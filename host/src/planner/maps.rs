@@ -472,13 +472,7 @@ fn spread_order(poses: &[(usize, Pose)]) -> Vec<usize> {
 /// (T₀: time to travel one radius at full pull; [`sampled_map`]).
 pub(super) fn map_run(body: &Body, mode: &Mode, plate: &PlateModel) -> (FieldModel, SimParams) {
     let field = FieldModel::new(mode, plate);
-    let t0 = body.radius / (mode.speed_mm_s * field.max_gain());
-    let p = SimParams {
-        speed: mode.speed_mm_s,
-        t_limit: 5000.0 * t0,
-        run_to_limit: false,
-        rim: Some(Rim::of(plate)),
-    };
+    let p = SimParams::to_rest(body, mode, &field, plate);
     (field, p)
 }
 

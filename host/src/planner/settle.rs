@@ -7,7 +7,7 @@ use rayon::prelude::*;
 
 use super::maps::outside_reach;
 use crate::model::plate::{Mode, PlateModel};
-use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
+use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
 
 /// Inset plate corners (by the part radius) farthest from a straight node on each side, or
 /// the corners, edge midpoints and centre for curved and grid nodes.
@@ -51,12 +51,7 @@ pub struct Settle {
 /// How the planner runs a part to rest under one mode: at the mode's speed, inside the
 /// plate's rim, until at rest (at most an hour of plate time).
 pub(crate) fn settle_params(mode: &Mode, plate: &PlateModel) -> SimParams {
-    SimParams {
-        speed: mode.speed_mm_s,
-        t_limit: 3600.0,
-        run_to_limit: false,
-        rim: Some(Rim::of(plate)),
-    }
+    SimParams::under(mode, plate, 3600.0)
 }
 
 /// Simulated settle time of a step from the given orientations (deg), from the start points

@@ -516,7 +516,7 @@ fn not_whole(
         v.fold([f64::INFINITY, f64::NEG_INFINITY], |a, x| [a[0].min(x), a[1].max(x)])
     };
     let (sx, sy) = (span(&mut xs.clone()), span(&mut ys.clone()));
-    let zone = super::capture::zone(plate, body.radius);
+    let zone = super::capture::zone(plate, part);
     let mut feed_mm = held_block(body, plate, &c.starts, failed);
     if let Some(z) = &zone {
         feed_mm = feed_mm.and_then(|b| z.clip(plate, b));

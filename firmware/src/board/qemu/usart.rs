@@ -7,13 +7,7 @@
 //! RX is interrupt-driven into a pipe. When the pipe is full the interrupt masks itself and
 //! leaves the byte in RDR; QEMU then holds further input back (it only delivers while RXNE is
 //! clear), so no byte is ever lost, and the next read re-enables the interrupt. TX polls TXE, which
-//! QEMU sets again as soon as a byte is written.
-//!
-//! Speed: QEMU hands the model one byte per pass of its main loop and is not told when RDR is
-//! read, so without help the link gets one byte per SysTick period (1 kB/s). After each read
-//! the handler wakes QEMU's main loop ([`super::time_driver::wake_host_loop`]), so the next
-//! byte comes as soon as the core has taken this one.
-//!
+//! QEMU sets again as soon as a byte is written.//!
 //! Speed: QEMU hands the model one byte per pass of its main loop and is not told when RDR is
 //! read, so without help the link gets one byte per SysTick period (1 kB/s). After each read
 //! the handler wakes QEMU's main loop ([`super::time_driver::wake_host_loop`]), so the next
