@@ -9,9 +9,10 @@
 //! 2. **Search.** Breadth-first over mode sequences up to `depth` steps. Applying a mode
 //!    simulates every tracked pose to rest (limit 5000 T₀, as for simulated maps); a run that
 //!    does not rest, falls off an open edge or ends against a clamped rim kills the sequence
-//!    (a rest against a free wall counts: the rim is an orienting feature). Rest poses are clustered (1°
-//!    mod the period, 2 mm) and only one pose per cluster is tracked further; a sequence whose
-//!    pose set falls into the same coarse cells (2°, 4 mm) as one already seen is pruned.
+//!    (a rest against a free wall counts: the rim is an orienting feature). Rest poses are
+//!    clustered (1° mod the period, 2 mm) and only one pose per cluster is tracked further; a
+//!    sequence whose pose set falls into the same coarse cells (2°, 4 mm) as one already seen
+//!    is pruned.
 //! 3. **Success.** Every tracked pose within `tol_deg` of one orientation (mod the period).
 //!    Each such sequence of the shortest length is confirmed from scratch: all starts tracked
 //!    without clustering, durations from their settle times
