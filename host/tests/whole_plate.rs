@@ -308,9 +308,9 @@ fn the_clamp_capture_zone_is_said_up_front_and_its_outside_box_lies_beyond_it() 
 fn the_rectangle_plans_from_the_feed_box_outside_the_clamp_capture_zone() {
     // The cantilever's six solver modes: the whole-plate plan fails in the clamp's capture
     // zone and names the plate beyond it; a feed region there plans. The zone ends half a
-    // column past the first column of drops none of which is captured: ending it half-way to
-    // that column (86 mm), or at it (90.6 mm), left captured starts in the box, and the feed
-    // search found no plan.
+    // column past the first column some mode keeps off the clamp: the earlier rule's 86 mm,
+    // or that column itself (90.6 mm), left starts in the box that every mode takes to the
+    // clamp, and the feed search found no plan.
     let plate = ex("plates/cantilever-6-modes.toml");
     let rect = ex("parts/rectangle.json");
     let whole = json(&chladni(&["plan", &rect, "--plate", &plate, "--json"]));

@@ -230,14 +230,7 @@ pub fn clamped_rims(plate: &PlateModel) -> Vec<PlateEdge> {
 
 /// Does a part at `q` touch one of the `rims` (its centroid within the part's radius of it)?
 pub fn touches(rims: &[PlateEdge], body: &Body, plate: &PlateModel, q: Pose) -> bool {
-    let [w, h] = plate.size_mm;
-    let r = body.radius;
-    rims.iter().any(|e| match e {
-        PlateEdge::Left => q.x < r,
-        PlateEdge::Right => q.x > w - r,
-        PlateEdge::Bottom => q.y < r,
-        PlateEdge::Top => q.y > h - r,
-    })
+    rims.iter().any(|&e| from_edge(e, [q.x, q.y], plate.size_mm) < body.radius)
 }
 
 /// The capture zone of `plate` for `part` (None: no clamped rim, or no drop is captured even
@@ -322,8 +315,8 @@ fn compute(plate: &PlateModel, body: &Body) -> Option<CaptureZone> {
     })
 }
 
-/// The width of the band along `edge` in each column of which some drop is captured (0: not
-/// even in the column where the part touches the rim).
+/// The width of the band along `edge` in each column of which every mode takes some drop to
+/// the clamp (0: not even in the column where the part touches the rim).
 fn band_width(
     body: &Body,
     plate: &PlateModel,
@@ -368,8 +361,8 @@ fn band_width(
         last = Some(d);
         d += COLUMN_STEP_MM;
     }
-    // The band ends half a column past the first column with no captured drop (or at the
-    // plate's far edge): its drops are samples, and captured ones lie between them.
+    // The band ends half a column past the first column some mode keeps off the clamp (or at
+    // the plate's far edge): its drops are samples, and the boundary lies between them.
     last.map_or(0.0, |d| (d + 1.5 * COLUMN_STEP_MM).min(across))
 }
 

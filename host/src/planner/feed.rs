@@ -235,8 +235,6 @@ enum RunFault {
     Clamped = 2,
 }
 
-impl Sim<'_> {}
-
 /// Simulates parts to rest under the plate's modes, each (part, mode, pose) once: runs are
 /// memoised, and the runs a batch still needs are simulated in parallel (`rayon`; results are
 /// collected in order, so plans do not depend on the thread count).

@@ -7,7 +7,10 @@
 //! RX is interrupt-driven into a pipe. When the pipe is full the interrupt masks itself and
 //! leaves the byte in RDR; QEMU then holds further input back (it only delivers while RXNE is
 //! clear), so no byte is ever lost, and the next read re-enables the interrupt. TX polls TXE, which
-//! QEMU sets again as soon as a byte is written.//!
+//! QEMU sets again as soon as its chardev has taken the byte. When the host is slow to read the
+//! socket the chardev takes none, TXE stays clear until QEMU's main loop retries, and `write`
+//! spins in thread mode meanwhile (the sense and watchdog tasks wait; not yet changed).
+//!
 //! Speed: QEMU hands the model one byte per pass of its main loop and is not told when RDR is
 //! read, so without help the link gets one byte per SysTick period (1 kB/s). After each read
 //! the handler wakes QEMU's main loop ([`super::time_driver::wake_host_loop`]), so the next
