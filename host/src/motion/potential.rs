@@ -143,8 +143,8 @@ impl Bicubic {
     /// Force (x, y) and moment of f = −∇(k φ²) (k = `k[0]` where φ < 0, `k[1]` where φ > 0)
     /// on `rings` (relative to the centroid) turned by (sin θ, cos θ) and moved to `origin`:
     /// [`boundary_wrench`] specialised to the grid. Each vertex is turned once, and each edge
-    /// walks the cells it crosses in order ([`Bicubic::edge_integrals`]): no sort, no
-    /// allocation, no rounding call per piece.
+    /// walks the cells it crosses in order (`edge_integrals`): no sort, no allocation, no
+    /// rounding call per piece.
     pub fn outline_wrench(
         &self,
         rings: &[Vec<[f64; 2]>],
