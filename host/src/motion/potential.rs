@@ -517,6 +517,25 @@ mod tests {
     }
 
     #[test]
+    fn poses_far_off_the_grid_or_not_finite_end_without_overflow() {
+        let b = Bicubic::new(&grid());
+        let ring = vec![vec![[-20.0, -10.0], [22.0, -12.0], [15.0, 14.0], [-18.0, 9.0]]];
+        let turn = (0.3f64.sin(), 0.3f64.cos());
+        // Far off the plate φ is the nearest edge's (clamped): finite, like a pose just off
+        // it. (Stepping past grid lines by 10⁻¹² of the edge, as the walk once did, never
+        // ends at 10²⁰ mm, where consecutive lines round to the same parameter.)
+        for origin in [[1e20, -1e20], [-3e18, 50.0], [1e15, 1e15], [-400.0, 900.0]] {
+            let w = b.outline_wrench(&ring, origin, turn, [1.0, 1.0]);
+            assert!(w.iter().all(|v| v.is_finite()), "{origin:?}: {w:?}");
+        }
+        // A pose that is not finite gives no number, and returns.
+        let w = b.outline_wrench(&ring, [f64::NAN, 10.0], turn, [1.0, 1.0]);
+        assert!(w.iter().any(|v| v.is_nan()), "{w:?}");
+        // At ∞ it returns too (a cell walk from there would never end).
+        let _ = b.outline_wrench(&ring, [f64::INFINITY, 10.0], turn, [1.0, 1.0]);
+    }
+
+    #[test]
     fn boundary_integral_of_a_polynomial_potential_is_exact() {
         // Ψ = x² y (f = −(2xy, x²)) over the unit-free square [1, 3] × [2, 5], centroid (2, 3.5).
         let ring = vec![[-1.0, -1.5], [1.0, -1.5], [1.0, 1.5], [-1.0, 1.5]];
