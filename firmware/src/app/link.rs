@@ -467,14 +467,27 @@ impl<F: NorFlash> Handler for Link<'_, F> {
     }
 }
 
-/// Writes one envelope as a frame.
+/// Longest one frame may take to leave. A host that stops reading (a USB host with no program
+/// holding the port, a socket nobody reads) would otherwise hold the link in `send` for ever:
+/// no request served (a stop among them) and no check-in, so the watchdog would reset the
+/// controller mid-run. Past this the frame is dropped, cut where it was; the host's reader
+/// resynchronises at the next frame's leading delimiter. Below the watchdog's 250 ms check-in
+/// period, so a link dropping every frame still checks in each period.
+pub const WRITE_LIMIT: Duration = Duration::from_millis(200);
+
+/// Writes one envelope as a frame, within [`WRITE_LIMIT`].
 async fn send<P: Write>(port: &mut P, envelope: &Envelope<Response>, tx: &mut [u8]) {
     match link::encode(envelope, tx) {
-        Ok(bytes) => {
-            if port.write_all(bytes).await.is_err() {
-                defmt::warn!("link: write error");
+        Ok(bytes) => match select(port.write_all(bytes), Timer::after(WRITE_LIMIT)).await {
+            Either::First(Ok(())) => {}
+            Either::First(Err(_)) => defmt::warn!("link: write error"),
+            Either::Second(()) => {
+                defmt::warn!(
+                    "link: the host did not take the frame within {=u64} ms: dropped",
+                    WRITE_LIMIT.as_millis()
+                )
             }
-        }
+        },
         Err(_) => defmt::error!("link: response {=u32} does not fit a frame", envelope.id),
     }
 }
@@ -522,6 +535,9 @@ pub async fn serve<F: NorFlash, P: Read + Write>(
             let Some(frame) = reader.push(byte) else { continue };
             link.respond_into(frame, Instant::now(), &mut out).await;
             send(port, &out, &mut tx).await;
+            // A chunk may hold several frames, each reply up to WRITE_LIMIT late: each one
+            // served is progress, so the watchdog hears of it.
+            supervisor.check_in(Task::Link);
         }
     }
 }

@@ -6,10 +6,12 @@
 //!
 //! RX is interrupt-driven into a pipe. When the pipe is full the interrupt masks itself and
 //! leaves the byte in RDR; QEMU then holds further input back (it only delivers while RXNE is
-//! clear), so no byte is ever lost, and the next read re-enables the interrupt. TX polls TXE, which
-//! QEMU sets again as soon as its chardev has taken the byte. When the host is slow to read the
-//! socket the chardev takes none, TXE stays clear until QEMU's main loop retries, and `write`
-//! spins in thread mode meanwhile (the sense and watchdog tasks wait; not yet changed).
+//! clear), so no byte is ever lost, and the next read re-enables the interrupt. TX writes a
+//! byte whenever TXE is set, which QEMU does as soon as its chardev has taken the previous one.
+//! When the host does not read the socket the chardev takes nothing and TXE stays clear until
+//! it does; `write` then awaits the TXE interrupt (TXEIE, masked again by the handler) instead
+//! of spinning, so the sense and watchdog tasks run meanwhile, and the link's bounded write
+//! (`app::link`) can give up on the frame.
 //!
 //! Speed: QEMU hands the model one byte per pass of its main loop and is not told when RDR is
 //! read, so without help the link gets one byte per SysTick period (1 kB/s). After each read
@@ -20,6 +22,7 @@ use core::sync::atomic::{AtomicBool, Ordering};
 
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::pipe::Pipe;
+use embassy_sync::waitqueue::AtomicWaker;
 use stm32_metapac::{self as pac, interrupt};
 
 const RX_CAPACITY: usize = 512;
@@ -28,6 +31,8 @@ static RX: Pipe<CriticalSectionRawMutex, RX_CAPACITY> = Pipe::new();
 /// the common case touches no USART register (each access is an exit from QEMU's translated
 /// code, and `read` runs once per byte in a burst).
 static MASKED: AtomicBool = AtomicBool::new(false);
+/// The writer waiting for TXE (woken by the handler, which masks TXEIE again).
+static TX_WAKER: AtomicWaker = AtomicWaker::new();
 
 /// The USART1 link (PB6 TX, PB7 RX on the board; a host chardev in QEMU).
 pub struct Usart1 {
@@ -63,6 +68,11 @@ impl Usart1 {
 fn USART1() {
     let usart = pac::USART1;
     let isr = usart.isr().read();
+    if isr.txe() && usart.cr1().read().txeie() {
+        // TXE stays set until the next byte is written: mask it, or it fires again at once.
+        usart.cr1().modify(|w| w.set_txeie(false));
+        TX_WAKER.wake();
+    }
     if isr.rxne() {
         if RX.is_full() {
             // Back-pressure: leave the byte in RDR; `read` unmasks us once there is room.
@@ -76,6 +86,20 @@ fn USART1() {
     }
 }
 
+/// Until TXE is set: registers the waker, then unmasks TXEIE (the handler masks it and wakes
+/// us); cancel-safe (a dropped wait leaves at most one spurious interrupt).
+async fn txe() {
+    core::future::poll_fn(|cx| {
+        TX_WAKER.register(cx.waker());
+        if pac::USART1.isr().read().txe() {
+            return core::task::Poll::Ready(());
+        }
+        cortex_m::interrupt::free(|_| pac::USART1.cr1().modify(|w| w.set_txeie(true)));
+        core::task::Poll::Pending
+    })
+    .await
+}
+
 /// Never fails: QEMU's USART has no line errors.
 impl embedded_io_async::ErrorType for Usart1 {
     type Error = core::convert::Infallible;
@@ -85,7 +109,8 @@ impl embedded_io_async::Read for Usart1 {
     async fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
         let n = RX.read(buf).await;
         if MASKED.swap(false, Ordering::AcqRel) {
-            pac::USART1.cr1().modify(|w| w.set_rxneie(true));
+            // CR1 is shared with the handler (TXEIE): modified with the handler held off.
+            cortex_m::interrupt::free(|_| pac::USART1.cr1().modify(|w| w.set_rxneie(true)));
             // The byte the handler left in RDR when the pipe was full is still there: raise
             // the interrupt for it by hand rather than count on the USART model raising it
             // again when RXNEIE is set while RXNE already is.
@@ -101,7 +126,9 @@ impl embedded_io_async::Write for Usart1 {
     async fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
         let usart = pac::USART1;
         for &byte in buf {
-            while !usart.isr().read().txe() {}
+            if !usart.isr().read().txe() {
+                txe().await;
+            }
             usart.tdr().write(|w| w.set_dr(byte as u16));
         }
         Ok(buf.len())
