@@ -21,8 +21,10 @@
 //!   reply) until the next write comes, perhaps never (embassy-usb's CDC class never sends a
 //!   ZLP itself). Each packet waits until the host has taken the one before it; when no program
 //!   has the port open, hosts stop asking for data and a write waits until one does (like a UART
-//!   with flow control); it does not time out. Writing before the device is configured fails at
-//!   once with [`UsbLinkError::Disconnected`].
+//!   with flow control); it does not time out here: the app's link gives each frame
+//!   `app::link::WRITE_LIMIT` and drops it after (docs/firmware.md, "A host that stops
+//!   reading"). Writing before the device is configured fails at once with
+//!   [`UsbLinkError::Disconnected`].
 //! - **DTR** ([`UsbLink::host_port_open`]) is reported, never used to gate data: Linux and macOS
 //!   raise it when a program opens the port, but the `serialport` crate leaves it low on
 //!   Windows, so a gate would lock Windows hosts out. Frames already survive a client change:
