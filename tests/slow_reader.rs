@@ -90,6 +90,7 @@ fn start(sock: &std::path::Path) -> (Qemu, DeviceClient) {
                 break client;
             }
             Err(e) if Instant::now() > deadline => panic!("no Hello on {sock:?} within 20 s: {e}"),
+            // Polling a condition (the firmware answers), bounded by the deadline above.
             Err(_) => std::thread::sleep(Duration::from_millis(100)),
         }
     };
@@ -116,6 +117,9 @@ fn a_host_that_stops_reading_stalls_neither_the_drive_nor_the_link() {
         "telemetry flows before the host stops reading"
     );
 
+    // The scenario is an absence (the host reads nothing), so it takes a fixed time: long
+    // enough for the watchdog to have reset a stalled controller three times over. No state
+    // of the firmware can be waited on instead, since the host is not listening.
     std::thread::sleep(DEAF);
 
     let after = client.status();
