@@ -20,7 +20,8 @@
 //!    (fixed durations, [`simulate_plan`](crate::motion::sim::simulate_plan)) from interleaved starts (grid shifted half a cell,
 //!    orientations half a step; and from the tracked starts again when some lingered and
 //!    were left out of the durations); every end must lie within the margin of the
-//!    predicted orientation. The fastest confirmed sequence wins.
+//!    predicted orientation. The fastest confirmed sequence wins; the candidates are redone
+//!    best first, so slower ones stop once they outlast it ([`confirm`]).
 //!
 //! **Several parts** ([`plan_parts`]; in practice the two faces of a part that flips,
 //! docs/plan.md "Both faces") are tracked together through the same sequences, each part from
@@ -36,17 +37,16 @@ use rayon::prelude::*;
 
 use super::capture::{clamped_rims, touches};
 use super::whole::PlateEdge;
-use super::{
-    PartPlan, PlanFailure, PlanOptions, PlannedStep, Settle, Synthesis, cdist, plan_period,
-    slowest_settled, step_duration_ms,
-};
+use super::{PlanFailure, PlanOptions, Synthesis, cdist, plan_period};
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
 use crate::motion::sim::{self, Body, FieldModel, Pose, REST_LIMIT_T0, SimParams};
 
 pub use crate::model::feed_region::{FeedError, FeedRegion};
 
+mod candidates;
 mod twins;
+use candidates::confirm;
 use twins::twins;
 
 /// The feed-region search's default most steps (`plan --max-steps`).
@@ -94,7 +94,8 @@ pub struct FeedCheck {
     /// Largest final orientation error of those runs and of the tracked poses at rest (deg,
     /// mod the period).
     pub worst_error_deg: f64,
-    /// Mode sequences the search found but the confirmation rejected.
+    /// Mode sequences the search found but the confirmation rejected (as far as it redid
+    /// them: a candidate it stopped redoing once slower than the plan is not counted).
     pub rejected: usize,
 }
 
@@ -641,9 +642,6 @@ pub fn plan_parts(
     unreachable!("the last round never refines")
 }
 
-/// Most starts one refinement round adds (those of the first failing batch of the check).
-const REFINE_STARTS: usize = 16;
-
 /// How one search over the tracked starts ended.
 enum Round {
     /// A confirmed plan.
@@ -706,47 +704,6 @@ impl Search<'_> {
         }
         Ok(Round::Fail(rejected, Bound { depth: s.depth, exhausted: None }))
     }
-}
-
-/// The candidates of one depth: durations first (every start tracked), then the check from
-/// the interleaved starts in order of total duration: the first confirmed is the fastest, and
-/// slower ones need no check. Returns the plan, the rejections in the order the search found
-/// them, and the checked starts that ended off (first failing batch of each, at most
-/// [`REFINE_STARTS`] in all).
-fn confirm(
-    t: &mut Tracker,
-    found: &[Node],
-    (starts, verify): (&[Tagged], &[Tagged]),
-    (opt, region, names): (&PlanOptions, &FeedRegion, &[&str]),
-) -> (Option<Synthesis>, Vec<String>, Vec<Tagged>) {
-    let mut why: Vec<(usize, String)> = Vec::new();
-    let mut drafts: Vec<(usize, Draft)> = Vec::new();
-    for (i, cand) in found.iter().take(opt.feed_search.candidates).enumerate() {
-        match track(t, &cand.seq, starts, (opt, names)) {
-            Ok(d) => drafts.push((i, d)),
-            Err(e) => why.push((i, e)),
-        }
-    }
-    drafts.sort_by_key(|(i, d)| (d.total_ms(), *i));
-    let (mut best, mut off) = (None, Vec::new());
-    for (i, d) in drafts {
-        match check(t, d, (region, starts, verify), (opt, names)) {
-            Ok(syn) => {
-                best = Some(syn);
-                break;
-            }
-            Err((e, bad)) => {
-                why.push((i, e));
-                for q in bad {
-                    if off.len() < REFINE_STARTS && !off.contains(&q) && !starts.contains(&q) {
-                        off.push(q);
-                    }
-                }
-            }
-        }
-    }
-    why.sort_by_key(|w| w.0);
-    (best, why.into_iter().map(|w| w.1).collect(), off)
 }
 
 /// `1 mode`, `4 modes`.
@@ -862,177 +819,11 @@ fn explain(
     msg
 }
 
-/// A candidate sequence with every start tracked: its steps (durations from the settle
-/// times) and where the tracked starts end.
-struct Draft {
-    modes: String,
-    steps: Vec<PlannedStep>,
-    poses: Vec<Tagged>,
-    /// Each part's orientations after each step (deg).
-    afters: Vec<Vec<Vec<f64>>>,
-    /// Each part's circular mean orientation of the ends and their largest distance from it
-    /// (deg).
-    spreads: Vec<(f64, f64)>,
-}
-
-impl Draft {
-    fn total_ms(&self) -> u64 {
-        self.steps.iter().map(|s| s.duration_ms as u64).sum()
-    }
-}
-
-/// Tracks every start through a mode sequence without clustering (see the module
-/// documentation): the durations (the slowest of every part's runs), and the spread of each
-/// part's ends.
-fn track(
-    t: &mut Tracker,
-    seq: &[usize],
-    starts: &[Tagged],
-    (opt, names): (&PlanOptions, &[&str]),
-) -> Result<Draft, String> {
-    let modes = seq.iter().map(|k| (k + 1).to_string()).collect::<Vec<_>>().join(", ");
-    let periods = t.sim.periods.clone();
-    let mut poses = starts.to_vec();
-    let mut steps = Vec::with_capacity(seq.len());
-    let mut afters = vec![Vec::with_capacity(seq.len()); periods.len()];
-    for (i, &k) in seq.iter().enumerate() {
-        let runs = t
-            .rests(k, &poses)
-            .ok_or_else(|| format!("modes {modes}: step {} leaves a part off any node", i + 1))?;
-        let (settle_s, lingering) = slowest_settled(runs.iter().map(|r| r.settle_s).collect());
-        let before =
-            if i == 0 { Vec::new() } else { orientations(&of_part(&poses, 0), periods[0]) };
-        poses = poses.iter().zip(&runs).map(|(q, r)| (q.0, r.pose)).collect();
-        for (a, o) in afters.iter_mut().zip(part_orientations(&poses, &periods)) {
-            a.push(o);
-        }
-        steps.push(PlannedStep {
-            mode: k,
-            before,
-            after: afters[0][i].clone(),
-            duration_ms: step_duration_ms(settle_s, opt.safety, t.sim.plate.modes[k].ramp_ms),
-            settle: Settle { settle_s, lingering, points: starts.len(), ends_on_edge: Vec::new() },
-            margin: super::margin::fixed(opt),
-        });
-    }
-    let spreads = spreads(&poses, &periods);
-    for (name, &(_, dev)) in names.iter().zip(&spreads) {
-        if dev > opt.feed_search.tol_deg {
-            let whose = if names.len() > 1 { format!("{name}'s ") } else { String::new() };
-            return Err(format!("modes {modes}: {whose}tracked orientations spread ±{dev:.2}°"));
-        }
-    }
-    Ok(Draft { modes, steps, poses, afters, spreads })
-}
-
-/// Runs a tracked sequence with its fixed durations from the interleaved starts (and the
-/// tracked ones again when some lingered) and builds its plan if every end lies within the
-/// margin of its part's predicted orientation.
-fn check(
-    t: &mut Tracker,
-    d: Draft,
-    (region, starts, verify): (&FeedRegion, &[Tagged], &[Tagged]),
-    (opt, names): (&PlanOptions, &[&str]),
-) -> Result<Synthesis, (String, Vec<Tagged>)> {
-    // Tracked starts settled within their step durations unless some lingered (left out of
-    // the durations); only then can they end elsewhere when run with the fixed durations.
-    let lingered = d.steps.iter().any(|s| s.settle.lingering > 0);
-    let again = if lingered { starts } else { &[] };
-    let runs: Vec<Tagged> = again.iter().chain(verify).copied().collect();
-    let bound = opt.margin_deg.max(opt.feed_search.tol_deg);
-    let thetas: Vec<f64> = d.spreads.iter().map(|s| s.0).collect();
-    let (checked, part, off) = checked_error(t, &d.steps, &runs, &thetas, bound);
-    let dev = d.spreads.iter().map(|s| s.1).fold(0.0, f64::max);
-    let worst = checked.max(dev);
-    if worst > bound {
-        let modes = &d.modes;
-        let of = if names.len() > 1 { format!(" of {}", names[part]) } else { String::new() };
-        let msg = format!("modes {modes}: a start{of} ends {worst:.2}° off (bound {bound}°)");
-        return Err((msg, off));
-    }
-    let periods = &t.sim.periods;
-    let parts = if names.len() < 2 {
-        Vec::new()
-    } else {
-        (names.iter().enumerate())
-            .map(|(i, name)| PartPlan {
-                name: name.to_string(),
-                period_deg: periods[i],
-                final_orientation_deg: thetas[i],
-                final_position_mm: common_position(&of_part(&d.poses, i)),
-                after: d.afters[i].clone(),
-                ..PartPlan::default()
-            })
-            .collect()
-    };
-    Ok(Synthesis {
-        final_position_mm: common_position(&of_part(&d.poses, 0)),
-        steps: d.steps,
-        final_orientation_deg: thetas[0],
-        period_deg: periods[0],
-        feed: Some(FeedCheck {
-            region: *region,
-            starts: starts.len(),
-            checked: runs.len(),
-            worst_error_deg: worst,
-            rejected: 0,
-        }),
-        parts,
-        ..Synthesis::default()
-    })
-}
-
-/// The largest final orientation error (deg, mod the part's period) of the plan run as the
-/// simulator runs it (fixed step durations,
-/// [`simulate_plan`](crate::motion::sim::simulate_plan)) from `starts`, each part against its
-/// own prediction `thetas[part]`, the part it was measured on, and the starts whose error
-/// exceeds `bound`. Starts go in batches of 64 (each batch in parallel); after a batch with an
-/// error above `bound` the rest are skipped, so a rejected plan costs less (the result then
-/// exceeds `bound` but need not be the largest).
-fn checked_error(
-    t: &mut Tracker,
-    steps: &[PlannedStep],
-    starts: &[Tagged],
-    thetas: &[f64],
-    bound: f64,
-) -> (f64, usize, Vec<Tagged>) {
-    let (mut worst, mut off) = ((0.0f64, 0), Vec::new());
-    for batch in starts.chunks(64) {
-        let mut poses = batch.to_vec();
-        for s in steps {
-            poses = t.after(s.mode, s.duration_ms as f64 / 1000.0, &poses);
-        }
-        for (&(i, q), &start) in poses.iter().zip(batch) {
-            let err = cdist(q.theta.to_degrees(), thetas[i], t.sim.periods[i]);
-            if err > worst.0 {
-                worst = (err, i);
-            }
-            if err > bound {
-                off.push(start);
-            }
-        }
-        if worst.0 > bound {
-            break;
-        }
-    }
-    (worst.0, worst.1, off)
-}
-
-/// The mean centroid when every final pose lies within 2 mm of it (the nodes fix the
-/// position), else `None`.
-fn common_position(poses: &[Pose]) -> Option<[f64; 2]> {
-    let n = poses.len().max(1) as f64;
-    let m =
-        [poses.iter().map(|q| q.x).sum::<f64>() / n, poses.iter().map(|q| q.y).sum::<f64>() / n];
-    let fixed = poses.iter().all(|q| (q.x - m[0]).hypot(q.y - m[1]) <= 2.0);
-    fixed.then(|| [(m[0] * 1000.0).round() / 1000.0, (m[1] * 1000.0).round() / 1000.0])
-}
-
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
-    fn tracker(plate: &PlateModel) -> Tracker<'_> {
+    pub(super) fn tracker(plate: &PlateModel) -> Tracker<'_> {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
         let part = Part::load(&path.join("../examples/parts/triangle.json")).unwrap();
         Tracker::new(vec![Body::with_samples(&part, 160)], plate, vec![360.0])
