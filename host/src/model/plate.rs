@@ -577,6 +577,14 @@ fn rim_of(t: &crate::model::plate_file::PlateTable) -> Result<(Edge, f64), Model
     Ok((edge, friction))
 }
 
+/// Is the point `p` (mm) on a plate of `size_mm`, its edges included? A coordinate that is not
+/// a number is not: a run that ends there ended nowhere on the plate. The one test of the
+/// plate's extent that the motion model (a part lost off an open edge) and the planners (a
+/// run that ended off the plate) share.
+pub fn on_plate(size_mm: [f64; 2], p: [f64; 2]) -> bool {
+    (0.0..=size_mm[0]).contains(&p[0]) && (0.0..=size_mm[1]).contains(&p[1])
+}
+
 impl PlateModel {
     /// Types a parsed plate file.
     pub fn from_file(file: &PlateFile) -> Result<PlateModel, ModelError> {
@@ -623,6 +631,18 @@ mod tests {
     fn model(modes: &str) -> Result<PlateModel, ModelError> {
         let text = format!("[plate]\nname = \"t\"\nsize_mm = [300.0, 200.0]\n{modes}");
         PlateModel::parse(&text, "t")
+    }
+
+    #[test]
+    fn a_point_is_on_the_plate_up_to_its_edges_and_never_when_not_a_number() {
+        let size = [300.0, 200.0];
+        for p in [[0.0, 0.0], [300.0, 200.0], [150.0, 0.0], [0.0, 200.0]] {
+            assert!(on_plate(size, p), "{p:?}");
+        }
+        for p in [[-1e-9, 10.0], [300.0 + 1e-9, 10.0], [10.0, 200.1], [f64::NAN, 10.0]] {
+            assert!(!on_plate(size, p), "{p:?}");
+        }
+        assert!(!on_plate(size, [10.0, f64::INFINITY]));
     }
 
     #[test]

@@ -16,7 +16,7 @@
 
 #[cfg(test)]
 use crate::model::plate::DEFAULT_FRICTION;
-use crate::model::plate::{Edge, PlateModel};
+use crate::model::plate::{Edge, PlateModel, on_plate};
 use crate::motion::body::{Body, Pose};
 
 /// Vertices within this fraction of the part's radius of the wall count as touching it (a
@@ -77,8 +77,7 @@ impl Rim {
 
     /// Has the part fallen off an open edge (centroid off the plate)?
     pub fn lost(&self, q: Pose) -> bool {
-        let [w, h] = self.size_mm;
-        self.edge == Edge::Open && !(q.x >= 0.0 && q.y >= 0.0 && q.x <= w && q.y <= h)
+        self.edge == Edge::Open && !on_plate(self.size_mm, [q.x, q.y])
     }
 
     /// The pose moved back inside a wall (by a translation), unchanged without one.

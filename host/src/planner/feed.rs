@@ -39,7 +39,7 @@ use super::capture::{clamped_rims, touches};
 use super::whole::PlateEdge;
 use super::{PlanFailure, PlanOptions, Synthesis, cdist, plan_period};
 use crate::model::part::Part;
-use crate::model::plate::PlateModel;
+use crate::model::plate::{PlateModel, on_plate};
 use crate::motion::sim::{self, Body, FieldModel, Pose, REST_LIMIT_T0, SimParams};
 
 pub use crate::model::feed_region::{FeedError, FeedRegion};
@@ -211,9 +211,7 @@ impl Sim<'_> {
 
     /// Why a run of part `i` does not count ([`Sim::ok`]), or `None` when it does.
     fn fault(&self, i: usize, o: &Outcome) -> Option<RunFault> {
-        let [w, h] = self.plate.size_mm;
-        let on = (0.0..=w).contains(&o.pose.x) && (0.0..=h).contains(&o.pose.y);
-        if o.lost || !on {
+        if o.lost || !on_plate(self.plate.size_mm, [o.pose.x, o.pose.y]) {
             Some(RunFault::Off)
         } else if !o.rested {
             Some(RunFault::Unsettled)

@@ -22,7 +22,7 @@ use super::{PlanFailure, PlanOptions, Problem, Synthesis, deadline};
 use crate::model::angle::cdist;
 use crate::model::part::Part;
 use crate::model::part::mirror::{Face, FaceOf};
-use crate::model::plate::{Node, PlateModel};
+use crate::model::plate::{Node, PlateModel, on_plate};
 use crate::motion::bulk::{Drop, run_drops};
 use crate::motion::shape::Pieces;
 use crate::motion::sim::{Body, FieldModel, Pose, SimStep, simulate_plan};
@@ -212,8 +212,7 @@ pub fn drops(body: &Body, plate: &PlateModel) -> Vec<([f64; 2], f64)> {
 /// Whether a run of the part ending at `e` held (on the plate, within [`DROP_TOL_DEG`] of
 /// `(final, period)`); if not, how it ended.
 fn held(body: &Body, plate: &PlateModel, e: Pose, lost: bool, pred: (f64, f64)) -> Option<DropEnd> {
-    let [w, h] = plate.size_mm;
-    let off = lost || e.x < 0.0 || e.y < 0.0 || e.x > w || e.y > h;
+    let off = lost || !on_plate(plate.size_mm, [e.x, e.y]);
     let ok = cdist(e.theta.to_degrees(), pred.0, pred.1);
     if !off && ok <= DROP_TOL_DEG {
         return None;
