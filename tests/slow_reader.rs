@@ -13,7 +13,7 @@
 
 use std::io::{Read, Write};
 use std::os::unix::net::UnixStream;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 use chladni::controller::client::{DeviceClient, Transport};
@@ -22,15 +22,18 @@ use chladni_e2e::{log_path, poll_until};
 use chladni_shared::icd::link::{Board, DriveState};
 use chladni_shared::icd::plan::Level;
 
-/// QEMU, killed when the test ends however it ends.
+/// QEMU under a time limit ([`emulator::limited`]), stopped when the test ends however it
+/// ends, and by the limit should the test process itself be killed.
 struct Qemu(Child);
 
 impl Drop for Qemu {
     fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
+        emulator::stop_child(&mut self.0);
     }
 }
+
+/// QEMU's time limit: the test takes about 10 s.
+const QEMU_LIMIT: Duration = Duration::from_secs(120);
 
 /// The client's end of QEMU's Unix socket.
 struct Unix(UnixStream);
@@ -68,8 +71,8 @@ fn start(sock: &std::path::Path) -> (Qemu, DeviceClient) {
     // The raw defmt stream (semihosting): `defmt-print -e ELF < slow_reader.defmt` reads it.
     let log = std::fs::File::create(log_path("slow_reader").with_extension("defmt"))
         .expect("the log file");
-    let qemu = Command::new("qemu-system-arm")
-        .args(&args)
+    let qemu = emulator::limited("qemu-system-arm", &args, Some(QEMU_LIMIT))
+        .stdin(Stdio::null())
         .stdout(log)
         .stderr(Stdio::null())
         .spawn()

@@ -304,15 +304,7 @@ impl Emulator {
     }
 
     fn stop_qemu(&mut self) {
-        if matches!(self.qemu.try_wait(), Ok(None)) {
-            let _ = kill(Pid::from_raw(self.qemu.id() as i32), Signal::SIGTERM);
-            let deadline = Instant::now() + Duration::from_secs(3);
-            while matches!(self.qemu.try_wait(), Ok(None)) && Instant::now() < deadline {
-                std::thread::sleep(Duration::from_millis(20));
-            }
-            let _ = self.qemu.kill();
-            let _ = self.qemu.wait();
-        }
+        stop_child(&mut self.qemu);
         self.stop_log_decoder();
     }
 
@@ -329,6 +321,40 @@ impl Emulator {
     }
 }
 
+/// `program` with `args`, under coreutils `timeout` when `limit` is given: it then ends after
+/// `limit` (SIGTERM, then SIGKILL 5 s later) even when the process that started it was killed
+/// outright and never stopped it. Stop it with [`stop_child`].
+pub fn limited(program: &str, args: &[String], limit: Option<Duration>) -> Command {
+    match limit {
+        Some(limit) => {
+            let mut c = Command::new("timeout");
+            c.args(["--kill-after=5", &format!("{}", limit.as_secs().max(1))]);
+            c.arg(program).args(args);
+            c
+        }
+        None => {
+            let mut c = Command::new(program);
+            c.args(args);
+            c
+        }
+    }
+}
+
+/// Stops a child started by [`limited`]: SIGTERM (which `timeout` passes on to its program; a
+/// SIGKILL would end `timeout` alone and leave the program running), up to 3 s to end, then
+/// SIGKILL.
+pub fn stop_child(child: &mut Child) {
+    if matches!(child.try_wait(), Ok(None)) {
+        let _ = kill(Pid::from_raw(child.id() as i32), Signal::SIGTERM);
+        let deadline = Instant::now() + Duration::from_secs(3);
+        while matches!(child.try_wait(), Ok(None)) && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = child.kill();
+        let _ = child.wait();
+    }
+}
+
 /// Starts QEMU on `elf` with its serial socket on `port`, and defmt-print decoding its log
 /// into the log file (created, or appended to when `append`) or stderr.
 fn spawn(
@@ -342,19 +368,7 @@ fn spawn(
     if let Some(speed) = config.speed {
         qemu_args.extend(icount_args(speed));
     }
-    let mut command = match config.time_limit {
-        Some(limit) => {
-            let mut c = Command::new("timeout");
-            c.args(["--kill-after=5", &format!("{}", limit.as_secs().max(1))]);
-            c.arg("qemu-system-arm").args(&qemu_args);
-            c
-        }
-        None => {
-            let mut c = Command::new("qemu-system-arm");
-            c.args(&qemu_args);
-            c
-        }
-    };
+    let mut command = limited("qemu-system-arm", &qemu_args, config.time_limit);
     let open_log = |path: &Path, append: bool| -> std::io::Result<Stdio> {
         let file = if append {
             File::options().append(true).create(true).open(path)?
