@@ -123,7 +123,7 @@ impl<'a> Tracking<'a> {
             let modes = self.modes();
             return Err(format!("modes {modes}: step {} leaves a part off any node", i + 1));
         };
-        let periods = &t.sim.periods.clone();
+        let periods = &t.sim.periods;
         let (settle_s, lingering) = slowest_settled(runs.iter().map(|r| r.settle_s).collect());
         let before =
             if i == 0 { Vec::new() } else { orientations(&of_part(&self.poses, 0), periods[0]) };
