@@ -683,7 +683,7 @@ impl Search<'_> {
             });
             let (next, found) = self.expand(&level, (s.tol_deg, depth), bar)?;
             let (best, why, off) =
-                confirm(&mut self.tracker, &found, (starts, verify), (opt, region, names));
+                confirm(&mut self.tracker, &found, (starts, verify), (opt, region, names), bar)?;
             rejected.extend(why);
             if let Some(syn) = best {
                 let mut syn = syn;

@@ -7,9 +7,11 @@ use super::{
     FeedCheck, FeedRegion, Node, Tagged, Tracker, cdist, of_part, orientations, part_orientations,
     spreads,
 };
+use indicatif::ProgressBar;
+
 use crate::motion::sim::Pose;
-use crate::planner::{PartPlan, PlanOptions, PlannedStep, Settle, Synthesis};
-use crate::planner::{margin, slowest_settled, step_duration_ms};
+use crate::planner::{PartPlan, PlanFailure, PlanOptions, PlannedStep, Settle, Synthesis};
+use crate::planner::{deadline, margin, slowest_settled, step_duration_ms};
 
 /// Most starts one refinement round adds (those of the first failing batch of the check).
 pub(super) const REFINE_STARTS: usize = 16;
@@ -23,20 +25,39 @@ pub(super) const REFINE_STARTS: usize = 16;
 /// find, and the candidates slower than it are tracked only as far as that shows. Returns
 /// the plan, the rejections in the order the search found them (candidates whose tracking
 /// failed as far as it went, and every check failed before the plan), and the checked
-/// starts that ended off (first failing batch of each, at most [`REFINE_STARTS`] in all).
+/// starts that ended off (first failing batch of each, at most [`REFINE_STARTS`] in all);
+/// [`PlanFailure::OutOfTime`] when the deadline passes (checked before every step redone and
+/// every check). `bar` counts the steps redone.
 pub(super) fn confirm(
     t: &mut Tracker,
     found: &[Node],
     (starts, verify): (&[Tagged], &[Tagged]),
     (opt, region, names): (&PlanOptions, &FeedRegion, &[&str]),
-) -> (Option<Synthesis>, Vec<String>, Vec<Tagged>) {
+    bar: &ProgressBar,
+) -> Result<Confirmed, PlanFailure> {
     let mut open: Vec<Tracking> = (found.iter().take(opt.feed_search.candidates).enumerate())
         .map(|(i, c)| Tracking::new(i, &c.seq, starts, t.sim.periods.len()))
         .collect();
+    if !open.is_empty() {
+        bar.set_length(open.iter().map(|c| c.seq.len() as u64).sum());
+        bar.set_position(0);
+        bar.set_message(format!("feed plan: confirming {} candidate(s)", open.len()));
+    }
     let mut why: Vec<(usize, String)> = Vec::new();
     let (mut best, mut off) = (None, Vec::new());
     while let Some(k) = (0..open.len()).min_by_key(|&k| (open[k].so_far_ms(), open[k].i)) {
+        let stage = || {
+            let c = &open[k];
+            format!(
+                "the feed-region confirmation, modes {} ({} of {} steps redone)",
+                c.modes(),
+                c.steps.len(),
+                c.seq.len()
+            )
+        };
+        deadline::check(opt.deadline, stage)?;
         if !open[k].done() {
+            bar.inc(1);
             if let Err(e) = open[k].advance(t, opt, starts.len()) {
                 why.push((open[k].i, e));
                 open.swap_remove(k);
@@ -68,8 +89,11 @@ pub(super) fn confirm(
         }
     }
     why.sort_by_key(|w| w.0);
-    (best, why.into_iter().map(|w| w.1).collect(), off)
+    Ok((best, why.into_iter().map(|w| w.1).collect(), off))
 }
+
+/// What [`confirm`] found: the plan, the rejections, the checked starts that ended off.
+pub(super) type Confirmed = (Option<Synthesis>, Vec<String>, Vec<Tagged>);
 
 /// A candidate sequence with every start tracked: its steps (durations from the settle
 /// times) and where the tracked starts end.
@@ -336,12 +360,42 @@ mod tests {
             // The choice matters: several candidates track to one orientation, not all as fast.
             assert!(totals.len() >= 3 && totals[0] < totals[totals.len() - 1], "{totals:?}");
             let mut bf = tracker(&plate);
-            let (got, _, _) = confirm(&mut bf, &nodes(order), (&starts, &verify), ctx);
+            let hidden = ProgressBar::hidden();
+            let (got, _, _) =
+                confirm(&mut bf, &nodes(order), (&starts, &verify), ctx, &hidden).unwrap();
             let got = got.expect("the best-first search finds a plan");
             assert_eq!((modes(&got), ms(&got)), (modes(&want), ms(&want)), "{what}");
             assert_eq!(got.final_orientation_deg, want.final_orientation_deg, "{what}");
             eprintln!("{what}: {} runs against {}", runs(&bf), runs(&ex));
             assert!(runs(&bf) < runs(&ex), "{what}: {} runs against {}", runs(&bf), runs(&ex));
         }
+    }
+
+    /// The confirmation stops at the deadline, naming the candidate it was redoing.
+    #[test]
+    fn the_confirmation_stops_at_the_deadline() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let plate = PlateModel::load(&path.join("../examples/plates/four-lines.toml")).unwrap();
+        let region = FeedRegion::new([60.0, 40.0, 120.0, 100.0], &plate).unwrap();
+        let s = FeedSearch { points: 2, starts: 6, ..Default::default() };
+        let deadline = Some(crate::planner::Deadline::after_s(0.0));
+        let opt =
+            PlanOptions { feed: Some(region), feed_search: s, deadline, ..Default::default() };
+        let mut t = tracker(&plate);
+        let starts: Vec<Tagged> = (tracked_starts(&region, &t.sim.bodies[0], &plate, &s))
+            .into_iter()
+            .map(|q| (0, q))
+            .collect();
+        let found = [Node { seq: vec![0, 1], poses: Vec::new() }];
+        let ctx = (&opt, &region, &["triangle"][..]);
+        let hidden = ProgressBar::hidden();
+        let err = confirm(&mut t, &found, (&starts, &starts), ctx, &hidden).unwrap_err();
+        let msg = err.to_string();
+        assert!(matches!(err, PlanFailure::OutOfTime { .. }), "{msg}");
+        assert!(
+            msg.contains("the feed-region confirmation, modes 1, 2 (0 of 2 steps redone)"),
+            "{msg}"
+        );
+        assert!(t.memo.is_empty(), "nothing was simulated");
     }
 }
