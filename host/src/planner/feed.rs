@@ -21,7 +21,7 @@
 //!    orientations half a step; and from the tracked starts again when some lingered and
 //!    were left out of the durations); every end must lie within the margin of the
 //!    predicted orientation. The fastest confirmed sequence wins; the candidates are redone
-//!    best first, so slower ones stop once they outlast it ([`confirm`]).
+//!    best first, so slower ones stop once they outlast it (`feed::candidates::confirm`).
 //!
 //! **Several parts** ([`plan_parts`]; in practice the two faces of a part that flips,
 //! docs/plan.md "Both faces") are tracked together through the same sequences, each part from
