@@ -1,7 +1,7 @@
 //! The field wrench of a grid mode, the motion model's inner loop (about two per Heun step;
 //! docs/plan.md, "Planning time"): criterion's time per call for parts of growing outline
 //! length on the free plate's first solver mode (`examples/plates/free-6-modes.toml`), over
-//! poses spread across the plate, and the pieces (edge cuts at grid lines) per call.
+//! 64 poses spread across the plate (one iteration is all 64; the names give the edges).
 
 use chladni::model::{part::Part, plate::PlateModel};
 use chladni::motion::sim::{Body, FieldModel, Pose};

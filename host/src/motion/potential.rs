@@ -177,8 +177,9 @@ impl Bicubic {
     /// ∫ k φ² ds and ∫ k φ² s ds over s ∈ [0, 1] along the segment a + s·d (grid coordinates):
     /// the segment is cut where it crosses a grid line, found by stepping from cell to cell
     /// (a digital differential analyser), and each piece, inside one cell's polynomial,
-    /// integrated with 4-point Gauss–Legendre (2-point when shorter than [`SHORT`]). Outside the plate φ is the clamped
-    /// coordinate's, as in `grid_eval`; the grid lines beyond the plate still cut pieces.
+    /// integrated with 4-point Gauss–Legendre (2-point when shorter than [`SHORT`]). Outside
+    /// the plate φ is the clamped coordinate's, as in `grid_eval`; the grid lines beyond the
+    /// plate still cut pieces.
     fn edge_integrals(&self, a: [f64; 2], d: [f64; 2], k: [f64; 2]) -> (f64, f64) {
         let (umax, vmax) = ((self.nx - 1) as f64, (self.ny - 1) as f64);
         let (imax, jmax) = (self.nx as i64 - 2, self.ny as i64 - 2);

@@ -2,7 +2,8 @@
 //! [`PlanFailure::OutOfTime`] once it has passed, so a user never waits minutes without an
 //! answer. It is checked between the stages that take time (each mode's step map, the search
 //! every few thousand sets, the dynamic check, the step durations, each depth of a feed-region
-//! search and each step its confirmation redoes), so a plan may run past it by at most one such stage.
+//! search and each step its confirmation redoes), so a plan may run past it by at most one
+//! such stage.
 
 use std::time::{Duration, Instant};
 

@@ -818,7 +818,7 @@ fn explain(
 }
 
 #[cfg(test)]
-pub(super) mod tests {
+mod tests {
     use super::*;
 
     pub(super) fn tracker(plate: &PlateModel) -> Tracker<'_> {
