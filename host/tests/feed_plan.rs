@@ -152,3 +152,27 @@ fn max_steps_one_stops_the_feed_search_and_says_so() {
     assert!(msg.contains("no sequence of up to 1 mode (--max-steps 1)"), "{msg}");
     assert!(msg.contains("a larger value searches longer sequences"), "{msg}");
 }
+
+/// The default step bound is 6: the triangle from the hinged-rod plate's left side gets its
+/// 5-step plan (docs/plan.md, "The step bound"; none of up to 4 steps exists) without
+/// `--max-steps`; a plan of at most 4 steps (the L-shape's 3) is the one a bound of 4
+/// gives, byte for byte, as the first four levels run every start exactly.
+#[test]
+fn the_default_step_bound_finds_a_5_step_plan_and_keeps_the_shorter_ones() {
+    let plate = ex("plates/hinged-rod-6-modes.toml");
+    let feed = ["--feed", "40", "50", "90", "150", "--json"];
+    let plan = |part: &str, more: &[&str]| {
+        let part = ex(part);
+        let args = [&["plan", part.as_str(), "--plate", plate.as_str()][..], &feed, more].concat();
+        let out = chladni(&args);
+        (out.status.code(), json(&out))
+    };
+    let (code, v) = plan("parts/triangle.json", &[]);
+    assert_eq!(code, Some(0), "{v}");
+    assert_eq!(v["steps"].as_array().map(Vec::len), Some(5), "{v}");
+    let (default, four) =
+        (plan("parts/l-shape.json", &[]), plan("parts/l-shape.json", &["--max-steps", "4"]));
+    assert_eq!(default.0, Some(0), "{}", default.1);
+    assert_eq!(default.1["steps"].as_array().map(Vec::len), Some(3), "{}", default.1);
+    assert_eq!(default, four);
+}

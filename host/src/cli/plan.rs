@@ -172,7 +172,7 @@ pub struct PlanArgs {
     #[arg(long, value_name = "N", default_value_t = 200_000,
           value_parser = clap::value_parser!(u32).range(1..=50_000_000))]
     max_states: u32,
-    /// With --feed: the longest mode sequence the feed-region search tries (default 4; at
+    /// With --feed: the longest mode sequence the feed-region search tries (default 6; at
     /// most 8: the sequences grow as (modes − 1)^N). The search over orientation sets has no
     /// step bound (--max-states bounds it).
     #[arg(long, value_name = "N",

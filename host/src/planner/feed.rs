@@ -49,8 +49,11 @@ mod twins;
 use candidates::confirm;
 use twins::twins;
 
-/// The feed-region search's default most steps (`plan --max-steps`).
-pub const DEPTH: usize = 4;
+/// The feed-region search's default most steps (`plan --max-steps`). Levels past the
+/// fourth borrow runs, which keeps a 6-step search of an ordinary part within about
+/// a minute, and the search is level by level, so every plan of 4 steps or fewer is the one a
+/// bound of 4 finds (docs/plan.md, "The step bound").
+pub const DEPTH: usize = 6;
 
 /// The largest `--max-steps`: sequences grow as (modes − 1)^depth.
 pub const MAX_DEPTH: usize = 8;
@@ -252,9 +255,10 @@ struct Tracker<'a> {
 type NearCell = (usize, usize, i64, i64, i64);
 
 /// The search's levels beyond this reuse a run from a start within the cluster tolerance
-/// ([`Tracker::near`]); levels up to it (the default `--max-steps`) run every tracked pose, so
-/// their answers do not depend on how deep the search may go.
-const EXACT_LEVELS: usize = DEPTH;
+/// ([`Tracker::near`]); levels up to it run every tracked pose, so their answers do not depend
+/// on how deep the search may go. Four: the default depth before it was 6, so every plan of
+/// up to 4 steps is the one found before.
+const EXACT_LEVELS: usize = 4;
 
 fn near_cell(k: usize, (i, q): Tagged, period: f64) -> NearCell {
     let th = q.theta.to_degrees().rem_euclid(period);
