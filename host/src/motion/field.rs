@@ -478,6 +478,26 @@ impl FieldModel {
         w
     }
 
+    /// Distance (mm) from a plate point to the mode's nearest node: exact for straight and
+    /// hyperbolic nodes, |φ| / |∇φ| (first order) on a grid; infinite where a grid's field is
+    /// flat and not zero.
+    pub fn node_distance(&self, p: [f64; 2]) -> f64 {
+        let xi = |(xhat, c): &([f64; 2], f64)| (xhat[0] * p[0] + xhat[1] * p[1] - c).abs();
+        match self {
+            FieldModel::Line { xhat, c, .. } => xi(&(*xhat, *c)),
+            FieldModel::Lines { lines, .. } => lines.iter().map(xi).fold(f64::INFINITY, f64::min),
+            FieldModel::Hyperbola { center, axis, a, b, table, .. } => {
+                let (d, _) =
+                    table.eval(p).unwrap_or_else(|| hyperbola_exact(*center, *axis, *a, *b, p));
+                d.abs()
+            }
+            FieldModel::Grid { cells, .. } => {
+                let (v, d) = cells.eval(p);
+                if v == 0.0 { 0.0 } else { v.abs() / d[0].hypot(d[1]) }
+            }
+        }
+    }
+
     /// Largest gain.
     pub fn max_gain(&self) -> f64 {
         match self {
@@ -656,6 +676,27 @@ mod tests {
         }
         eprintln!("hyperbola outline pieces {HYPERBOLA_PIECE} R vs R/50: {worst:.1e}");
         assert!(worst < 1e-4, "{worst}");
+    }
+
+    /// A straight node's distance is exact; a grid's is |φ| / |∇φ|: zero on the hinged-rod
+    /// plate's hinge line x = 150 mm in every mode, and off the line not zero in every mode.
+    #[test]
+    fn node_distance_is_zero_on_a_node_and_not_off_it() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let plate = PlateModel::load(&root.join("examples/plates/four-lines.toml")).unwrap();
+        let f = FieldModel::new(&plate.modes[0], &plate);
+        let d = f.node_distance([140.0, 37.0]);
+        assert!((d - 10.0).abs() < 1e-9 && f.node_distance([150.0, 37.0]) < 1e-9, "{d}");
+        let hinged =
+            PlateModel::load(&root.join("examples/plates/hinged-rod-6-modes.toml")).unwrap();
+        let fields: Vec<FieldModel> =
+            hinged.modes.iter().map(|m| FieldModel::new(m, &hinged)).collect();
+        for y in [10.0, 50.0, 100.0, 170.0] {
+            for (k, f) in fields.iter().enumerate() {
+                assert!(f.node_distance([150.0, y]) < 0.1, "mode {} at y = {y}", k + 1);
+            }
+        }
+        assert!(fields.iter().any(|f| f.node_distance([60.0, 50.0]) > 10.0));
     }
 
     #[test]

@@ -9,7 +9,9 @@
 //! the original's mirror image through it). When every mode keeps the pair 180° apart from both
 //! twins' rests, the pair is physical: no next step parts it. When some mode does not, the
 //! pair is not forced by the modes: the search's coarse picture (sparse starts, clustering)
-//! left it.
+//! left it. A pair forced at a rest that lies on a node of every mode (a hinged-rod plate's
+//! hinge line) is said to be so, with how many modes leave the part where it rests: no later
+//! step takes it off, so what parts the pair must act before the part gets there.
 
 use super::{Search, Tagged, of_part, orientations, spread};
 use crate::model::pose::Pose;
@@ -38,12 +40,22 @@ struct From {
 /// The twin test at one rest pose: the modes (of those where both runs count) that keep the
 /// part turned 180° in place 180° from the original's end, how many of them also end it at the
 /// original's mirror image through the rest position, and the modes that do not keep the
-/// pair, with how far off 180° apart (deg).
+/// pair, with how far off 180° apart (deg). When the rest lies on a node of every mode
+/// ([`on_every_node`]): the modes whose run of the original ends on such a node again, within
+/// [`KEEP_DEG`] of the rest's orientation, and the most any of them turned it (deg).
 struct Test {
     at: Pose,
     kept: Vec<(usize, f64)>,
     mirrored: usize,
     broken: Vec<(usize, f64)>,
+    shared_node: Option<(usize, f64)>,
+}
+
+/// Whether a plate point lies within the cluster distance ([`TWIN_MM`]) of a node of every
+/// mode ([`crate::motion::field::FieldModel::node_distance`]), as every point of a hinged-rod
+/// plate's hinge line does.
+fn on_every_node(search: &Search, p: Pose) -> bool {
+    (search.tracker.sim.fields.iter()).all(|f| f.node_distance([p.x, p.y]) < TWIN_MM)
 }
 
 /// The measured sentence on the closest sequence's 180° pair of a one-part search, or `None`
@@ -101,11 +113,18 @@ fn test(search: &mut Search, r: Tagged) -> Test {
     let jobs: Vec<(usize, Tagged)> = (0..nm).flat_map(|k| [(k, r), (k, turned)]).collect();
     let outs = search.tracker.outcomes(&jobs, false);
     let p = search.tracker.sim.periods[i];
+    let shared = on_every_node(search, at);
     let (mut kept, mut mirrored, mut broken) = (Vec::new(), 0, Vec::new());
+    let (mut stays, mut turned_most) = (0, 0.0f64);
     for k in 0..nm {
         let (o, t) = (&outs[2 * k], &outs[2 * k + 1]);
         if !search.tracker.sim.ok(i, o) || !search.tracker.sim.ok(i, t) {
             continue;
+        }
+        let turned_by = cdist(o.pose.theta.to_degrees(), at.theta.to_degrees(), p);
+        if shared && turned_by < KEEP_DEG && on_every_node(search, o.pose) {
+            stays += 1;
+            turned_most = turned_most.max(turned_by);
         }
         let (mx, my) = (2.0 * at.x - o.pose.x, 2.0 * at.y - o.pose.y);
         let dth = cdist(t.pose.theta.to_degrees(), o.pose.theta.to_degrees() + 180.0, p);
@@ -117,7 +136,8 @@ fn test(search: &mut Search, r: Tagged) -> Test {
             broken.push((k, dth));
         }
     }
-    Test { at, kept, mirrored, broken }
+    let shared_node = shared.then_some((stays, turned_most));
+    Test { at, kept, mirrored, broken, shared_node }
 }
 
 /// `modes 1, 3`.
@@ -154,6 +174,15 @@ fn sentence(
              {mirrored} also at its mirror image through the rest, within {TWIN_MM} mm), so no \
              next step parts the pair"
         );
+        let held = |t: &Test| t.shared_node.filter(|s| s.0 == t.kept.len()).map(|s| s.1);
+        if let Some(turned) = tests.iter().map(held).try_fold(0.0f64, |m, h| h.map(|h| m.max(h))) {
+            msg += &format!(
+                "; both rests lie within {TWIN_MM} mm of a node every mode shares (as a \
+                 hinged-rod plate's hinge line does), and under each of the {nm} modes the part \
+                 ends on it again, turned by at most {turned:.1}°: no later step takes it off, so \
+                 what parts the pair must keep the part from reaching that node"
+            );
+        }
         if let Some(note) = symmetry_note(None, &[a, b], p) {
             msg += &format!("; {note}");
         }
@@ -207,6 +236,35 @@ mod tests {
         assert!(t.broken.iter().any(|b| b.0 == 1 && b.1 > 90.0), "{:?}", t.broken);
         let msg = sentence((10.0, 190.0), (&from(3), &from(2)), &[t], 5, (&[0], 360.0));
         assert!(msg.contains("not a symmetry of every mode"), "{msg}");
+    }
+
+    /// The hinged-rod crank lever's pair (docs/plan.md, "The step bound"): its rest at
+    /// (150, 50) mm lies on the hinge line, a node of every mode, and every mode ends the part
+    /// on that line again, so the sentence says no later step takes it off. 100 mm to the
+    /// left, off the hinge, not every mode has a node.
+    #[test]
+    fn a_rest_on_a_node_every_mode_shares_is_named() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let plate =
+            PlateModel::load(&path.join("../examples/plates/hinged-rod-6-modes.toml")).unwrap();
+        let part = Part::load(&path.join("../examples/parts/ordinary/crank-lever.json")).unwrap();
+        let tracker = Tracker::new(vec![Body::with_samples(&part, 160)], &plate, vec![360.0]);
+        let mut s =
+            Search { tracker, deadline: None, seen: HashSet::new(), tally: Tally::default() };
+        let up = std::f64::consts::FRAC_PI_2;
+        assert!(!on_every_node(&s, Pose { x: 50.0, y: 50.0, theta: up }));
+        let tests: Vec<Test> = [up, 3.0 * up]
+            .iter()
+            .map(|&theta| test(&mut s, (0, Pose { x: 150.0, y: 50.0, theta })))
+            .collect();
+        for t in &tests {
+            assert!(t.broken.is_empty(), "every mode keeps the pair: {:?}", t.broken);
+            let (stays, turned) = t.shared_node.expect("the hinge line is a node of every mode");
+            assert_eq!(stays, t.kept.len());
+            assert!(turned < KEEP_DEG, "{turned}");
+        }
+        let msg = sentence((90.0, 270.0), (&from(3), &from(2)), &tests, 5, (&[0], 360.0));
+        assert!(msg.contains("a node every mode shares") && msg.contains("no later step"), "{msg}");
     }
 
     fn from(count: usize) -> From {
