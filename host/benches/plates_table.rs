@@ -5,7 +5,8 @@
 //!
 //! - cantilever: `plan` over the whole plate, then `simulate` (200 trials); then "outside the
 //!   capture zone": `plan --feed` and `simulate --feed` in the plate minus the clamp's capture
-//!   zone, the box that whole-plate `plan --json` names (`capture_zone.outside_mm`);
+//!   zone, the box that whole-plate `plan --json` names (`capture_zone.outside_mm`); and
+//!   "clear of the clamp": the same past the zone's clear line (`capture_zone.clear_box_mm`);
 //! - free and hinged-rod: `plan --feed` from a feed region on the left side ([`FEED`]) and
 //!   `simulate --feed`; then `plate suggest` (its wall time is the suggest timing), the drive
 //!   point and clamps of its best row written into a plate file, `plate modes --count 6
@@ -32,6 +33,9 @@ const FEED: [f64; 4] = [40.0, 50.0, 90.0, 150.0];
 /// The cantilever's second case: `--feed` the plate minus the clamp's capture zone (the box
 /// the whole-plate `plan --json` names in `capture_zone.outside_mm`).
 const OUTSIDE: &str = "outside the capture zone";
+/// The cantilever's third case: `--feed` the plate past the clear line (`capture_zone.
+/// clear_box_mm`), from where one mode takes none of the zone's sampled drops to the clamp.
+const CLEAR: &str = "clear of the clamp";
 /// Monte Carlo trials per plan (`simulate --trials`).
 const TRIALS: u32 = 200;
 /// A plan counts when `simulate` confirms at least this success rate.
@@ -124,9 +128,10 @@ fn short(msg: &str) -> String {
     s.replace('|', "/")
 }
 
-/// What one `plan` gave: the answer, its wall time (s), and the plate minus the clamp's
-/// capture zone (`capture_zone.outside_mm` of its `--json`, plan or failure) when it names one.
-type PlanRan = (Planned, f64, Option<[f64; 4]>);
+/// What one `plan` gave: the answer, its wall time (s), and the two boxes of the clamp's
+/// capture zone that its `--json` (plan or failure) names: `capture_zone.outside_mm` and
+/// `capture_zone.clear_box_mm`.
+type PlanRan = (Planned, f64, [Option<[f64; 4]>; 2]);
 
 /// `chladni plan PART --plate P --json --out OUT [--feed …]`.
 fn plan(root: &Path, part: &str, plate: &str, feed: Option<[f64; 4]>, out: &Path) -> PlanRan {
@@ -140,11 +145,12 @@ fn plan(root: &Path, part: &str, plate: &str, feed: Option<[f64; 4]>, out: &Path
     let r = chladni(root, &args);
     let wall = r.wall.as_secs_f64();
     let v: Option<Value> = r.stdout.lines().rev().find_map(|l| serde_json::from_str(l).ok());
-    let outside = v.as_ref().and_then(|v| {
-        let b = v["capture_zone"]["outside_mm"].as_array()?;
+    let zone_box = |key: &str| {
+        let b = v.as_ref()?["capture_zone"][key].as_array()?;
         let b: Vec<f64> = b.iter().filter_map(Value::as_f64).collect();
         <[f64; 4]>::try_from(b).ok()
-    });
+    };
+    let boxes = [zone_box("outside_mm"), zone_box("clear_box_mm")];
     let planned = match (r.ok, v) {
         (true, Some(v)) => {
             let steps = v["steps"].as_array().map_or(&[][..], Vec::as_slice);
@@ -158,7 +164,7 @@ fn plan(root: &Path, part: &str, plate: &str, feed: Option<[f64; 4]>, out: &Path
         )),
         _ => Planned::No(short(&r.stderr)),
     };
-    (planned, wall, outside)
+    (planned, wall, boxes)
 }
 
 /// `chladni simulate PART --plate P --plan PLAN --trials 200 --json [--feed …]`: the success
@@ -309,27 +315,30 @@ fn rows_of(root: &Path, pc: &PlateCase, part: &str, dir: &Path, suggest_rows: Su
     let out = dir.join("plan.json");
     let run = |plate: &str, part: &str, feed: Option<[f64; 4]>| {
         let _ = std::fs::remove_file(&out);
-        let (planned, wall, outside) = plan(root, part, plate, feed, &out);
+        let (planned, wall, boxes) = plan(root, part, plate, feed, &out);
         let success = match planned {
             Planned::Plan { .. } => simulate(root, part, plate, &out, feed),
             Planned::No(_) => None,
         };
-        (planned, wall, success, outside)
+        (planned, wall, success, boxes)
     };
     let mut rows = Vec::new();
     if !pc.one_sided {
-        let (p, w, s, outside) = run(pc.modes, part, None);
+        let (p, w, s, boxes) = run(pc.modes, part, None);
         rows.push(row("whole plate", p, w, s, None));
-        // The plate minus the clamp's capture zone, as the whole-plate `plan --json` named it.
-        match outside {
-            Some(b) => {
-                let (p, w, s, _) = run(pc.modes, part, Some(b));
-                let case = format!("feed {:.0} {:.0} {:.0} {:.0}", b[0], b[1], b[2], b[3]);
-                rows.push(Row { note: Some(case), ..row(OUTSIDE, p, w, s, None) });
-            }
-            None => {
-                let why = Planned::No("plan --json named no capture zone".into());
-                rows.push(row(OUTSIDE, why, 0.0, None, None));
+        // The plate minus the clamp's capture zone, and past its clear line, as the
+        // whole-plate `plan --json` named them.
+        for (case, b) in [OUTSIDE, CLEAR].into_iter().zip(boxes) {
+            match b {
+                Some(b) => {
+                    let (p, w, s, _) = run(pc.modes, part, Some(b));
+                    let note = format!("feed {:.0} {:.0} {:.0} {:.0}", b[0], b[1], b[2], b[3]);
+                    rows.push(Row { note: Some(note), ..row(case, p, w, s, None) });
+                }
+                None => {
+                    let why = Planned::No(format!("plan --json named no {case} box"));
+                    rows.push(row(case, why, 0.0, None, None));
+                }
             }
         }
         return rows;

@@ -297,6 +297,9 @@ fn the_clamp_capture_zone_is_said_up_front_and_its_outside_box_lies_beyond_it() 
             && b[3] <= 200.0,
         "{z}"
     );
+    // One mode, which takes every part to the clamp in every column: the clear line is the
+    // zone's edge, so the warning's --feed is the box outside the zone.
+    assert_eq!(z["clear_box_mm"], z["outside_mm"], "{z}");
     let feed = format!("try --feed {:.0} {:.0} {:.0} {:.0}", b[0], b[1], b[2], b[3]);
     assert!(warning.ends_with(&feed), "{warning}");
     let drops_in = z["drops_in"].as_u64().unwrap();
@@ -319,6 +322,32 @@ fn the_rectangle_plans_from_the_feed_box_outside_the_clamp_capture_zone() {
     assert!(b[0] > 90.7, "{whole}");
     let feed: Vec<String> = b.iter().map(|v| format!("{v}")).collect();
     let mut args = vec!["plan", &rect, "--plate", &plate, "--json", "--feed"];
+    args.extend(feed.iter().map(String::as_str));
+    let plan = ok_json(&chladni(&args));
+    assert!(!plan["steps"].as_array().unwrap().is_empty(), "{plan}");
+}
+
+#[test]
+fn the_l_shape_plans_from_the_clear_box_the_warning_offers() {
+    // The cantilever's six solver modes: past the L-shape's capture zone (x < 92 mm) every
+    // mode still takes some sampled drop to the clamp up to x = 142 mm, and from the box
+    // outside the zone the feed search finds no plan (docs/plan.md, the ordinary-parts
+    // table). The warning offers the box past the clear line instead, and from there it plans.
+    let plate = ex("plates/cantilever-6-modes.toml");
+    let l = ex("parts/l-shape.json");
+    let out = chladni(&["plan", &l, "--plate", &plate, "--json"]);
+    let (stderr, whole) = (String::from_utf8_lossy(&out.stderr), json(&out));
+    let z = &whole["capture_zone"];
+    let (outside, clear) = (floats(&z["outside_mm"]), floats(&z["clear_box_mm"]));
+    assert!(clear[0] > outside[0] + 10.0, "{z}");
+    let warning =
+        stderr.lines().find(|l| l.starts_with("warning: ")).unwrap_or_else(|| panic!("{stderr}"));
+    let hint =
+        format!("try --feed {:.0} {:.0} {:.0} {:.0}", clear[0], clear[1], clear[2], clear[3]);
+    assert!(warning.ends_with(&hint), "{warning}");
+    assert!(warning.contains("one mode takes none of the zone's sampled drops"), "{warning}");
+    let feed: Vec<String> = clear.iter().map(|v| format!("{v}")).collect();
+    let mut args = vec!["plan", &l, "--plate", &plate, "--json", "--feed"];
     args.extend(feed.iter().map(String::as_str));
     let plan = ok_json(&chladni(&args));
     assert!(!plan["steps"].as_array().unwrap().is_empty(), "{plan}");

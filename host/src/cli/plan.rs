@@ -406,9 +406,7 @@ fn capture_zone(parts: &[Part], plate: &PlateModel) -> (Option<CaptureZone>, (us
     let drops = planner::whole::drops(&body, plate);
     let n = drops.iter().filter(|(p, _)| zone.contains(plate, *p)).count();
     if n > 0 {
-        let feed = zone.outside_mm(plate).map_or(String::new(), |b| {
-            format!("; try --feed {:.0} {:.0} {:.0} {:.0}", b[0], b[1], b[2], b[3])
-        });
+        let feed = feed_hint(&zone, plate);
         eprintln!(
             "warning: {}: {n} of the {} drop points of the whole-plate check lie in it{feed}",
             zone.describe(plate),
@@ -416,6 +414,24 @@ fn capture_zone(parts: &[Part], plate: &PlateModel) -> (Option<CaptureZone>, (us
         );
     }
     (Some(zone), (n, drops.len()))
+}
+
+/// The `--feed` box the capture-zone warning offers: the plate past the clear line, where
+/// one mode takes no sampled drop to the clamp, when there is one; else the plate outside the
+/// zone.
+fn feed_hint(zone: &CaptureZone, plate: &PlateModel) -> String {
+    let (outside, clear) = (zone.outside_mm(plate), zone.clear_box_mm(plate));
+    let farther = (zone.bands.iter()).filter(|b| b.clear_mm > b.width_mm).map(|b| b.clear_mm);
+    let why = match farther.fold(None, |m: Option<f64>, c| Some(m.map_or(c, |m| m.max(c)))) {
+        Some(c) if clear.is_some() => format!(
+            "; from {c:.0} mm off the clamped edge on, one mode takes none of the zone's sampled \
+             drops to the clamp, so a plan can start with it"
+        ),
+        _ => String::new(),
+    };
+    clear.or(outside).map_or(String::new(), |b| {
+        format!("{why}; try --feed {:.0} {:.0} {:.0} {:.0}", b[0], b[1], b[2], b[3])
+    })
 }
 
 /// The planned parts whose predicted end poses overlap (parts from different files: two faces

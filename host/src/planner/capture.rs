@@ -27,6 +27,13 @@
 //! half-way to the first column it left, said 86 mm, and counted a part at rest on a node far
 //! from the clamp as captured.) Zones are cached per plate and part (the CLI and the
 //! whole-plate failure ask for the same one).
+//!
+//! Past the zone a feed region can still hold columns that every mode takes some drop of to
+//! the clamp, farther out, so the first step of a plan from there has no mode that keeps
+//! every part off it. The clear line ([`Band::clear_mm`]) is where that stops: half a column
+//! past the farthest capturing column of the mode whose farthest one is nearest the clamp.
+//! It is found from the far edge in, each mode leaving the scan at its first capture, and the
+//! `plan` warning offers the plate past it as the `--feed` box.
 
 use std::collections::HashMap;
 use std::hash::{Hash, Hasher};
@@ -66,6 +73,10 @@ pub struct Band {
     pub edge: PlateEdge,
     /// The band's width from that edge (mm).
     pub width_mm: f64,
+    /// From this distance from the edge on (mm, at least `width_mm`), one mode takes no
+    /// sampled drop to the clamp, so a feed region there can start with that mode: the
+    /// zone's `clear_mm` box ([`CaptureZone::clear_box_mm`]).
+    pub clear_mm: f64,
 }
 
 /// The capture zone of a plate for parts of one radius ([`zone`]).
@@ -136,6 +147,24 @@ impl CaptureZone {
         (b[2] > b[0] && b[3] > b[1]).then_some(b)
     }
 
+    /// The plate past every band's `clear_mm` as a `--feed` box (mm: x0, y0, x1, y1), if any
+    /// is left: where a feed region's first step has a mode that takes no sampled drop to the
+    /// clamp.
+    pub fn clear_box_mm(&self, plate: &PlateModel) -> Option<[f64; 4]> {
+        let [w, h] = plate.size_mm;
+        let mut b = [0.0, 0.0, w, h];
+        for band in &self.bands {
+            let d = band.clear_mm;
+            match band.edge {
+                PlateEdge::Left => b[0] = b[0].max(d),
+                PlateEdge::Bottom => b[1] = b[1].max(d),
+                PlateEdge::Right => b[2] = b[2].min(w - d),
+                PlateEdge::Top => b[3] = b[3].min(h - d),
+            }
+        }
+        (b[2] > b[0] && b[3] > b[1]).then_some(b)
+    }
+
     /// `b` with the zone cut off (the side of each band), if anything is left.
     pub fn clip(&self, plate: &PlateModel, b: [f64; 4]) -> Option<[f64; 4]> {
         let o = self.outside_mm(plate)?;
@@ -181,6 +210,8 @@ pub struct InZone {
     pub zone: CaptureZone,
     /// The plate minus the zone (mm: x0, y0, x1, y1), if anything is left.
     pub outside_mm: Option<[f64; 4]>,
+    /// The zone's [`CaptureZone::clear_box_mm`].
+    pub clear_box_mm: Option<[f64; 4]>,
     /// Failed drops that start in the zone.
     pub failed_in: usize,
     /// Failed drops.
@@ -193,8 +224,8 @@ impl InZone {
     /// The zone of `plate` and the count of failed drops in it.
     pub fn new(zone: CaptureZone, plate: &PlateModel, failed_in: usize, failed: usize) -> InZone {
         let (bands, meaning) = (zone.bands_text(plate), zone.meaning());
-        let outside_mm = zone.outside_mm(plate);
-        InZone { zone, outside_mm, failed_in, failed, bands, meaning }
+        let (outside_mm, clear_box_mm) = (zone.outside_mm(plate), zone.clear_box_mm(plate));
+        InZone { zone, outside_mm, clear_box_mm, failed_in, failed, bands, meaning }
     }
 
     /// "x < 62 mm (clamped edge x = 0) is the clamp's capture zone …" ([`CaptureZone::describe`]).
@@ -256,7 +287,10 @@ pub fn zone_for_parts(plate: &PlateModel, parts: &[Part]) -> Option<CaptureZone>
     for z in zones {
         for b in z.bands {
             match all.bands.iter_mut().find(|a| a.edge == b.edge) {
-                Some(a) => a.width_mm = a.width_mm.max(b.width_mm),
+                Some(a) => {
+                    a.width_mm = a.width_mm.max(b.width_mm);
+                    a.clear_mm = a.clear_mm.max(b.clear_mm);
+                }
                 None => all.bands.push(b),
             }
         }
@@ -301,9 +335,12 @@ fn compute(plate: &PlateModel, body: &Body) -> Option<CaptureZone> {
     let runs = std::sync::atomic::AtomicUsize::new(0);
     let mut bands = Vec::new();
     for &edge in &rims {
-        let width = band_width(body, plate, &fields, edge, &runs);
+        let [w, h] = plate.size_mm;
+        let across = if matches!(edge, PlateEdge::Left | PlateEdge::Right) { w } else { h };
+        let cols = Columns { body, plate, fields: &fields, edge, runs: &runs, across };
+        let width = cols.band_width();
         if width > 0.0 {
-            bands.push(Band { edge, width_mm: width });
+            bands.push(Band { edge, width_mm: width, clear_mm: cols.clear_width().max(width) });
         }
     }
     (!bands.is_empty()).then(|| CaptureZone {
@@ -315,55 +352,96 @@ fn compute(plate: &PlateModel, body: &Body) -> Option<CaptureZone> {
     })
 }
 
-/// The width of the band along `edge` in each column of which every mode takes some drop to
-/// the clamp (0: not even in the column where the part touches the rim).
-fn band_width(
-    body: &Body,
-    plate: &PlateModel,
-    fields: &[FieldModel],
+/// The columns of drops parallel to one clamped rim, and which modes take some drop of a
+/// column to the clamp.
+struct Columns<'a> {
+    body: &'a Body,
+    plate: &'a PlateModel,
+    fields: &'a [FieldModel],
     edge: PlateEdge,
-    runs: &std::sync::atomic::AtomicUsize,
-) -> f64 {
-    let [w, h] = plate.size_mm;
-    let r = body.radius;
-    let across = if matches!(edge, PlateEdge::Left | PlateEdge::Right) { w } else { h };
-    let along = if matches!(edge, PlateEdge::Left | PlateEdge::Right) { h } else { w };
-    let point = |d: f64, t: f64| {
-        let s = r + t * (along - 2.0 * r).max(0.0);
-        match edge {
-            PlateEdge::Left => [d, s],
-            PlateEdge::Right => [w - d, s],
-            PlateEdge::Bottom => [s, d],
-            PlateEdge::Top => [s, h - d],
-        }
-    };
-    let thetas = map_thetas(ANGLES);
-    let mut last = None;
-    let mut d = r;
-    while d <= across - r {
-        let column: Vec<Pose> = (0..ROWS)
+    runs: &'a std::sync::atomic::AtomicUsize,
+    /// The plate's extent across the rim (mm).
+    across: f64,
+}
+
+impl Columns<'_> {
+    /// The drops of the column at distance `d` from the rim: [`ROWS`] × [`ANGLES`].
+    fn drops(&self, d: f64) -> Vec<Pose> {
+        let [w, h] = self.plate.size_mm;
+        let r = self.body.radius;
+        let along = if matches!(self.edge, PlateEdge::Left | PlateEdge::Right) { h } else { w };
+        let thetas = map_thetas(ANGLES);
+        (0..ROWS)
             .flat_map(|k| {
-                let [x, y] = point(d, (k as f64 + 0.5) / ROWS as f64);
-                thetas.iter().map(move |th| Pose { x, y, theta: th.to_radians() })
+                let s = r + (k as f64 + 0.5) / ROWS as f64 * (along - 2.0 * r).max(0.0);
+                let [x, y] = match self.edge {
+                    PlateEdge::Left => [d, s],
+                    PlateEdge::Right => [w - d, s],
+                    PlateEdge::Bottom => [s, d],
+                    PlateEdge::Top => [s, h - d],
+                };
+                thetas
+                    .iter()
+                    .map(move |th| Pose { x, y, theta: th.to_radians() })
+                    .collect::<Vec<_>>()
             })
-            .collect();
-        // In the zone when no mode keeps every drop of the column off the clamp: whichever
-        // mode a plan starts with, some part dropped here ends there.
-        let held = plate.modes.iter().zip(fields).all(|(m, f)| {
-            column.par_iter().any(|&q| {
-                runs.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                captured_by(body, plate, m, f, edge, q)
-            })
-        });
-        if !held {
-            break;
-        }
-        last = Some(d);
-        d += COLUMN_STEP_MM;
+            .collect()
     }
-    // The band ends half a column past the first column some mode keeps off the clamp (or at
-    // the plate's far edge): its drops are samples, and the boundary lies between them.
-    last.map_or(0.0, |d| (d + 1.5 * COLUMN_STEP_MM).min(across))
+
+    /// Whether mode `k` takes some drop of `column` to the clamp.
+    fn captures(&self, k: usize, column: &[Pose]) -> bool {
+        let (m, f) = (&self.plate.modes[k], &self.fields[k]);
+        column.par_iter().any(|&q| {
+            self.runs.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            captured_by(self.body, self.plate, m, f, self.edge, q)
+        })
+    }
+
+    /// The column distances from the rim: from where the part touches it, every
+    /// [`COLUMN_STEP_MM`], to where it touches the far edge.
+    fn distances(&self) -> Vec<f64> {
+        let r = self.body.radius;
+        (0..).map(|i| r + i as f64 * COLUMN_STEP_MM).take_while(|&d| d <= self.across - r).collect()
+    }
+
+    /// The width of the band in each column of which every mode takes some drop to the clamp
+    /// (0: not even in the column where the part touches the rim).
+    fn band_width(&self) -> f64 {
+        let nm = self.plate.modes.len();
+        let mut last = None;
+        for d in self.distances() {
+            let column = self.drops(d);
+            // In the zone when no mode keeps every drop of the column off the clamp:
+            // whichever mode a plan starts with, some part dropped here ends there.
+            if !(0..nm).all(|k| self.captures(k, &column)) {
+                break;
+            }
+            last = Some(d);
+        }
+        // The band ends half a column past the first column some mode keeps off the clamp
+        // (or at the plate's far edge): its drops are samples, and the boundary lies between
+        // them.
+        last.map_or(0.0, |d| (d + 1.5 * COLUMN_STEP_MM).min(self.across))
+    }
+
+    /// The distance from the rim past which one mode takes no drop of any column to the
+    /// clamp, half a column past that mode's farthest capturing column (0: some mode captures
+    /// none; `across`: every mode captures in the farthest column). Columns go from the far
+    /// edge in, and a mode leaves the scan at its first capture, so each column runs only
+    /// the modes still clear.
+    fn clear_width(&self) -> f64 {
+        let mut clear: Vec<usize> = (0..self.plate.modes.len()).collect();
+        for d in self.distances().into_iter().rev() {
+            let column = self.drops(d);
+            let left: Vec<usize> =
+                clear.iter().copied().filter(|&k| !self.captures(k, &column)).collect();
+            if left.is_empty() {
+                return (d + 1.5 * COLUMN_STEP_MM).min(self.across);
+            }
+            clear = left;
+        }
+        0.0
+    }
 }
 
 /// Whether `mode` leaves the part dropped at `q` captured by the clamped `edge`: within the
@@ -432,12 +510,21 @@ mod tests {
         assert_eq!(z.clip(&cant, [0.0, 10.0, 100.0, 50.0]).unwrap()[0], band.width_mm);
         assert!(z.describe(&cant).starts_with(&format!("x < {:.0} mm", band.width_mm)));
         assert_eq!(zone(&cant, &rect), Some(z.clone()), "cached");
-        // Several parts: the widest band of each rim.
+        // The clear line: never inside the zone; the rectangle's is its edge (95.6 mm).
+        assert!(band.clear_mm >= band.width_mm && band.clear_mm < 300.0, "{band:?}");
+        // Several parts: the widest band of each rim, and the farthest clear line.
         let key = part("l-shape.json");
         let wide = zone_for_parts(&cant, &[rect.clone(), key.clone()]).unwrap();
-        let each = [&rect, &key].map(|p| zone(&cant, p).unwrap().bands[0].width_mm);
+        let each = [&rect, &key].map(|p| zone(&cant, p).unwrap().bands[0]);
         assert_eq!(wide.bands.len(), 1);
-        assert_eq!(wide.bands[0].width_mm, each[0].max(each[1]));
+        assert_eq!(wide.bands[0].width_mm, each[0].width_mm.max(each[1].width_mm));
+        assert_eq!(wide.bands[0].clear_mm, each[0].clear_mm.max(each[1].clear_mm));
+        // The L-shape: past its zone (91.6 mm) every mode still takes some sampled drop to the
+        // clamp up to 141.6 mm; its clear line is half a column past that (151.6 mm).
+        let l = each[1];
+        assert!(l.clear_mm > l.width_mm + COLUMN_STEP_MM, "{l:?}");
+        let clear = zone(&cant, &key).unwrap().clear_box_mm(&cant).unwrap();
+        assert_eq!(clear, [l.clear_mm, 0.0, 300.0, 200.0]);
         // A whole-plate failure names how many of its failed drops start in the zone.
         let inz = InZone::new(z.clone(), &cant, 3, 4);
         let msg = inz.to_string();

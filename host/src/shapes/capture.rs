@@ -7,14 +7,19 @@ use crate::model::plan_file::r4;
 use crate::model::plate::PlateModel;
 use crate::planner::capture::{CaptureZone, InZone, edge_name};
 
-/// `{"bands": [{"edge": "x = 0", "width_mm"}], "radius_mm", "floor_mm_s", "outside_mm",
-/// "message"}`: `outside_mm` is the plate minus the zone (a `--feed` box, or null).
+/// `{"bands": [{"edge": "x = 0", "width_mm", "clear_mm"}], "radius_mm", "floor_mm_s",
+/// "outside_mm", "clear_box_mm", "message"}`: `outside_mm` is the plate minus the zone (a
+/// `--feed` box, or null), `clear_box_mm` the plate past each band's `clear_mm`, where one
+/// mode takes no sampled drop to the clamp (a `--feed` box, or null).
 pub fn zone_json(zone: &CaptureZone, plate: &PlateModel) -> Value {
     let bands: Vec<Value> = (zone.bands.iter())
-        .map(|b| json!({"edge": edge_name(b.edge), "width_mm": r4(b.width_mm)}))
+        .map(|b| {
+            json!({"edge": edge_name(b.edge), "width_mm": r4(b.width_mm), "clear_mm": r4(b.clear_mm)})
+        })
         .collect();
     json!({"bands": bands, "radius_mm": r4(zone.radius_mm),
         "floor_mm_s": zone.floor_mm_s, "outside_mm": zone.outside_mm(plate),
+        "clear_box_mm": zone.clear_box_mm(plate),
         "message": zone.describe(plate)})
 }
 
@@ -22,10 +27,13 @@ pub fn zone_json(zone: &CaptureZone, plate: &PlateModel) -> Value {
 /// that start in the zone, of all).
 pub fn in_zone_json(z: &InZone) -> Value {
     let bands: Vec<Value> = (z.zone.bands.iter())
-        .map(|b| json!({"edge": edge_name(b.edge), "width_mm": r4(b.width_mm)}))
+        .map(|b| {
+            json!({"edge": edge_name(b.edge), "width_mm": r4(b.width_mm), "clear_mm": r4(b.clear_mm)})
+        })
         .collect();
     json!({"bands": bands, "radius_mm": r4(z.zone.radius_mm),
         "floor_mm_s": z.zone.floor_mm_s, "outside_mm": z.outside_mm,
+        "clear_box_mm": z.clear_box_mm,
         "message": z.describe(), "failed_in": z.failed_in, "failed": z.failed})
 }
 
@@ -58,7 +66,7 @@ mod tests {
         let text = "[plate]\nname = \"t\"\nsize_mm = [300.0, 200.0]\n[[mode]]\nfreq_hz = 50.0\n\
                     node = { kind = \"line\", angle_deg = 0.0 }\n";
         let plate = PlateModel::parse(text, "t").unwrap();
-        let band = Band { edge: PlateEdge::Left, width_mm: 85.0 };
+        let band = Band { edge: PlateEdge::Left, width_mm: 85.0, clear_mm: 160.0 };
         let z = CaptureZone {
             bands: vec![band],
             radius_mm: 20.0,
@@ -71,10 +79,13 @@ mod tests {
         assert_eq!(json["failed_in"], 3);
         assert_eq!(json["bands"][0]["edge"], "x = 0");
         assert_eq!(json["outside_mm"], json!([85.0, 0.0, 300.0, 200.0]));
+        assert_eq!(json["clear_box_mm"], json!([160.0, 0.0, 300.0, 200.0]));
+        assert_eq!(json["bands"][0]["clear_mm"], 160.0);
         assert!(json["message"].as_str().unwrap().starts_with("x < 85 mm (clamped edge x = 0)"));
         let json = with_zone(json!({}), Some(&z), &plate, (5, 48));
         assert_eq!(json["capture_zone"]["drops_in"], 5);
         assert_eq!(json["capture_zone"]["outside_mm"][0], 85.0);
+        assert_eq!(json["capture_zone"]["clear_box_mm"][0], 160.0);
         // A failure's own zone (with its failed drops) is kept; the counts are added.
         let kept =
             with_zone(json!({"capture_zone": in_zone_json(&inz)}), Some(&z), &plate, (5, 48));
