@@ -133,28 +133,22 @@ impl CaptureZone {
 
     /// The plate minus the zone as a `--feed` box (mm: x0, y0, x1, y1), if any is left.
     pub fn outside_mm(&self, plate: &PlateModel) -> Option<[f64; 4]> {
-        let [w, h] = plate.size_mm;
-        let mut b = [0.0, 0.0, w, h];
-        for band in &self.bands {
-            let d = band.width_mm;
-            match band.edge {
-                PlateEdge::Left => b[0] = b[0].max(d),
-                PlateEdge::Bottom => b[1] = b[1].max(d),
-                PlateEdge::Right => b[2] = b[2].min(w - d),
-                PlateEdge::Top => b[3] = b[3].min(h - d),
-            }
-        }
-        (b[2] > b[0] && b[3] > b[1]).then_some(b)
+        self.past(plate, |b| b.width_mm)
     }
 
     /// The plate past every band's `clear_mm` as a `--feed` box (mm: x0, y0, x1, y1), if any
     /// is left: where a feed region's first step has a mode that takes no sampled drop to the
     /// clamp.
     pub fn clear_box_mm(&self, plate: &PlateModel) -> Option<[f64; 4]> {
+        self.past(plate, |b| b.clear_mm)
+    }
+
+    /// The plate past `depth` of every band, from its edge, as a box, if any is left.
+    fn past(&self, plate: &PlateModel, depth: fn(&Band) -> f64) -> Option<[f64; 4]> {
         let [w, h] = plate.size_mm;
         let mut b = [0.0, 0.0, w, h];
         for band in &self.bands {
-            let d = band.clear_mm;
+            let d = depth(band);
             match band.edge {
                 PlateEdge::Left => b[0] = b[0].max(d),
                 PlateEdge::Bottom => b[1] = b[1].max(d),
