@@ -422,7 +422,7 @@ fn capture_zone(parts: &[Part], plate: &PlateModel) -> (Option<CaptureZone>, (us
 fn feed_hint(zone: &CaptureZone, plate: &PlateModel) -> String {
     let (outside, clear) = (zone.outside_mm(plate), zone.clear_box_mm(plate));
     let farther = (zone.bands.iter()).filter(|b| b.clear_mm > b.width_mm).map(|b| b.clear_mm);
-    let why = match farther.fold(None, |m: Option<f64>, c| Some(m.map_or(c, |m| m.max(c)))) {
+    let why = match farther.reduce(f64::max) {
         Some(c) if clear.is_some() => format!(
             "; from {c:.0} mm off the clamped edge on, one mode takes none of the zone's sampled \
              drops to the clamp, so a plan can start with it"

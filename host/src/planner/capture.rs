@@ -329,9 +329,7 @@ fn compute(plate: &PlateModel, body: &Body) -> Option<CaptureZone> {
     let runs = std::sync::atomic::AtomicUsize::new(0);
     let mut bands = Vec::new();
     for &edge in &rims {
-        let [w, h] = plate.size_mm;
-        let across = if matches!(edge, PlateEdge::Left | PlateEdge::Right) { w } else { h };
-        let cols = Columns { body, plate, fields: &fields, edge, runs: &runs, across };
+        let cols = Columns { body, plate, fields: &fields, edge, runs: &runs };
         let width = cols.band_width();
         if width > 0.0 {
             bands.push(Band { edge, width_mm: width, clear_mm: cols.clear_width().max(width) });
@@ -354,16 +352,20 @@ struct Columns<'a> {
     fields: &'a [FieldModel],
     edge: PlateEdge,
     runs: &'a std::sync::atomic::AtomicUsize,
-    /// The plate's extent across the rim (mm).
-    across: f64,
 }
 
 impl Columns<'_> {
+    /// The plate's extent across the rim and along it (mm).
+    fn across_along(&self) -> (f64, f64) {
+        let [w, h] = self.plate.size_mm;
+        if matches!(self.edge, PlateEdge::Left | PlateEdge::Right) { (w, h) } else { (h, w) }
+    }
+
     /// The drops of the column at distance `d` from the rim: [`ROWS`] × [`ANGLES`].
     fn drops(&self, d: f64) -> Vec<Pose> {
         let [w, h] = self.plate.size_mm;
         let r = self.body.radius;
-        let along = if matches!(self.edge, PlateEdge::Left | PlateEdge::Right) { h } else { w };
+        let (_, along) = self.across_along();
         let thetas = map_thetas(ANGLES);
         (0..ROWS)
             .flat_map(|k| {
@@ -391,11 +393,17 @@ impl Columns<'_> {
         })
     }
 
+    /// Half a column past the next column after the one at `d` (within the plate): where a
+    /// line between sampled columns is put, the boundary lying between them.
+    fn half_past(&self, d: f64) -> f64 {
+        (d + 1.5 * COLUMN_STEP_MM).min(self.across_along().0)
+    }
+
     /// The column distances from the rim: from where the part touches it, every
     /// [`COLUMN_STEP_MM`], to where it touches the far edge.
     fn distances(&self) -> Vec<f64> {
-        let r = self.body.radius;
-        (0..).map(|i| r + i as f64 * COLUMN_STEP_MM).take_while(|&d| d <= self.across - r).collect()
+        let (r, (across, _)) = (self.body.radius, self.across_along());
+        (0..).map(|i| r + i as f64 * COLUMN_STEP_MM).take_while(|&d| d <= across - r).collect()
     }
 
     /// The width of the band in each column of which every mode takes some drop to the clamp
@@ -415,14 +423,14 @@ impl Columns<'_> {
         // The band ends half a column past the first column some mode keeps off the clamp
         // (or at the plate's far edge): its drops are samples, and the boundary lies between
         // them.
-        last.map_or(0.0, |d| (d + 1.5 * COLUMN_STEP_MM).min(self.across))
+        last.map_or(0.0, |d| self.half_past(d))
     }
 
     /// The distance from the rim past which one mode takes no drop of any column to the
     /// clamp, half a column past that mode's farthest capturing column (0: some mode captures
-    /// none; `across`: every mode captures in the farthest column). Columns go from the far
-    /// edge in, and a mode leaves the scan at its first capture, so each column runs only
-    /// the modes still clear.
+    /// none; the plate's extent: every mode captures in the farthest column). Columns go from
+    /// the far edge in, and a mode leaves the scan at its first capture, so each column runs
+    /// only the modes still clear.
     fn clear_width(&self) -> f64 {
         let mut clear: Vec<usize> = (0..self.plate.modes.len()).collect();
         for d in self.distances().into_iter().rev() {
@@ -430,7 +438,7 @@ impl Columns<'_> {
             let left: Vec<usize> =
                 clear.iter().copied().filter(|&k| !self.captures(k, &column)).collect();
             if left.is_empty() {
-                return (d + 1.5 * COLUMN_STEP_MM).min(self.across);
+                return self.half_past(d);
             }
             clear = left;
         }

@@ -5,33 +5,33 @@ use serde_json::{Value, json};
 
 use crate::model::plan_file::r4;
 use crate::model::plate::PlateModel;
-use crate::planner::capture::{CaptureZone, InZone, edge_name};
+use crate::planner::capture::{Band, CaptureZone, InZone, edge_name};
 
 /// `{"bands": [{"edge": "x = 0", "width_mm", "clear_mm"}], "radius_mm", "floor_mm_s",
 /// "outside_mm", "clear_box_mm", "message"}`: `outside_mm` is the plate minus the zone (a
 /// `--feed` box, or null), `clear_box_mm` the plate past each band's `clear_mm`, where one
 /// mode takes no sampled drop to the clamp (a `--feed` box, or null).
 pub fn zone_json(zone: &CaptureZone, plate: &PlateModel) -> Value {
-    let bands: Vec<Value> = (zone.bands.iter())
-        .map(|b| {
-            json!({"edge": edge_name(b.edge), "width_mm": r4(b.width_mm), "clear_mm": r4(b.clear_mm)})
-        })
-        .collect();
-    json!({"bands": bands, "radius_mm": r4(zone.radius_mm),
+    json!({"bands": bands_json(&zone.bands), "radius_mm": r4(zone.radius_mm),
         "floor_mm_s": zone.floor_mm_s, "outside_mm": zone.outside_mm(plate),
         "clear_box_mm": zone.clear_box_mm(plate),
         "message": zone.describe(plate)})
 }
 
+/// `[{"edge": "x = 0", "width_mm", "clear_mm"}]`: one object per band.
+fn bands_json(bands: &[Band]) -> Vec<Value> {
+    (bands.iter())
+        .map(|b| {
+            let (width, clear) = (r4(b.width_mm), r4(b.clear_mm));
+            json!({"edge": edge_name(b.edge), "width_mm": width, "clear_mm": clear})
+        })
+        .collect()
+}
+
 /// The failure's zone: [`zone_json`]'s keys with `failed_in` and `failed` (its failed drops
 /// that start in the zone, of all).
 pub fn in_zone_json(z: &InZone) -> Value {
-    let bands: Vec<Value> = (z.zone.bands.iter())
-        .map(|b| {
-            json!({"edge": edge_name(b.edge), "width_mm": r4(b.width_mm), "clear_mm": r4(b.clear_mm)})
-        })
-        .collect();
-    json!({"bands": bands, "radius_mm": r4(z.zone.radius_mm),
+    json!({"bands": bands_json(&z.zone.bands), "radius_mm": r4(z.zone.radius_mm),
         "floor_mm_s": z.zone.floor_mm_s, "outside_mm": z.outside_mm,
         "clear_box_mm": z.clear_box_mm,
         "message": z.describe(), "failed_in": z.failed_in, "failed": z.failed})
@@ -58,7 +58,6 @@ pub fn with_zone(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::planner::capture::Band;
     use crate::planner::whole::PlateEdge;
 
     #[test]
