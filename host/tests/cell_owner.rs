@@ -3,7 +3,7 @@
 //! killed controller reads error within seconds, and a restarted one is picked up again. The
 //! stale-busy case: the controller is killed mid-run and started again on the same flash (its
 //! run numbers start over): the cell follows it (error naming the lost run, never busy), and a
-//! stop resolves it to idle.
+//! stop resolves it to idle. Dropped, the cell's owner ends and releases the controller at once.
 
 use std::time::{Duration, Instant};
 
@@ -116,4 +116,12 @@ async fn the_owner_runs_stops_and_reports_a_lost_and_found_link() {
     );
     let seen = until(&cell, Duration::from_secs(10), |s| s.state == CellState::Done).await;
     assert_eq!(seen.last().unwrap().last_run, Some(again.run));
+
+    // The last handle dropped: the owner ends and releases the controller (it owned it: it ran
+    // plans), so another client owns it at once rather than after the lease.
+    let end = cell.owner_end();
+    drop(cell);
+    assert!(end.wait(Duration::from_secs(4)), "the owner thread did not end");
+    let mut next = emu.connect("cell_owner next owner").expect("connect after the cell");
+    next.clear_fault().expect("the ended owner released the controller");
 }

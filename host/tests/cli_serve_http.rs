@@ -320,8 +320,12 @@ fn the_dashboard_runs_a_stored_plan_and_the_api_reports_a_lost_link() {
     let idle = status_until(addr, Duration::from_secs(3), |s| s["state"] == "idle");
     assert_eq!(idle["state"], "idle", "{idle}");
     check_photo_route(addr, &photo);
-    // This server owns the controller while it serves: the next one starts after it.
+    // This server owns the controller while it serves, and releases it as it stops: the next
+    // client owns it at once, not after the lease.
     assert_eq!(serve.terminate(), Some(0));
+    let mut next = emu.connect("cli_serve_http next owner").unwrap();
+    next.clear_fault().expect("the stopped server released the controller");
+    drop(next);
     let (mut serve, token) = token_login_runs_and_stops(&emu);
     let addr = serve.addr;
 

@@ -205,11 +205,39 @@ struct Queue {
 struct Shared {
     queue: Mutex<Queue>,
     ready: Condvar,
+    /// The owner thread has ended and its session is closed (released).
+    ended: Mutex<bool>,
+    ended_signal: Condvar,
 }
 
 impl Shared {
     fn lock(&self) -> MutexGuard<'_, Queue> {
         self.queue.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    fn mark_ended(&self) {
+        *self.ended.lock().unwrap_or_else(PoisonError::into_inner) = true;
+        self.ended_signal.notify_all();
+    }
+}
+
+/// Waits for the owner thread to end, after the last [`Cell`] handle is gone.
+///
+/// Why a process waits for it: the owner's session may own the controller, and dropping it
+/// sends `Release`. A process that exits first leaves the controller held for the owner's lease
+/// (3 s), and the next program to run the shaker is refused as busy.
+pub struct OwnerEnd(Arc<Shared>);
+
+impl OwnerEnd {
+    /// Waits up to `limit` for the owner to close its session; whether it did.
+    pub fn wait(self, limit: Duration) -> bool {
+        let ended = self.0.ended.lock().unwrap_or_else(PoisonError::into_inner);
+        let (ended, _) = self
+            .0
+            .ended_signal
+            .wait_timeout_while(ended, limit, |ended| !*ended)
+            .unwrap_or_else(PoisonError::into_inner);
+        *ended
     }
 }
 
@@ -257,9 +285,19 @@ impl Cell {
         let queue = Arc::clone(&shared);
         std::thread::Builder::new()
             .name("cell-link-owner".into())
-            .spawn(move || owner.serve(&queue))
+            .spawn(move || {
+                owner.serve(&queue);
+                // The session is released (dropped) before anyone is told the owner ended.
+                drop(owner);
+                queue.mark_ended();
+            })
             .expect("spawning a thread only fails when the OS is out of resources");
         Cell { _alive: Arc::new(Alive(Arc::clone(&shared))), shared, status, plans }
+    }
+
+    /// A handle to wait for the owner thread's end (it does not keep the owner alive).
+    pub fn owner_end(&self) -> OwnerEnd {
+        OwnerEnd(Arc::clone(&self.shared))
     }
 
     /// The latest status.

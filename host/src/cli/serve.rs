@@ -129,6 +129,18 @@ impl VerifyServeArgs {
     }
 }
 
+/// How long a stopping server waits for the link owner to release the controller: the request
+/// in flight (at most one answer's timeout), then the release.
+const OWNER_END_LIMIT: Duration = Duration::from_secs(4);
+
+/// What `serve` checked of its arguments before it opened the link.
+struct Checked {
+    access: Access,
+    modbus: modbus::Options,
+    verifier: Verifier,
+    caps: Caps,
+}
+
 /// A front end's task: it runs until the process stops, or ends with why it failed.
 type FrontEnds = JoinSet<(&'static str, std::io::Result<()>)>;
 
@@ -142,23 +154,38 @@ impl ServeArgs {
             )
             .into());
         }
+        // Every input checked before the cell opens the link: a refused start touches nothing.
+        let checked = Checked {
+            access: self.access()?,
+            modbus: self.modbus_options()?,
+            verifier: self.verify.verifier()?,
+            caps: Caps::from_limit(net::open_file_limit(), usize::from(self.modbus_clients)),
+        };
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
             .enable_all()
             .build()
             .context("starting the async runtime")?;
-        let result = runtime.block_on(self.serve());
-        // Open connections are dropped with the runtime; nothing in them needs finishing.
+        let cell = Cell::start(&self.port, &format!("chladni serve (pid {})", std::process::id()));
+        let owner_end = cell.owner_end();
+        let result = runtime.block_on(self.serve(cell, checked));
+        // Open connections are dropped with the runtime (nothing in them needs finishing), and
+        // with them the last handles on the cell.
         runtime.shutdown_timeout(Duration::from_secs(1));
+        // The owner releases the controller as it ends: without this wait the process could
+        // exit first, and the next program would find the controller held for the lease.
+        if !owner_end.wait(OWNER_END_LIMIT) {
+            eprintln!(
+                "chladni serve: the controller link did not close within {} s: the controller \
+                 stays held by this server for its lease (3 s)",
+                OWNER_END_LIMIT.as_secs()
+            );
+        }
         result
     }
 
-    async fn serve(&self) -> anyhow::Result<ExitCode> {
-        let access = self.access()?;
-        let modbus_options = self.modbus_options()?;
-        let verifier = self.verify.verifier()?;
-        let caps = Caps::from_limit(net::open_file_limit(), usize::from(self.modbus_clients));
-        let cell = Cell::start(&self.port, &format!("chladni serve (pid {})", std::process::id()));
+    async fn serve(&self, cell: Cell, checked: Checked) -> anyhow::Result<ExitCode> {
+        let Checked { access, modbus: modbus_options, verifier, caps } = checked;
         // Before any address is printed: whoever reads it may signal at once (and `ctrlc`
         // takes one handler per process, for every front end).
         let (stop_tx, mut stop_rx) = tokio::sync::mpsc::unbounded_channel();
