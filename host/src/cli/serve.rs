@@ -27,6 +27,8 @@ use chladni::cell::modbus::{self, Registers};
 use chladni::cell::net::{self, Caps, Cidr};
 use chladni::cell::verify::{Setup, Verifier};
 use chladni::cell::{self, Cell, http};
+use chladni::controller::client::{DEFAULT_TIMEOUT, RELEASE_TIMEOUT};
+use chladni_shared::icd::link::OWNER_LEASE_MS;
 use clap::Args;
 use tokio::net::TcpListener;
 use tokio::task::JoinSet;
@@ -130,8 +132,10 @@ impl VerifyServeArgs {
 }
 
 /// How long a stopping server waits for the link owner to release the controller: the request
-/// in flight (at most one answer's timeout), then the release.
-const OWNER_END_LIMIT: Duration = Duration::from_secs(4);
+/// in flight (at most one answer's timeout), then the release, and 0.7 s for the thread to be
+/// scheduled on a loaded machine (4 s in all).
+const OWNER_END_LIMIT: Duration =
+    DEFAULT_TIMEOUT.saturating_add(RELEASE_TIMEOUT).saturating_add(Duration::from_millis(700));
 
 /// What `serve` checked of its arguments before it opened the link.
 struct Checked {
@@ -176,9 +180,10 @@ impl ServeArgs {
         // exit first, and the next program would find the controller held for the lease.
         if !owner_end.wait(OWNER_END_LIMIT) {
             eprintln!(
-                "chladni serve: the controller link did not close within {} s: the controller \
-                 stays held by this server for its lease (3 s)",
-                OWNER_END_LIMIT.as_secs()
+                "chladni serve: the controller link did not close within {:.1} s: the controller \
+                 stays held by this server for its lease ({:.1} s)",
+                OWNER_END_LIMIT.as_secs_f64(),
+                f64::from(OWNER_LEASE_MS) / 1000.0
             );
         }
         result
