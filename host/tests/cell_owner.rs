@@ -3,7 +3,8 @@
 //! killed controller reads error within seconds, and a restarted one is picked up again. The
 //! stale-busy case: the controller is killed mid-run and started again on the same flash (its
 //! run numbers start over): the cell follows it (error naming the lost run, never busy), and a
-//! stop resolves it to idle. Dropped, the cell's owner ends and releases the controller at once.
+//! stop resolves it to idle. A controller that hangs (QEMU frozen) reads link down, and thawed it
+//! runs the cell's next plan. Dropped, the cell's owner ends and releases the controller at once.
 
 use std::time::{Duration, Instant};
 
@@ -116,6 +117,27 @@ async fn the_owner_runs_stops_and_reports_a_lost_and_found_link() {
     );
     let seen = until(&cell, Duration::from_secs(10), |s| s.state == CellState::Done).await;
     assert_eq!(seen.last().unwrap().last_run, Some(again.run));
+
+    // Frozen, as a controller that hangs with its link open: the cell calls the link down
+    // within its answer timeout and refuses runs. Thawed, the controller reads the requests
+    // buffered meanwhile and answers them late; the cell's new session takes none of those
+    // answers for its own, and its next run is accepted and runs to done. (QEMU's clock jumps
+    // over the freeze, so the old session's lease has run out by then: this does not test the
+    // release; the drop below does.)
+    emu.pause();
+    let frozen = Instant::now();
+    let seen = until(&cell, Duration::from_secs(8), |s| !s.link_up).await;
+    let hung = seen.last().unwrap();
+    assert!(hung.error.as_deref().unwrap().contains("link down"), "{:?}", hung.error);
+    eprintln!("hang seen after {:.2} s", frozen.elapsed().as_secs_f64());
+    assert!(matches!(cell.run(u32::from(SLOT), None).await, Err(CellError::LinkDown { .. })));
+    emu.resume();
+    let thawed = Instant::now();
+    until(&cell, Duration::from_secs(10), |s| s.link_up && s.device.is_some()).await;
+    eprintln!("link back after the hang in {:.2} s", thawed.elapsed().as_secs_f64());
+    let after_hang = cell.run(u32::from(SLOT), None).await.expect("run after the hang");
+    let seen = until(&cell, Duration::from_secs(10), |s| s.state == CellState::Done).await;
+    assert_eq!(seen.last().unwrap().last_run, Some(after_hang.run));
 
     // The last handle dropped: the owner ends and releases the controller (it owned it: it ran
     // plans), so another client owns it at once rather than after the lease.

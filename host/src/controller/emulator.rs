@@ -214,15 +214,35 @@ impl Emulator {
     /// Kills QEMU at once (SIGKILL: no chance to finish a flash write), as a power cut would.
     /// [`Self::restart`] powers the controller up again.
     pub fn kill(&mut self) {
-        if matches!(self.qemu.try_wait(), Ok(None)) {
-            let pid = self.qemu.id() as i32;
-            // Under coreutils `timeout`, QEMU is timeout's child in timeout's own process
-            // group: kill the group. Without it, QEMU is our child.
-            let target = if self.config.time_limit.is_some() { -pid } else { pid };
-            let _ = kill(Pid::from_raw(target), Signal::SIGKILL);
+        if self.signal(Signal::SIGKILL) {
             let _ = self.qemu.wait();
         }
         self.stop_log_decoder();
+    }
+
+    /// Freezes QEMU where it is (SIGSTOP), as a controller that hangs: the link's port and
+    /// its connections stay open, bytes sent are buffered, and nothing answers until
+    /// [`Self::resume`].
+    pub fn pause(&mut self) {
+        self.signal(Signal::SIGSTOP);
+    }
+
+    /// Lets a [`Self::pause`]d QEMU go on (SIGCONT): it reads what was sent meanwhile.
+    pub fn resume(&mut self) {
+        self.signal(Signal::SIGCONT);
+    }
+
+    /// Sends `sig` to QEMU while it runs; false when it had ended.
+    fn signal(&mut self, sig: Signal) -> bool {
+        if !matches!(self.qemu.try_wait(), Ok(None)) {
+            return false;
+        }
+        let pid = self.qemu.id() as i32;
+        // Under coreutils `timeout`, QEMU is timeout's child in timeout's own process group:
+        // signal the group. Without it, QEMU is our child.
+        let target = if self.config.time_limit.is_some() { -pid } else { pid };
+        let _ = kill(Pid::from_raw(target), sig);
+        true
     }
 
     fn wait_ready(&mut self, within: Duration) -> Result<(), EmulatorError> {
