@@ -142,8 +142,9 @@ fn no_plan_says_which_orientations_stay_apart() {
         planner::plan(&part("trapezoid.json"), &plate("four-lines.toml"), &PlanOptions::default())
             .unwrap_err();
     let msg = err.to_string();
-    assert!(msg.contains("from a basin boundary)"), "{msg}");
-    assert!(msg.contains("a step keeps every orientation at least 3"), "{msg}");
+    // The blocked mode says how far it keeps, and the rule names the mode it is for.
+    assert!(msg.contains("from a basin boundary, under its 3.16°)"), "{msg}");
+    assert!(msg.contains("(mode 2: a step keeps every orientation at least 3.16°"), "{msg}");
     assert!(msg.contains("(--margin-deg 3°"), "{msg}");
 }
 

@@ -127,7 +127,9 @@ impl Problem {
         };
         let set: Vec<f64> = best.0.iter().map(|&u| uni[u]).collect();
         let list = set.iter().map(|v| format!("{v:.2}°")).collect::<Vec<_>>().join(", ");
-        let (mut why, mut rules) = (Vec::new(), Vec::new());
+        let mut why = Vec::new();
+        // Each margin rule once, with the modes it blocked (1-based).
+        let mut rules: Vec<(String, Vec<usize>)> = Vec::new();
         for (k, map) in self.maps.iter().enumerate() {
             if map.neutral {
                 why.push(format!("mode {} is neutral (keeps every orientation)", k + 1));
@@ -141,20 +143,27 @@ impl Problem {
                     k + 1
                 )),
                 Some((t, d)) => {
+                    let (kept, rule) = margin_rule(map, opt);
                     why.push(format!(
-                        "mode {} may not act on {t:.2}° ({d:.2}° from a basin boundary)",
+                        "mode {} may not act on {t:.2}° ({d:.2}° from a basin boundary, under \
+                         its {kept})",
                         k + 1
                     ));
-                    let rule = margin_rule(map, opt);
-                    if !rules.contains(&rule) {
-                        rules.push(rule);
+                    match rules.iter_mut().find(|r| r.0 == rule) {
+                        Some(r) => r.1.push(k + 1),
+                        None => rules.push((rule, vec![k + 1])),
                     }
                 }
                 None => why.push(keeps_apart(k, map, &set, opt.margin_deg, p)),
             }
         }
-        let rules =
-            if rules.is_empty() { String::new() } else { format!(" ({})", rules.join("; ")) };
+        let rules = if rules.is_empty() {
+            String::new()
+        } else {
+            let each: Vec<String> =
+                rules.iter().map(|(rule, ks)| format!("{}: {rule}", modes_label(ks))).collect();
+            format!(" ({})", each.join("; "))
+        };
         let note = symmetry_note(self.symmetry_centre, &set, p)
             .map(|n| format!(". {n}"))
             .unwrap_or_default();
@@ -172,19 +181,29 @@ impl Problem {
 /// map's sampling allowance (simulated maps: half the spacing of their start orientations;
 /// dynamic maps: the bisection's resolution), how far a sampled boundary may lie from where it
 /// was found.
-fn margin_rule(map: &StepMap, opt: &PlanOptions) -> String {
+/// Returns the distance kept (`5.00°`) and the rule.
+fn margin_rule(map: &StepMap, opt: &PlanOptions) -> (String, String) {
     let slack = map.slack;
     let m = margin_of(map, opt.margin_deg, opt.margin_auto);
     let (margin, what) = (m.deg, m.describe());
-    let rule = if slack > 1e-9 {
-        format!(
-            "{:.2}° ({what} plus {slack:.2}°, how far the map's sampled boundaries may be off)",
-            margin + slack
+    let (kept, made_of) = if slack > 1e-9 {
+        (
+            format!("{:.2}°", margin + slack),
+            format!("{what} plus {slack:.2}°, how far the map's sampled boundaries may be off"),
         )
     } else {
-        format!("{margin}° ({what})")
+        (format!("{margin}°"), what)
     };
-    format!("a step keeps every orientation at least {rule} from its basin boundaries")
+    let rule = format!(
+        "a step keeps every orientation at least {kept} ({made_of}) from its basin boundaries"
+    );
+    (kept, rule)
+}
+
+/// `mode 2` or `modes 2, 4` (1-based mode numbers).
+fn modes_label(ks: &[usize]) -> String {
+    let list = ks.iter().map(usize::to_string).collect::<Vec<_>>().join(", ");
+    if ks.len() == 1 { format!("mode {list}") } else { format!("modes {list}") }
 }
 
 /// Why mode `k` leaves the orientations `set` apart: their images, and which orientation a
