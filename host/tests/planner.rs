@@ -257,7 +257,7 @@ fn a_centrally_symmetric_plate_names_its_symmetry_and_what_breaks_it() {
     let opt = PlanOptions { sim_starts: 36, durations: false, ..Default::default() };
     let err = planner::plan(&part("triangle.json"), &cross, &opt).unwrap_err();
     let msg = err.to_string();
-    for want in ["180° twins", "centrally symmetric about the plate centre", "drive_mm", "--feed"]
+    for want in ["180° twins", "centrally symmetric about the plate centre", "clamps_mm", "--feed"]
     {
         assert!(msg.contains(want), "{want}: {msg}");
     }

@@ -164,7 +164,7 @@ impl Problem {
                 rules.iter().map(|(rule, ks)| format!("{}: {rule}", modes_label(ks))).collect();
             format!(" ({})", each.join("; "))
         };
-        let note = symmetry_note(self.symmetry_centre, &set, p)
+        let note = symmetry_note(self.symmetry_centre, &set, p, false)
             .map(|n| format!(". {n}"))
             .unwrap_or_default();
         format!(

@@ -814,7 +814,7 @@ fn explain(
     if let Some(tw) = twins {
         msg += &format!(". {tw}");
     } else if let Some(note) =
-        t.best.as_ref().and_then(|b| super::symmetry_note(None, &b.2[0], period))
+        t.best.as_ref().and_then(|b| super::symmetry_note(None, &b.2[0], period, true))
     {
         msg += &format!(". {note}");
     }

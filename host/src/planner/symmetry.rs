@@ -85,10 +85,25 @@ pub fn symmetry_centre(plate: &PlateModel) -> Option<[f64; 2]> {
 }
 
 /// What breaks a 180° twin: something one-sided (the remedies every symmetry sentence names).
-const ONE_SIDED_FIXES: &str = "what breaks it is one-sided: drive the plate off its centre \
-    (`drive_mm = [x, y]` in [plate]: unequal amplitude on the two sides of a node), clamp it at \
-    points (`clamps_mm = [[x, y], …]`), drop the parts on one side (`--feed X0 Y0 X1 Y1`), or \
-    use a mode whose field pushes the part against a wall (`edge = \"wall\"`)";
+/// The drive point is named as what does not: a single mode keeps its shape wherever it is
+/// driven, and the point only picks a degenerate pair's combination (docs/plate.md, "Drive
+/// point"), so re-solving with another `drive_mm` gives the same fields. `feed`: the search
+/// already ran from a feed region, so the remedy is another one.
+fn one_sided_fixes(feed: bool) -> String {
+    let side = if feed {
+        "a feed region elsewhere (from this one the parts reach the pair)"
+    } else {
+        "parts dropped on one side (`--feed X0 Y0 X1 Y1`)"
+    };
+    format!(
+        "what breaks it is one-sided: a support off the plate's centre and mid-lines \
+         (`clamps_mm = [[x, y], …]` in [plate], then `chladni plate modes --write-modes`: a \
+         clamp changes the modes themselves; `chladni plate suggest` tries clamp sets), {side}, \
+         or a mode whose field pushes the part against the rim (`edge = \"wall\"` in [plate], the \
+         default); not the drive point alone (`drive_mm`): a single mode keeps its shape wherever the plate is driven, \
+         and the point only picks the combination a degenerate pair takes"
+    )
+}
 
 /// The sentence naming a plate's central symmetry about `centre` (mm) and what breaks it: one
 /// home for the planner's failures ([`symmetry_note`]) and `plate suggest`'s refusal of a
@@ -97,22 +112,26 @@ pub fn central_symmetry_sentence(centre: [f64; 2]) -> String {
     format!(
         "every mode's field is centrally symmetric about the plate centre ({:.1}, {:.1}) mm, so \
          a pose and its twin turned 180° about the centre are moved alike by every sequence; \
-         {ONE_SIDED_FIXES}",
-        centre[0], centre[1]
+         {}",
+        centre[0],
+        centre[1],
+        one_sided_fixes(false)
     )
 }
 
 /// What to say when orientations 180° apart are left after every sequence (deg): the
 /// symmetry that keeps them apart and what breaks it; `None` when no two of `set` are 180°
-/// apart modulo the period `p`. `centre`: [`symmetry_centre`].
-pub fn symmetry_note(centre: Option<[f64; 2]>, set: &[f64], p: f64) -> Option<String> {
+/// apart modulo the period `p`. `centre`: [`symmetry_centre`]; `feed`: the search ran from a
+/// feed region (`--feed`), so its remedy is another region.
+pub fn symmetry_note(centre: Option<[f64; 2]>, set: &[f64], p: f64, feed: bool) -> Option<String> {
     let twins = |a: f64, b: f64| cdist(a, b, p) > 1.0 && cdist(a + 180.0, b, p) < 1.0;
     let (a, b) = set.iter().find_map(|&a| set.iter().find(|&&b| twins(a, b)).map(|&b| (a, b)))?;
     Some(match centre {
         Some(c) => format!("{a:.2}° and {b:.2}° are 180° twins: {}", central_symmetry_sentence(c)),
         None => format!(
             "{a:.2}° and {b:.2}° are 180° twins: a part straddling a node whose field is the same \
-             on both sides rests in such pairs wherever it was dropped; {ONE_SIDED_FIXES}"
+             on both sides rests in such pairs wherever it was dropped; {}",
+            one_sided_fixes(feed)
         ),
     })
 }
@@ -145,7 +164,7 @@ mod tests {
     fn the_note_names_the_symmetry_and_what_breaks_it() {
         let centre = symmetry_centre(&plate(CROSS));
         assert_eq!(centre, Some([150.0, 100.0]));
-        let note = symmetry_note(centre, &[10.0, 50.0, 190.5], 360.0).unwrap();
+        let note = symmetry_note(centre, &[10.0, 50.0, 190.5], 360.0, false).unwrap();
         for want in [
             "10.00° and 190.50° are 180° twins",
             "centrally symmetric about the plate \
@@ -157,10 +176,15 @@ mod tests {
         ] {
             assert!(note.contains(want), "{want}: {note}");
         }
-        let local = symmetry_note(None, &[10.0, 190.0], 360.0).unwrap();
-        assert!(local.contains("straddling a node") && local.contains("drive_mm"), "{local}");
+        // The drive point is named as what does not break it (a single mode keeps its shape).
+        assert!(note.contains("not the drive point alone (`drive_mm`)"), "{note}");
+        let local = symmetry_note(None, &[10.0, 190.0], 360.0, false).unwrap();
+        assert!(local.contains("straddling a node") && local.contains("clamps_mm"), "{local}");
+        // From a feed region the remedy is another region, not `--feed` again.
+        let fed = symmetry_note(None, &[10.0, 190.0], 360.0, true).unwrap();
+        assert!(fed.contains("a feed region elsewhere") && !fed.contains("--feed"), "{fed}");
         // No twins, or twins that are one orientation modulo the period: nothing to say.
-        assert_eq!(symmetry_note(centre, &[10.0, 50.0], 360.0), None);
-        assert_eq!(symmetry_note(centre, &[10.0, 10.0], 180.0), None);
+        assert_eq!(symmetry_note(centre, &[10.0, 50.0], 360.0, false), None);
+        assert_eq!(symmetry_note(centre, &[10.0, 10.0], 180.0, false), None);
     }
 }

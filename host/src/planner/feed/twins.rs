@@ -176,14 +176,19 @@ fn sentence(
         );
         let held = |t: &Test| t.shared_node.filter(|s| s.0 == t.kept.len()).map(|s| s.1);
         if let Some(turned) = tests.iter().map(held).try_fold(0.0f64, |m, h| h.map(|h| m.max(h))) {
+            // The generic remedies do not apply: a clamp or a drive point leaves a support
+            // line a node of every mode (measured on the hinged rod, docs/plan.md).
             msg += &format!(
                 "; both rests lie within {TWIN_MM} mm of a node every mode shares (as a \
                  hinged-rod plate's hinge line does), and under each of the {nm} modes the part \
                  ends on it again, turned by at most {turned:.1}°: no later step takes it off, so \
-                 what parts the pair must keep the part from reaching that node"
+                 what parts the pair must keep the part from reaching that node; {a:.2}° and \
+                 {b:.2}° are 180° twins on it: a drive point leaves every mode's nodes where they \
+                 are, and so does a clamp when the node is a support line (a hinge); what parts \
+                 them is a feed region from which the modes bring the part to rest before it \
+                 reaches the node, or another plate"
             );
-        }
-        if let Some(note) = symmetry_note(None, &[a, b], p) {
+        } else if let Some(note) = symmetry_note(None, &[a, b], p, true) {
             msg += &format!("; {note}");
         }
     } else {
@@ -265,6 +270,9 @@ mod tests {
         }
         let msg = sentence((90.0, 270.0), (&from(3), &from(2)), &tests, 5, (&[0], 360.0));
         assert!(msg.contains("a node every mode shares") && msg.contains("no later step"), "{msg}");
+        // Its remedy is its own: not the clamps and drive point of a local symmetry.
+        assert!(msg.contains("90.00° and 270.00° are 180° twins on it"), "{msg}");
+        assert!(msg.contains("a feed region from which") && !msg.contains("clamps_mm"), "{msg}");
     }
 
     fn from(count: usize) -> From {
