@@ -324,6 +324,9 @@ impl Emulator {
     }
 
     fn stop_qemu(&mut self) {
+        // A paused QEMU (and its `timeout`) would hold the SIGTERM until SIGKILL, and QEMU
+        // could stay stopped behind a killed `timeout`: let it run to take the signal.
+        self.resume();
         stop_child(&mut self.qemu);
         self.stop_log_decoder();
     }
