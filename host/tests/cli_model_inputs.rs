@@ -46,6 +46,35 @@ fn plate_size_with_three_numbers_is_refused() {
     assert!(e.contains("size_mm") && e.contains("exactly two"), "{e}");
 }
 
+/// A plate past any rig, and absurd numbers in a plate, plan or region: refused naming the
+/// value as the user wrote it (`1e308`), not as hundreds of digits.
+#[test]
+fn absurd_numbers_are_refused_and_named_readably() {
+    let mode = "[[mode]]\nfreq_hz = 60.0\nnode = { kind = \"line\", angle_deg = 0.0 }\n";
+    let p = file("huge.toml", &format!("[plate]\nsize_mm = [1e308, 200.0]\n{mode}"));
+    let e = refused(&["plan", &ex("parts/triangle.json"), "--plate", &p]);
+    assert!(e.contains("size_mm[0] = 1e308 mm is absurdly large (limit 100000 mm)"), "{e}");
+    let plan = file(
+        "thz.json",
+        r#"{"steps": [{"freq_hz": 1e300, "duration_ms": 100, "amplitude": 0.5}]}"#,
+    );
+    let four = ex("plates/four-lines.toml");
+    let e = refused(&["simulate", &ex("parts/triangle.json"), "--plate", &four, "--plan", &plan]);
+    assert!(e.contains("frequency 1e300 Hz is outside the drive's range"), "{e}");
+    let e = refused(&[
+        "plan",
+        &ex("parts/triangle.json"),
+        "--plate",
+        &four,
+        "--feed",
+        "0",
+        "0",
+        "1e308",
+        "10",
+    ]);
+    assert!(e.contains("feed region 0 0 1e308 10 mm is not inside"), "{e}");
+}
+
 #[test]
 fn frequencies_name_the_drive_range_in_plate_and_plan_files() {
     let p = file(

@@ -2,6 +2,7 @@
 //! `simulate --feed`), checked against the plate.
 
 use crate::model::plate::PlateModel;
+use chladni_shared::icd::units::Given;
 
 /// A rectangle of the plate (mm) where parts are dropped.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -26,8 +27,9 @@ pub enum FeedError {
     OutsidePlate([f64; 4], [f64; 2]),
 }
 
+/// The coordinates as given ([`Given`]: huge ones in exponent form).
 fn show(c: &[f64; 4]) -> String {
-    c.iter().map(f64::to_string).collect::<Vec<_>>().join(" ")
+    c.iter().map(|&v| Given(v).to_string()).collect::<Vec<_>>().join(" ")
 }
 
 impl FeedRegion {
@@ -57,5 +59,29 @@ impl FeedRegion {
         let x = self.lo[0] + u * (self.hi[0] - self.lo[0]);
         let y = self.lo[1] + v * (self.hi[1] - self.lo[1]);
         [keep(x, plate.size_mm[0]), keep(y, plate.size_mm[1])]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::FeedError;
+
+    #[test]
+    fn refusals_echo_the_region_as_given_and_readable() {
+        let far = FeedError::OutsidePlate([0.0, 0.0, 1e308, 10.0], [300.0, 200.0]);
+        assert_eq!(
+            far.to_string(),
+            "feed region 0 0 1e308 10 mm is not inside the 300 × 200 mm plate"
+        );
+        let thin = FeedError::Empty([10.5, 3e-9, 10.5, 20.0]);
+        assert_eq!(
+            thin.to_string(),
+            "feed region 10.5 3e-9 10.5 20 mm is empty: X0 < X1 and Y0 < Y1 are required"
+        );
+        let nan = FeedError::NotFinite([f64::NAN, 0.0, f64::INFINITY, 1.0]);
+        assert_eq!(
+            nan.to_string(),
+            "feed region NaN 0 inf 1 mm: every coordinate must be a finite number"
+        );
     }
 }

@@ -14,6 +14,7 @@
 //! holes clockwise). Errors name the problem, the ring and the vertex index (0-based, as in
 //! the file).
 
+use chladni_shared::icd::units::Given;
 use std::fmt;
 use std::path::Path;
 
@@ -166,7 +167,8 @@ pub enum PartError {
     },
     /// A coordinate beyond [`MAX_COORD_MM`].
     #[error(
-        "{ring}, vertex {index}: coordinate {value} mm is absurdly large (limit ±{MAX_COORD_MM} mm)"
+        "{ring}, vertex {index}: coordinate {} mm is absurdly large (limit ±{MAX_COORD_MM} mm)",
+        Given(*.value)
     )]
     TooLarge {
         /// Which ring.

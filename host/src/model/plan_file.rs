@@ -15,6 +15,7 @@
 //! The planner writes open-loop steps only.
 
 use chladni_shared::icd::plan::{DeviceLimits, Level, MAX_NAME, MAX_STEPS, Plan, PlanError, Step};
+use chladni_shared::icd::units::Given;
 use chladni_shared::icd::units::{FrequencyError, MilliHz, MmPerS2, Q15};
 use serde::{Deserialize, Serialize};
 
@@ -191,7 +192,11 @@ pub enum PlanFileError {
         value: f64,
     },
     /// Amplitude outside 0..=1.
-    #[error("step {}: amplitude {value} outside 0..=1 (fraction of full scale)", step + 1)]
+    #[error(
+        "step {}: amplitude {} outside 0..=1 (fraction of full scale)",
+        step + 1,
+        Given(*.value)
+    )]
     Amplitude {
         /// Step index, 0-based (the message prints it 1-based, as `chladni plan` does).
         step: usize,

@@ -30,6 +30,7 @@ pub use crate::model::field::{LINEAR_SCALE_MM, Law};
 use crate::model::grid::Grid;
 use crate::model::plan_file::check_drive_freq;
 use crate::model::plate_file::{LineEntry, ModeEntry, NodeEntry, PlateFile, PlateFileError};
+use chladni_shared::icd::units::Given;
 
 /// Entries whose frequencies differ by less than this (Hz) are one mode (the drive's
 /// resolution is 1 mHz).
@@ -254,14 +255,14 @@ impl Ctx {
     }
     fn finite(&self, key: &str, v: Option<f64>) -> Result<Option<f64>, ModelError> {
         match v {
-            Some(f) if !f.is_finite() => Err(self.bad(key, f, "must be a finite number")),
+            Some(f) if !f.is_finite() => Err(self.bad(key, Given(f), "must be a finite number")),
             other => Ok(other),
         }
     }
     fn positive(&self, key: &str, v: Option<f64>) -> Result<Option<f64>, ModelError> {
         match self.finite(key, v)? {
             Some(v) if v <= 0.0 || v > MAX_POSITIVE => {
-                Err(self.bad(key, v, "must be positive (and at most 1e7)"))
+                Err(self.bad(key, Given(v), "must be positive (and at most 1e7)"))
             }
             other => Ok(other),
         }
@@ -295,10 +296,14 @@ pub fn check_mode(index: usize, e: &ModeEntry, size_mm: [f64; 2]) -> Result<Mode
     let freq_hz = c
         .finite("freq_hz", e.freq_hz)?
         .ok_or_else(|| c.bad("freq_hz", "missing", "add freq_hz = <drive frequency in Hz>"))?;
-    check_drive_freq(freq_hz).map_err(|r| c.bad("freq_hz", freq_hz, &r.to_string()))?;
+    check_drive_freq(freq_hz).map_err(|r| c.bad("freq_hz", Given(freq_hz), &r.to_string()))?;
     let amplitude = c.finite("amplitude", e.amplitude)?.unwrap_or(1.0);
     if !(amplitude > 0.0 && amplitude <= 1.0) {
-        return Err(c.bad("amplitude", amplitude, "must be in (0, 1] (fraction of full scale)"));
+        return Err(c.bad(
+            "amplitude",
+            Given(amplitude),
+            "must be in (0, 1] (fraction of full scale)",
+        ));
     }
     let speed_mm_s = c.positive("speed_mm_s", e.speed_mm_s)?.unwrap_or(10.0);
     let ramp_ms = match e.ramp_ms {
@@ -341,7 +346,7 @@ fn gains(c: &Ctx, e: &ModeEntry) -> Result<(f64, f64), ModelError> {
         (Some(g), None, None) => Ok((g, g)),
         (None, l, r) => Ok((l.unwrap_or(1.0), r.unwrap_or(1.0))),
         (Some(g), _, _) => {
-            Err(c.bad("gain", g, "give either gain or gain_left/gain_right, not both"))
+            Err(c.bad("gain", Given(g), "give either gain or gain_left/gain_right, not both"))
         }
     }
 }
@@ -452,7 +457,7 @@ fn line_of(
     if offset_mm.abs() > diag / 2.0 {
         return Err(c.bad(
             &offset_key,
-            offset_mm,
+            Given(offset_mm),
             &format!("the line misses the plate: |offset| must be at most {:.1} mm", diag / 2.0),
         ));
     }

@@ -22,6 +22,8 @@
 //! `chladni plate modes --write-modes` and `plate from-photo --out` write and the planner reads;
 //! their values are checked when the planner types them ([`crate::model::plate`]).
 
+use crate::model::part::MAX_COORD_MM;
+use chladni_shared::icd::units::Given;
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
@@ -324,8 +326,21 @@ pub enum PlateFileError {
     #[error("[plate] needs `{0}` for the mode solver")]
     Missing(&'static str),
     /// A length, modulus or density that must be positive (and finite) is not.
-    #[error("[plate] {key} must be positive and finite, got {value}")]
+    #[error("[plate] {key} must be positive and finite, got {}", Given(*.value))]
     NotPositive {
+        /// Key.
+        key: &'static str,
+        /// Value.
+        value: f64,
+    },
+    /// A plate side longer than any part may be ([`MAX_COORD_MM`]): no rig, and far past where
+    /// the motion model's millimetre tolerances mean anything.
+    #[error(
+        "[plate] {key} = {} mm is absurdly large (limit {MAX_COORD_MM} mm): give the plate's \
+         size in mm",
+        Given(*.value)
+    )]
+    TooLarge {
         /// Key.
         key: &'static str,
         /// Value.
@@ -407,14 +422,20 @@ fn positive(key: &'static str, v: f64) -> Result<f64, PlateFileError> {
     }
 }
 
+/// A side of the plate: positive, finite and at most [`MAX_COORD_MM`].
+fn side(key: &'static str, v: f64) -> Result<f64, PlateFileError> {
+    let v = positive(key, v)?;
+    if v > MAX_COORD_MM { Err(PlateFileError::TooLarge { key, value: v }) } else { Ok(v) }
+}
+
 impl PlateFile {
     /// Parses a plate file from text (`path` only labels errors).
     pub fn parse(text: &str, path: &str) -> Result<Self, PlateFileError> {
         let file: PlateFile = toml::from_str(text)
             .map_err(|e| PlateFileError::Syntax { path: path.into(), message: e.to_string() })?;
         if let Some([w, h]) = file.plate.size_mm {
-            positive("size_mm[0]", w)?;
-            positive("size_mm[1]", h)?;
+            side("size_mm[0]", w)?;
+            side("size_mm[1]", h)?;
         }
         Ok(file)
     }
@@ -432,8 +453,8 @@ impl PlateTable {
     /// Checks and returns everything the mode solver needs.
     pub fn mechanics(&self) -> Result<Plate, PlateFileError> {
         let [w, h] = self.size_mm.ok_or(PlateFileError::Missing("size_mm"))?;
-        let w = positive("size_mm[0]", w)?;
-        let h = positive("size_mm[1]", h)?;
+        let w = side("size_mm[0]", w)?;
+        let h = side("size_mm[1]", h)?;
         let t = positive(
             "thickness_mm",
             self.thickness_mm.ok_or(PlateFileError::Missing("thickness_mm"))?,
@@ -608,6 +629,13 @@ node = { kind = "line", angle_deg = 90.0, offset_mm = 0.0 }
             bad("[300.0, 200.0]", "[300.0, -2.0]"),
             Err(PlateFileError::NotPositive { key: "size_mm[1]", value }) if value == -2.0
         ));
+        // A side past any rig is refused naming it readably, not as 309 digits.
+        let huge = bad("[300.0, 200.0]", "[1e308, 200.0]").unwrap_err().to_string();
+        assert_eq!(
+            huge,
+            "[plate] size_mm[0] = 1e308 mm is absurdly large (limit 100000 mm): give the plate's \
+             size in mm"
+        );
         assert!(
             matches!(mech("poisson = 0.33", "poisson = 0.5"), Err(PlateFileError::Poisson(v)) if v == 0.5)
         );

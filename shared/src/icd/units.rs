@@ -14,6 +14,8 @@
 //!   ([`ms_from_samples`], [`s_from_samples`], [`whole_ms_from_samples`]).
 //! - [`Fx`] ↔ `f64` ([`Fx::from_f64`], [`Fx::to_f64`]) and binary angles ↔ degrees or radians
 //!   ([`bam_from_deg`], [`deg_from_bam`], [`bam_from_rad`], [`rad_from_bam`]).
+//! - [`Given`]: a number from a user's input echoed in a refusal (these errors' and the host's
+//!   file and argument errors), huge and tiny ones in exponent form.
 //!
 //! The crate is `no_std`, so `f64::round` is not available: [`round_half_away`] is its exact
 //! equivalent (tested against `std` bit for bit), and every conversion here gives the same
@@ -48,6 +50,25 @@ fn rem_euclid(x: f64, m: f64) -> f64 {
     if r < 0.0 { r + m.abs() } else { r }
 }
 
+// ---- Numbers echoed in refusals ----
+
+/// `format!("{}", Given(v))`: `v` as Rust prints it (`300`, `0.5`, `NaN`, `inf`), or `1e308` /
+/// `3e-9` when |v| ≥ 10⁹ or 0 < |v| < 10⁻⁶, so that a refusal of `1e300 Hz` names `1e300`, not
+/// 301 digits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Given(pub f64);
+
+impl core::fmt::Display for Given {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let v = self.0;
+        if v.is_finite() && (v.abs() >= 1e9 || (v != 0.0 && v.abs() < 1e-6)) {
+            write!(f, "{v:e}")
+        } else {
+            write!(f, "{v}")
+        }
+    }
+}
+
 // ---- Frequency ----
 
 /// A drive frequency in millihertz, as plans and the link carry it.
@@ -70,7 +91,9 @@ impl core::fmt::Display for FrequencyError {
         write!(
             f,
             "frequency {} Hz is outside the drive's range {}..={} Hz",
-            self.hz, self.min_hz, self.max_hz
+            Given(self.hz),
+            self.min_hz,
+            self.max_hz
         )
     }
 }
@@ -140,7 +163,7 @@ pub struct AmplitudeError {
 
 impl core::fmt::Display for AmplitudeError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        write!(f, "amplitude {} outside 0..=1 (fraction of full scale)", self.value)
+        write!(f, "amplitude {} outside 0..=1 (fraction of full scale)", Given(self.value))
     }
 }
 
@@ -190,7 +213,7 @@ impl core::fmt::Display for AccelError {
         write!(
             f,
             "acceleration {} m/s² is not a number of m/s² in 0..={} (resolved to 1 mm/s²)",
-            self.mps2,
+            Given(self.mps2),
             u32::MAX / 1000
         )
     }
@@ -228,7 +251,7 @@ impl core::fmt::Display for DbError {
         write!(
             f,
             "{} dB is not a number of dB in 0..={} (resolved to 0.001 dB)",
-            self.db,
+            Given(self.db),
             u32::MAX / 1000
         )
     }
@@ -469,5 +492,22 @@ mod tests {
         assert_eq!(MilliDb(3_000).to_db(), 3.0);
         assert!(MilliDb::from_db(-1.0).is_err() && MilliDb::from_db(f64::NAN).is_err());
         assert_eq!(MilliDeg(-90_500).to_deg(), -90.5);
+    }
+
+    #[test]
+    fn given_numbers_are_echoed_as_given_and_extreme_ones_in_exponent_form() {
+        use std::string::ToString;
+        let shown = |v: f64| Given(v).to_string();
+        assert_eq!(shown(300.0), "300");
+        assert_eq!(shown(-2.5), "-2.5");
+        assert_eq!(shown(0.0), "0");
+        assert_eq!(shown(999_999_999.0), "999999999");
+        assert_eq!(shown(1e308), "1e308");
+        assert_eq!(shown(-1.5e300), "-1.5e300");
+        assert_eq!(shown(3e-9), "3e-9");
+        assert_eq!(shown(f64::NAN), "NaN");
+        assert_eq!(shown(f64::NEG_INFINITY), "-inf");
+        let e = MilliHz::from_hz(1e300).unwrap_err().to_string();
+        assert_eq!(e, "frequency 1e300 Hz is outside the drive's range 1..=2000 Hz");
     }
 }
