@@ -422,10 +422,16 @@ fn positive(key: &'static str, v: f64) -> Result<f64, PlateFileError> {
     }
 }
 
-/// A side of the plate: positive, finite and at most [`MAX_COORD_MM`].
+/// Whether `v` (mm) is a plate side the tool takes: positive, finite and at most
+/// [`MAX_COORD_MM`]. The one rule for plate files, `--size-mm` and photos.
+pub fn is_plate_side(v: f64) -> bool {
+    v.is_finite() && v > 0.0 && v <= MAX_COORD_MM
+}
+
+/// A side of the plate ([`is_plate_side`]), or the typed refusal.
 fn side(key: &'static str, v: f64) -> Result<f64, PlateFileError> {
     let v = positive(key, v)?;
-    if v > MAX_COORD_MM { Err(PlateFileError::TooLarge { key, value: v }) } else { Ok(v) }
+    if is_plate_side(v) { Ok(v) } else { Err(PlateFileError::TooLarge { key, value: v }) }
 }
 
 impl PlateFile {

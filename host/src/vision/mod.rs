@@ -18,12 +18,14 @@
 //! [`Part::mirrored`]; a part with a mirror axis looks the same on both faces and is always
 //! reported face up, at the equivalent turn.
 
+use chladni_shared::icd::units::Given;
 use image::{GrayImage, Luma};
 use imageproc::contrast::otsu_level;
 use imageproc::region_labelling::{Connectivity, connected_components};
 
-use crate::model::part::Part;
 use crate::model::part::mirror::flip_turn_deg;
+use crate::model::part::{MAX_COORD_MM, Part};
+use crate::model::plate_file::is_plate_side;
 use crate::plate::photo::rectify::RectifyError;
 
 pub mod corners;
@@ -73,7 +75,12 @@ pub enum LocateError {
     #[error("no part given; name the parts to look for with --part P.json")]
     NoParts,
     /// A bad plate size.
-    #[error("--size-mm {0} {1}: the plate's width and height must be finite and positive (mm)")]
+    #[error(
+        "--size-mm {} {}: the plate's width and height must be finite, positive and at most \
+         {MAX_COORD_MM} (mm)",
+        Given(*.0),
+        Given(*.1)
+    )]
     Size(f64, f64),
     /// The plate cannot be found automatically.
     #[error(
@@ -486,7 +493,7 @@ pub fn locate(
     size_mm: [f64; 2],
     corners: Option<[[f64; 2]; 4]>,
 ) -> Result<(Report, GrayImage), LocateError> {
-    if !size_mm.iter().all(|v| v.is_finite() && *v > 0.0) {
+    if !size_mm.iter().all(|&v| is_plate_side(v)) {
         return Err(LocateError::Size(size_mm[0], size_mm[1]));
     }
     if templates.is_empty() {

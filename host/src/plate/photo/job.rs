@@ -7,7 +7,8 @@ use image::GrayImage;
 
 use super::{Found, PhotoParams, find_lines, input, rectify};
 use crate::model::modes_file;
-use crate::model::plate_file::ModeEntry;
+use crate::model::part::MAX_COORD_MM;
+use crate::model::plate_file::{ModeEntry, is_plate_side};
 use crate::plate::node_field::{self, FieldError, NodeField};
 use crate::plate::solver::{GRID_X_POINTS, grid_dims};
 
@@ -46,8 +47,10 @@ impl PhotoRequest {
     /// Checks the numbers before any work: an `Err` names the value and the fix (bad input).
     pub fn check(&self) -> Result<(), String> {
         let size = self.size_mm;
-        if !size.iter().all(|v| v.is_finite() && *v > 0.0) {
-            return Err(format!("--size-mm must be two positive numbers, got {size:?}"));
+        if !size.iter().all(|&v| is_plate_side(v)) {
+            return Err(format!(
+                "--size-mm must be two positive numbers of at most {MAX_COORD_MM} mm, got {size:?}"
+            ));
         }
         // The drive's range, through the one frequency conversion and its message.
         if let Some(f) = self.freq_hz {
@@ -122,6 +125,25 @@ impl PhotoRequest {
                     if lines.len() == 1 { "line".into() } else { format!("{} lines", lines.len()) };
                 vec![modes_file::lines_mode(&self.entry_name(&what), self.freq_hz, &lines)]
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::PhotoRequest;
+
+    fn request(size_mm: [f64; 2]) -> PhotoRequest {
+        let grid = *crate::plate::solver::GRID_X_POINTS.start();
+        PhotoRequest { size_mm, corners: None, grain_mm: 0.0, freq_hz: None, as_grid: false, grid }
+    }
+
+    #[test]
+    fn the_plate_size_takes_the_plate_files_rule() {
+        assert_eq!(request([300.0, 200.0]).check(), Ok(()));
+        for bad in [[1e308, 200.0], [300.0, 0.0], [f64::NAN, 200.0], [100_001.0, 200.0]] {
+            let e = request(bad).check().unwrap_err();
+            assert!(e.contains("at most 100000 mm") && e.contains("--size-mm"), "{bad:?}: {e}");
         }
     }
 }
