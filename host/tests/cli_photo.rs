@@ -259,7 +259,7 @@ fn frequency_is_checked_before_work_and_needed_for_a_plate_file() {
     assert_eq!(out.status.code(), Some(2));
     let err = stderr(&out);
     assert!(
-        err.contains("--freq-hz: frequency 1000000000 Hz is outside the drive's range 1..=2000 Hz"),
+        err.contains("--freq-hz: frequency 1e9 Hz is outside the drive's range 1..=2000 Hz"),
         "{err}"
     );
     assert!(!plate.exists());
