@@ -75,6 +75,19 @@ fn absurd_numbers_are_refused_and_named_readably() {
     assert!(e.contains("feed region 0 0 1e308 10 mm is not inside"), "{e}");
 }
 
+/// A plan given as its list of steps, and a part as its outline alone: refused naming the top
+/// level (serde's own message was "invalid type: map, expected a string").
+#[test]
+fn a_bare_list_is_named_as_what_it_is() {
+    let steps = file("steps.json", r#"[{"freq_hz": 60, "duration_ms": 100, "amplitude": 0.5}]"#);
+    let four = ex("plates/four-lines.toml");
+    let e = refused(&["simulate", &ex("parts/triangle.json"), "--plate", &four, "--plan", &steps]);
+    assert!(e.contains("the file is an array; a plan file is one JSON object"), "{e}");
+    let outline = file("outline.json", "[[0, 0], [10, 0], [0, 10]]");
+    let e = refused(&["analyze", &outline, "--field", "sign"]);
+    assert!(e.contains("the file is an array; a part file is one JSON object"), "{e}");
+}
+
 #[test]
 fn frequencies_name_the_drive_range_in_plate_and_plan_files() {
     let p = file(

@@ -75,6 +75,12 @@ pub enum PartError {
     /// Not valid JSON for a part.
     #[error("invalid part JSON: {0}")]
     Json(#[from] serde_json::Error),
+    /// The file's top level is not a JSON object ([`crate::model::json_top`]).
+    #[error(
+        "invalid part JSON: the file is {0}; a part file is one JSON object: {{\"name\": …, \
+         \"outline\": [[x, y], …], \"holes\": [[[x, y], …], …]}} in mm (docs/analyze.md)"
+    )]
+    NotAnObject(&'static str),
     /// JSON with NaN or Infinity, which JSON does not have.
     #[error(
         "invalid part JSON: `{token}` at line {line} column {column} (in \"{key}\"): JSON has no \
@@ -299,6 +305,9 @@ impl Part {
 
     /// Parses the JSON part format; `default_name` is used when the file has none.
     pub fn from_json(text: &str, default_name: &str) -> Result<Part, PartError> {
+        if let Some(kind) = crate::model::json_top::not_an_object(text) {
+            return Err(PartError::NotAnObject(kind));
+        }
         let j: PartJson = serde_json::from_str(text).map_err(|e| json_error(text, e))?;
         let part =
             Part::new(j.name.unwrap_or_else(|| default_name.to_string()), j.outline, j.holes)?;

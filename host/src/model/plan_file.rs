@@ -282,6 +282,12 @@ impl PlanFile {
 
     /// Parses JSON text.
     pub fn parse(text: &str) -> Result<PlanFile, PlanFileError> {
+        if let Some(kind) = crate::model::json_top::not_an_object(text) {
+            return Err(PlanFileError::Json(format!(
+                "the file is {kind}; a plan file is one JSON object: {{\"steps\": [{{\"freq_hz\": …, \
+                 \"duration_ms\": …, \"amplitude\": …}}, …]}} (docs/plan.md, \"Plan file\")"
+            )));
+        }
         let strict = serde_json::from_str(text).map_err(|e| PlanFileError::Json(e.to_string()));
         let Err(refused) = strict else { return strict };
         // `plan --json` prints the plan file with its report keys beside it: that output saved

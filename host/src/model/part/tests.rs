@@ -61,6 +61,10 @@ fn validation_errors_name_the_problem_and_vertex() {
     let e = json(r#"{"outline": [[0,0],[4,0],[4,4],[4,2],[0,4]]}"#).unwrap_err();
     assert!(matches!(e, PartError::SelfIntersection { .. }), "{e}");
     assert!(matches!(json("{\"outline\": 3}").unwrap_err(), PartError::Json(_)));
+    // An outline alone, without the object around it, is named as what it is.
+    let e = json("[[0, 0], [10, 0], [0, 10]]").unwrap_err();
+    assert!(matches!(e, PartError::NotAnObject("an array")), "{e}");
+    assert!(e.to_string().contains("a part file is one JSON object"), "{e}");
 }
 
 #[test]

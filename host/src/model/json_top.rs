@@ -1,0 +1,37 @@
+//! The top level of the JSON files a user writes (parts, plans), checked before serde reads
+//! them: serde's derived structs also take an array (as the fields in order), so a plan given
+//! as its list of steps was refused "invalid type: map, expected a string", naming the wrong
+//! thing.
+
+/// What the top level of `text` is when it is not a JSON object (`"an array"`, `"a string"`,
+/// `"a number"`, `"true or false"`, `"null"`); `None` for an object, and for text serde's own
+/// error describes better (empty, not JSON).
+pub fn not_an_object(text: &str) -> Option<&'static str> {
+    let first = text.trim_start_matches('\u{feff}').trim_start().chars().next()?;
+    match first {
+        '[' => Some("an array"),
+        '"' => Some("a string"),
+        '-' | '0'..='9' => Some("a number"),
+        't' | 'f' => Some("true or false"),
+        'n' => Some("null"),
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::not_an_object;
+
+    #[test]
+    fn names_a_top_level_that_is_not_an_object() {
+        assert_eq!(not_an_object("  {\"steps\": []}"), None);
+        assert_eq!(not_an_object("\u{feff}{}"), None);
+        assert_eq!(not_an_object("[{\"freq_hz\": 60}]"), Some("an array"));
+        assert_eq!(not_an_object("\n\"x\""), Some("a string"));
+        assert_eq!(not_an_object("-3"), Some("a number"));
+        assert_eq!(not_an_object("true"), Some("true or false"));
+        assert_eq!(not_an_object("null"), Some("null"));
+        assert_eq!(not_an_object(""), None);
+        assert_eq!(not_an_object("<svg/>"), None);
+    }
+}
