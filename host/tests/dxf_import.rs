@@ -225,6 +225,19 @@ fn refusals_are_named_errors() {
         }
         other => panic!("{other:?}"),
     }
+    // A polyline without vertices is part geometry with no length: said so, not "no part
+    // geometry: layers with part geometry: 0".
+    let hollow =
+        std::env::temp_dir().join(format!("chladni-dxf-{}-hollow.dxf", std::process::id()));
+    let text = "0\nSECTION\n2\nENTITIES\n0\nLWPOLYLINE\n8\n0\n90\n0\n0\nENDSEC\n0\nEOF\n";
+    std::fs::write(&hollow, text).unwrap();
+    let e = Part::load(&hollow);
+    std::fs::remove_file(&hollow).unwrap();
+    let m = e.unwrap_err().to_string();
+    assert!(
+        m.contains("entities on layer(s) 0 have no length") && !m.contains("layers with"),
+        "{m}"
+    );
     let garbage = std::env::temp_dir().join(format!("chladni-dxf-{}.dxf", std::process::id()));
     std::fs::write(&garbage, "not a drawing").unwrap();
     let e = Part::load(&garbage);

@@ -167,15 +167,26 @@ pub enum DxfError {
 }
 
 fn empty_message(layer: Option<&str>, layers: &[String]) -> String {
+    // Entities of the right kinds that give no piece: nothing with a length to join.
+    let no_length = "have no length (empty or one-point polylines, zero-length lines), so \
+                     there is no outline to read";
     let have = if layers.is_empty() {
         "the drawing has no LINE, ARC, CIRCLE, LWPOLYLINE or POLYLINE".to_string()
     } else {
         format!("layers with part geometry: {}", layers.join(", "))
     };
     match layer {
+        Some(l) if layers.iter().any(|x| x.eq_ignore_ascii_case(l)) => {
+            format!("layer \"{l}\": its LINE, ARC, CIRCLE and polyline entities {no_length}")
+        }
         Some(l) => {
             format!("layer \"{l}\" has no part geometry (LINE, ARC, CIRCLE, polyline); {have}")
         }
+        None if !layers.is_empty() => format!(
+            "no part geometry: the LINE, ARC, CIRCLE and polyline entities on layer(s) {} \
+             {no_length}",
+            layers.join(", ")
+        ),
         None => format!("no part geometry: {have}"),
     }
 }
