@@ -7,13 +7,15 @@
 /// `"a number"`, `"true or false"`, `"null"`); `None` for an object, and for text serde's own
 /// error describes better (empty, not JSON).
 pub fn not_an_object(text: &str) -> Option<&'static str> {
-    let first = text.trim_start_matches('\u{feff}').trim_start().chars().next()?;
-    match first {
-        '[' => Some("an array"),
-        '"' => Some("a string"),
-        '-' | '0'..='9' => Some("a number"),
-        't' | 'f' => Some("true or false"),
-        'n' => Some("null"),
+    let t = text.trim_start_matches('\u{feff}').trim_start();
+    let mut chars = t.chars();
+    // Only what the start shows for sure: a word like `nope` or `-x` is not JSON at all.
+    match (chars.next()?, chars.next()) {
+        ('[', _) => Some("an array"),
+        ('"', _) => Some("a string"),
+        ('0'..='9', _) | ('-', Some('0'..='9')) => Some("a number"),
+        _ if t.starts_with("true") || t.starts_with("false") => Some("true or false"),
+        _ if t.starts_with("null") => Some("null"),
         _ => None,
     }
 }
@@ -33,5 +35,9 @@ mod tests {
         assert_eq!(not_an_object("null"), Some("null"));
         assert_eq!(not_an_object(""), None);
         assert_eq!(not_an_object("<svg/>"), None);
+        // Not JSON: serde's own error says where, rather than a guess from the first letter.
+        for garbage in ["nope", "foo", "-x", "t"] {
+            assert_eq!(not_an_object(garbage), None, "{garbage}");
+        }
     }
 }

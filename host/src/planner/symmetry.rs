@@ -100,8 +100,9 @@ fn one_sided_fixes(feed: bool) -> String {
          (`clamps_mm = [[x, y], …]` in [plate], then `chladni plate modes --write-modes`: a \
          clamp changes the modes themselves; `chladni plate suggest` tries clamp sets), {side}, \
          or a mode whose field pushes the part against the rim (`edge = \"wall\"` in [plate], the \
-         default); not the drive point alone (`drive_mm`): a single mode keeps its shape wherever the plate is driven, \
-         and the point only picks the combination a degenerate pair takes"
+         default); not the drive point alone (`drive_mm`): a single mode keeps its shape \
+         wherever the plate is driven, and the point only picks the combination a degenerate \
+         pair takes"
     )
 }
 
