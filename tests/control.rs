@@ -9,8 +9,8 @@
 
 use std::time::{Duration, Instant};
 
-use chladni::controller::client::{DeviceClient, DeviceError};
-use chladni::controller::sweep::{SweepSample, find_resonances};
+use chladni_device::client::{DeviceClient, DeviceError};
+use chladni_device::sweep::{SweepSample, find_resonances};
 use chladni_e2e::{Controller, plan, poll_until};
 use chladni_shared::drive::dds::SAMPLE_RATE;
 use chladni_shared::icd::link::{

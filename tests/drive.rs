@@ -6,7 +6,7 @@
 
 use std::time::Duration;
 
-use chladni::controller::client::{DeviceClient, DeviceError};
+use chladni_device::client::{DeviceClient, DeviceError};
 use chladni_e2e::{Controller, plan, poll_until};
 use chladni_shared::drive::dds::SAMPLES_PER_MS;
 use chladni_shared::drive::runner::{BLOCK_LEN, MANUAL_RAMP_MS};

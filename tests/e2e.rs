@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use chladni::controller::client::{DeviceClient, Frame, Tamper};
+use chladni_device::client::{DeviceClient, Frame, Tamper};
 use chladni_e2e::{Controller, frames_until, poll_until, pseudo_random_bytes};
 use chladni_shared::icd::frame::CRC32;
 use chladni_shared::icd::link::{

@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
-use chladni::controller::client::{DeviceClient, DeviceError};
-use chladni::controller::emulator::{EmulatedSpeed, Emulator, EmulatorConfig};
+use chladni_device::client::{DeviceClient, DeviceError};
+use chladni_device::emulator::{EmulatedSpeed, Emulator, EmulatorConfig};
 use chladni_shared::icd::link::{Board, StatusReport};
 use chladni_shared::icd::plan::{Plan, Step};
 
@@ -141,7 +141,7 @@ pub fn read_log(path: &std::path::Path) -> String {
 
 /// Reproducible pseudo-random bytes from the host's one seeded generator.
 pub fn pseudo_random_bytes(seed: u64, len: usize) -> Vec<u8> {
-    let mut rng = chladni::rng::Rng::seeded(seed);
+    let mut rng = chladni_core::rng::Rng::seeded(seed);
     (0..len).map(|_| (rng.next_u64() >> 56) as u8).collect()
 }
 
@@ -191,10 +191,10 @@ pub fn steps(count: usize, base_mhz: u32, duration_ms: u32) -> Vec<Step> {
 /// received within `limit` if none does. QEMU's serial port takes a burst of bytes at its own
 /// pace, so the answer to a frame sent after kilobytes of garbage may take seconds to come.
 pub fn frames_until(
-    client: &mut chladni::controller::client::DeviceClient,
+    client: &mut chladni_device::client::DeviceClient,
     limit: Duration,
-    wanted: impl Fn(&chladni::controller::client::Frame) -> bool,
-) -> Vec<chladni::controller::client::Frame> {
+    wanted: impl Fn(&chladni_device::client::Frame) -> bool,
+) -> Vec<chladni_device::client::Frame> {
     let start = std::time::Instant::now();
     let mut frames = Vec::new();
     while start.elapsed() < limit {

@@ -12,8 +12,8 @@
 
 use std::time::{Duration, Instant};
 
-use chladni::controller::client::DeviceClient;
-use chladni::controller::emulator::EmulatedSpeed;
+use chladni_device::client::DeviceClient;
+use chladni_device::emulator::EmulatedSpeed;
 use chladni_e2e::{Controller, plan};
 use chladni_shared::icd::link::{DriveState, StatusReport};
 use chladni_shared::icd::plan::{Level, MAX_STEPS, Step};

@@ -5,7 +5,7 @@
 
 use std::process::{Command, Output};
 
-use chladni::controller::firmware;
+use chladni_device::firmware;
 use chladni_e2e::root;
 use chladni_shared::icd::link::Board;
 

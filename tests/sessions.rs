@@ -8,7 +8,7 @@
 use std::ops::ControlFlow;
 use std::time::{Duration, Instant};
 
-use chladni::controller::client::{DeviceClient, DeviceError, RunOutcome, Tamper, open_transport};
+use chladni_device::client::{DeviceClient, DeviceError, RunOutcome, Tamper, open_transport};
 use chladni_e2e::{Controller, poll_until, pseudo_random_bytes};
 use chladni_shared::icd::link::{Drive, DriveState, LinkError, Refusal, Response};
 
@@ -127,7 +127,7 @@ fn defect_4_a_drive_with_a_corrupted_crc_is_not_executed() {
         let drive =
             Drive { freq_mhz: 123_000, level: chladni_shared::icd::plan::Level::Drive(6_000) };
         let id = client.send_tampered(drive, Tamper::FlipBodyBit(bit)).unwrap();
-        let is_answer = |f: &chladni::controller::client::Frame| matches!(f, Ok(env) if env.id == id && env.body == Response::Error(LinkError::BadCrc));
+        let is_answer = |f: &chladni_device::client::Frame| matches!(f, Ok(env) if env.id == id && env.body == Response::Error(LinkError::BadCrc));
         let frames = chladni_e2e::frames_until(&mut client, Duration::from_secs(20), is_answer);
         let answered = frames.iter().any(is_answer);
         assert!(answered, "bit {bit}: no BadCrc answer with the frame's id: {frames:?}");

@@ -16,8 +16,8 @@ use std::os::unix::net::UnixStream;
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
-use chladni::controller::client::{DeviceClient, Transport};
-use chladni::controller::{emulator, firmware};
+use chladni_device::client::{DeviceClient, Transport};
+use chladni_device::{emulator, firmware};
 use chladni_e2e::{log_path, poll_until};
 use chladni_shared::icd::link::{Board, DriveState};
 use chladni_shared::icd::plan::Level;

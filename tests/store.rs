@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use chladni::controller::client::{DeviceClient, DeviceError, Tamper};
+use chladni_device::client::{DeviceClient, DeviceError, Tamper};
 use chladni_e2e::{Controller, plan, poll_until, pseudo_random_bytes, steps};
 use chladni_shared::icd::link::{DeletePlan, DriveState, GetStatus, MAX_FRAME, Refusal, Telemetry};
 use chladni_shared::icd::plan::{PlanError, Step};

@@ -608,7 +608,7 @@ pub enum DriveState {
     RampDown,
     /// Ramping to zero after a stop request or the end of a plan; then idle.
     Stopping,
-    /// Ramped to zero after a fault; stays silent until a stop request clears it.
+    /// Ramped to zero after a fault; stays silent until `ClearFault` clears it (a stop does not).
     Faulted,
 }
 
