@@ -1,4 +1,5 @@
-"""The command examples of README.md and docs/*.md, run and compared with what they show.
+"""The command examples of README.md and docs/**/*.md, run and compared with what they show,
+and the links between those pages checked.
 
 A fenced block right after a line `<!-- docs-check -->` is checked: each line starting with
 `$ ` is a command (`chladni …` runs the binary given), the lines after it up to the next
@@ -7,6 +8,10 @@ stands for any number of lines. Commands run in a scratch folder holding a link 
 repository's `examples/`, so relative paths in the docs work and files they write go nowhere.
 
     python3 scripts/lib/docs_check.py BINARY [--update]
+    python3 scripts/lib/docs_check.py --links      # the links alone, no binary needed
+
+Every relative link `[text](path#anchor)` outside code blocks must name a file that exists
+and, for a Markdown file, a heading whose GitHub anchor is `anchor`.
 
 --update rewrites the output of every example that no longer matches with what it prints now
 (elisions there are dropped; put them back by hand if the output is long).
@@ -68,11 +73,65 @@ def run(command, binary, cwd):
     return text.rstrip("\n").split("\n") if text.strip() else []
 
 
+def pages():
+    """README.md and every Markdown page under docs/ (docs/evidence/ included), in the order
+    their examples run."""
+    return [ROOT / "README.md"] + sorted((ROOT / "docs").rglob("*.md"))
+
+
+def prose(text):
+    """(line number, line) of the lines outside fenced code blocks."""
+    fenced = False
+    for number, line in enumerate(text.split("\n"), 1):
+        if line.startswith("```"):
+            fenced = not fenced
+        elif not fenced:
+            yield number, line
+
+
+def anchor(heading):
+    """GitHub's anchor of a heading: lower case, punctuation dropped, spaces to hyphens."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def anchors(path):
+    found, seen = set(), {}
+    for _, line in prose(path.read_text()):
+        heading = re.match(r"#{1,6} (.*)", line)
+        if heading:
+            name = anchor(heading.group(1))
+            found.add(name if name not in seen else f"{name}-{seen[name]}")
+            seen[name] = seen.get(name, 0) + 1
+    return found
+
+
+def broken_links():
+    """'file:line: what' for every relative link that names no file or no heading."""
+    broken = []
+    for path in pages():
+        for number, line in prose(path.read_text()):
+            for target in re.findall(r"\]\(([^)\s]+)\)", line):
+                if re.match(r"[a-z]+:", target):
+                    continue  # http:, mailto:
+                name, _, fragment = target.partition("#")
+                dest = (path.parent / name).resolve() if name else path
+                where = f"{path.relative_to(ROOT)}:{number}"
+                if not dest.exists():
+                    broken.append(f"{where}: {target}: no such file")
+                elif fragment and dest.suffix == ".md" and fragment not in anchors(dest):
+                    broken.append(f"{where}: {target}: no heading with that anchor")
+    return broken
+
+
 def main():
+    broken = broken_links()
+    print("\n".join(broken + [f"links: {len(broken)} broken"]))
+    if sys.argv[1:] == ["--links"]:
+        return 1 if broken else 0
     binary = str(Path(sys.argv[1]).resolve())
     update = "--update" in sys.argv[2:]
-    files = [ROOT / "README.md"] + sorted((ROOT / "docs").glob("*.md"))
-    failures, count, start = 0, 0, time.monotonic()
+    files = pages()
+    failures, count, start = len(broken), 0, time.monotonic()
     with tempfile.TemporaryDirectory(prefix="chladni-docs-check-") as scratch:
         os.symlink(ROOT / "examples", Path(scratch) / "examples")
         for path in files:
