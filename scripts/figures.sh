@@ -24,7 +24,7 @@ while [ $# -gt 0 ]; do
     esac
 done
 if [ -z "${CHLADNI:-}" ]; then
-    cargo build -q -p chladni-host --bin chladni
+    cargo build -q -p chladni --bin chladni
     CHLADNI="$root/target/debug/chladni"
 fi
 scratch="$(mktemp -d)"
@@ -87,8 +87,8 @@ chladni physics string --e 0.1 --freq-hz 6.1 --x0 1.45 --duration 1500 \
 done_
 
 step "synthetic photos (2)"
-cargo run -q -p chladni-host --example synthetic_photo -- "$out/synthetic-photo.png" >/dev/null
-cargo run -q -p chladni-host --example synthetic_photo -- "$scratch/curved-photo.png" --curved \
+cargo run -q -p chladni-core --example synthetic_photo -- "$out/synthetic-photo.png" >/dev/null
+cargo run -q -p chladni-core --example synthetic_photo -- "$scratch/curved-photo.png" --curved \
     "$out/synthetic-photo-curved.png" >/dev/null
 done_
 
@@ -116,7 +116,7 @@ if [ "$device" = 1 ]; then
     done_
 
     step "dashboard (headless Chromium)"
-    cargo test -q -p chladni-host --test cli_serve_http >"$scratch/http.log" 2>&1 ||
+    cargo test -q -p chladni --test integration cli_serve_http:: >"$scratch/http.log" 2>&1 ||
         { cat "$scratch/http.log" >&2; exit 1; }
     cp target/cell/dashboard.png "$out/dashboard.png"
     done_

@@ -7,7 +7,7 @@
 #   - qemu-system-arm 10 from Debian bookworm-backports (the emulated B-L475E-IOT01A)
 #   - binutils-arm-none-eabi (arm-none-eabi-size/nm/objdump: size report, image checks)
 #   - python3-pymodbus 3.6 from bookworm-backports: the Modbus client that plays the PLC in
-#     host/tests/cli_serve_modbus.rs (tests/cell/modbus_client.py, run by /usr/bin/python3)
+#     host/cli/tests/integration/cli_serve_modbus.rs (tests/cell/modbus_client.py, run by /usr/bin/python3)
 #   - defmt-print (decodes the QEMU firmware's defmt log)
 #   - chromium, chromium-driver and python3-selenium (the cell dashboard's browser test)
 #   - for fuzzing, the pinned nightly toolchain and cargo-fuzz (scripts/fuzz.sh install; the
@@ -48,7 +48,7 @@ if ! qemu-system-arm --version 2>/dev/null | grep -qE 'version (9|1[0-9])\.'; th
   need_apt+=(qemu-system-arm)
 fi
 command -v arm-none-eabi-size >/dev/null || need_apt+=(binutils-arm-none-eabi)
-# The dashboard's browser test (host/tests/cli_serve_http.rs drives tests/cell/dashboard.py).
+# The dashboard's browser test (host/cli/tests/integration/cli_serve_http.rs drives tests/cell/dashboard.py).
 command -v chromium >/dev/null || need_apt+=(chromium)
 command -v chromedriver >/dev/null || need_apt+=(chromium-driver)
 /usr/bin/python3 -c 'import selenium' 2>/dev/null || need_apt+=(python3-selenium)

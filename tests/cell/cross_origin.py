@@ -10,7 +10,7 @@ Usage: cross_origin.py CELL_URL
 CELL_URL is the cell's base URL (http://127.0.0.1:PORT/). Prints one JSON line of what the
 pages saw; the page sets its title to "attacked" when every attempt has been made, which
 proves it ran. Whether anything ran on the controller is for the caller to check.
-Run by host/tests/cli_serve_http.rs; needs chromium, chromium-driver, python3-selenium.
+Run by host/cli/tests/integration/cli_serve_http.rs; needs chromium, chromium-driver, python3-selenium.
 """
 
 import http.server

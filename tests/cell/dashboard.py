@@ -8,7 +8,7 @@ With `stop`, the run is stopped with the Stop button once busy, and the state mu
 (the login case: URL is then the `/?token=...` URL serve printed). With `photo=PATH`, the
 script plays the camera first: it posts the PNG to /api/verify while the page is open, and the
 page must show the check (its event) with the photo and the found outlines drawn over it.
-Run by host/tests/cli_serve_http.rs against `chladni serve --http` on the QEMU controller.
+Run by host/cli/tests/integration/cli_serve_http.rs against `chladni serve --http` on the QEMU controller.
 Prints one JSON line of what it saw; exits 1 naming the first thing that did not happen.
 Needs Debian's chromium, chromium-driver and python3-selenium (scripts/install-deps.sh).
 """

@@ -4,7 +4,7 @@ wrote): it reads the register map of docs/cell.md, refuses a bad slot, runs a pl
 it to the end, or waits for the link-lost error.
 
 Prints a transcript for people (each request and the registers it read, decoded) and, as its
-last line, one JSON object with what it saw, for host/tests/cli_serve_modbus.rs to check.
+last line, one JSON object with what it saw, for host/cli/tests/integration/cli_serve_modbus.rs to check.
 
     modbus_client.py HOST PORT run SLOT          # map, bad slot, run SLOT, poll until done
     modbus_client.py HOST PORT wait-link-lost    # poll until state 3 with fault 100

@@ -29,7 +29,7 @@ use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
-use super::http::ApiError;
+use super::error::ApiError;
 
 /// The most header lines a request may carry.
 pub const MAX_HEADERS: usize = 64;
@@ -50,7 +50,14 @@ pub struct Access {
 }
 
 fn refused(status: StatusCode, message: String) -> ApiError {
-    ApiError { status, message }
+    let kind = match status {
+        StatusCode::UNAUTHORIZED => "unauthorized",
+        StatusCode::FORBIDDEN => "forbidden",
+        StatusCode::UNSUPPORTED_MEDIA_TYPE => "unsupported_media_type",
+        StatusCode::MISDIRECTED_REQUEST => "unknown_host",
+        _ => "bad_input",
+    };
+    ApiError::new(status, kind, message)
 }
 
 /// The middleware: every request passes the checks in the module doc, in that order.

@@ -39,21 +39,21 @@ use axum::http::{HeaderValue, Method, StatusCode, Uri, header};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::{get, post};
+use chladni_media::shapes::failure::FailureJson;
 use chladni_shared::icd::store::PLAN_SLOTS;
 use futures_util::stream::{self, Stream};
-use serde::Serialize;
 use serde_json::Value;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{Semaphore, watch};
 use tower_http::limit::RequestBodyLimitLayer;
 use tower_http::timeout::{RequestBodyTimeoutLayer, TimeoutLayer};
 
+use super::error::{ApiError, json_response, kind_of_status};
 use super::guard::{self, Access};
 use super::net::{self, Caps};
 use super::ratelog;
 use super::verify::{self, Verifier};
-use super::{Cell, CellError, CellStatus};
-use chladni_device::client::DeviceError;
+use super::{Cell, CellStatus};
 use chladni_device::json::{PlanJson, PlansJson, RunNumberJson};
 
 /// The shortest gap between two status events of one `/api/events` stream: the owner polls
@@ -144,7 +144,7 @@ pub async fn serve(cell: Cell, listener: TcpListener, options: Options) -> std::
 
 /// A connection beyond every cap: a JSON 503 if the socket takes it at once, then closed.
 fn refuse_connection(stream: &TcpStream, peer: std::net::SocketAddr) {
-    let body = r#"{"error":"the server holds as many connections as it takes: try again in a few seconds"}"#;
+    let body = r#"{"error":"too_many_connections","message":"the server holds as many connections as it takes: try again in a few seconds"}"#;
     let answer = format!(
         "HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\n\
          Content-Length: {}\r\nConnection: close\r\nRetry-After: 2\r\n\r\n{body}",
@@ -201,7 +201,7 @@ pub async fn json_errors(response: Response) -> Response {
         _ if text.trim().is_empty() => status.canonical_reason().unwrap_or("error").to_owned(),
         _ => format!("{}: {}", status.canonical_reason().unwrap_or("error"), text.trim()),
     };
-    ApiError { status, message }.into_response()
+    ApiError::new(status, kind_of_status(status), message).into_response()
 }
 
 /// The routes themselves.
@@ -219,85 +219,6 @@ fn routes(cell: Cell) -> Router {
         .with_state(cell)
 }
 
-/// An API error: the HTTP status and the message for `{"error": ...}`.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ApiError {
-    /// The HTTP status.
-    pub status: StatusCode,
-    /// What went wrong, naming the value and the fix.
-    pub message: String,
-}
-
-impl ApiError {
-    fn bad_request(message: impl Into<String>) -> Self {
-        ApiError { status: StatusCode::BAD_REQUEST, message: message.into() }
-    }
-}
-
-impl From<CellError> for ApiError {
-    fn from(e: CellError) -> Self {
-        let status = match &e {
-            CellError::BadSlot { .. } | CellError::NoPlan { .. } => {
-                StatusCode::UNPROCESSABLE_ENTITY
-            }
-            CellError::LinkDown { .. } | CellError::Stopped | CellError::QueueFull => {
-                StatusCode::SERVICE_UNAVAILABLE
-            }
-            CellError::Device(d) => device_status(d),
-        };
-        ApiError { status, message: e.to_string() }
-    }
-}
-
-/// The HTTP status of a controller error.
-fn device_status(e: &DeviceError) -> StatusCode {
-    match e {
-        DeviceError::Refused(_)
-        | DeviceError::StaleSweep { .. }
-        | DeviceError::SweepIncomplete { .. } => StatusCode::CONFLICT,
-        DeviceError::Open { .. }
-        | DeviceError::Io(_)
-        | DeviceError::Closed
-        | DeviceError::Timeout { .. } => StatusCode::SERVICE_UNAVAILABLE,
-        DeviceError::Link(_)
-        | DeviceError::Protocol { .. }
-        | DeviceError::VersionMismatch { .. } => StatusCode::BAD_GATEWAY,
-    }
-}
-
-impl IntoResponse for ApiError {
-    fn into_response(self) -> Response {
-        #[derive(Serialize)]
-        struct Body {
-            error: String,
-        }
-        json(self.status, &Body { error: self.message })
-    }
-}
-
-/// A JSON response, for the other front-end modules ([`json`]).
-pub(crate) fn json_response<T: Serialize>(status: StatusCode, value: &T) -> Response {
-    json(status, value)
-}
-
-/// A JSON response. Serializing the API's own types cannot fail; if it ever did, the client
-/// gets a 500 naming it rather than a dropped connection.
-fn json<T: Serialize>(status: StatusCode, value: &T) -> Response {
-    let (status, body) = match serde_json::to_string(value) {
-        Ok(body) => (status, body),
-        Err(e) => (
-            StatusCode::INTERNAL_SERVER_ERROR,
-            serde_json::json!({ "error": format!("cannot encode the answer: {e}") }).to_string(),
-        ),
-    };
-    let mut response = (status, body).into_response();
-    let headers = response.headers_mut();
-    headers.insert(header::CONTENT_TYPE, HeaderValue::from_static("application/json"));
-    // The status changes ten times a second: no cache may keep an answer.
-    headers.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
-    response
-}
-
 async fn dashboard() -> Response {
     let mut response = Html(DASHBOARD).into_response();
     response.headers_mut().insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
@@ -305,29 +226,29 @@ async fn dashboard() -> Response {
 }
 
 async fn status(State(cell): State<Cell>) -> Response {
-    json(StatusCode::OK, &cell.status())
+    json_response(StatusCode::OK, &cell.status())
 }
 
 async fn plans(State(cell): State<Cell>) -> Result<Response, ApiError> {
     let (plans, free_bytes) = cell.plans()?;
     let plans = PlansJson { free_bytes, plans: plans.iter().map(PlanJson::from).collect() };
-    Ok(json(StatusCode::OK, &plans))
+    Ok(json_response(StatusCode::OK, &plans))
 }
 
 async fn run(State(cell): State<Cell>, body: Bytes) -> Result<Response, ApiError> {
     let request = RunRequest::parse(&body)?;
     let started = cell.run(request.slot, request.repeat).await?;
-    Ok(json(StatusCode::OK, &started))
+    Ok(json_response(StatusCode::OK, &started))
 }
 
 async fn stop(State(cell): State<Cell>, body: Bytes) -> Result<Response, ApiError> {
     empty_object(&body)?;
-    Ok(json(StatusCode::OK, &RunNumberJson { run: cell.stop().await? }))
+    Ok(json_response(StatusCode::OK, &RunNumberJson { run: cell.stop().await? }))
 }
 
 async fn clear_fault(State(cell): State<Cell>, body: Bytes) -> Result<Response, ApiError> {
     empty_object(&body)?;
-    Ok(json(StatusCode::OK, &RunNumberJson { run: cell.clear_fault().await? }))
+    Ok(json_response(StatusCode::OK, &RunNumberJson { run: cell.clear_fault().await? }))
 }
 
 /// Stop and clear-fault take no arguments: an empty body or `{}`.
@@ -342,17 +263,13 @@ fn empty_object(body: &[u8]) -> Result<(), ApiError> {
 }
 
 async fn not_found(method: Method, uri: Uri) -> ApiError {
-    ApiError {
-        status: StatusCode::NOT_FOUND,
-        message: format!("no route {method} {}: the routes are {ROUTES}", uri.path()),
-    }
+    let message = format!("no route {method} {}: the routes are {ROUTES}", uri.path());
+    ApiError::new(StatusCode::NOT_FOUND, "not_found", message)
 }
 
 async fn method_not_allowed(method: Method, uri: Uri) -> ApiError {
-    ApiError {
-        status: StatusCode::METHOD_NOT_ALLOWED,
-        message: format!("{} does not take {method}: the routes are {ROUTES}", uri.path()),
-    }
+    let message = format!("{} does not take {method}: the routes are {ROUTES}", uri.path());
+    ApiError::new(StatusCode::METHOD_NOT_ALLOWED, "method_not_allowed", message)
 }
 
 /// The body of `POST /api/run`.
@@ -404,9 +321,9 @@ fn slot_of(v: &Value) -> Result<u32, ApiError> {
             PLAN_SLOTS - 1
         ))
     })?;
-    u32::try_from(n).map_err(|_| ApiError {
-        status: StatusCode::UNPROCESSABLE_ENTITY,
-        message: format!("slot {n} does not exist: slots are 0..{}", PLAN_SLOTS - 1),
+    u32::try_from(n).map_err(|_| {
+        let message = format!("slot {n} does not exist: slots are 0..{}", PLAN_SLOTS - 1);
+        ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "bad_slot", message)
     })
 }
 
@@ -445,8 +362,9 @@ fn status_events(
 }
 
 fn status_event(status: &CellStatus) -> Event {
-    let data = serde_json::to_string(status)
-        .unwrap_or_else(|e| serde_json::json!({ "error": e.to_string() }).to_string());
+    let data = serde_json::to_string(status).unwrap_or_else(|e| {
+        serde_json::json!(FailureJson::new("internal", &e.to_string())).to_string()
+    });
     Event::default().event("status").data(data)
 }
 

@@ -18,6 +18,7 @@
 
 #![forbid(unsafe_code)]
 
+pub mod error;
 pub mod guard;
 pub mod http;
 pub mod mbap;

@@ -34,7 +34,7 @@ use futures_util::stream::{self, Stream};
 use serde_json::{Value, json};
 use tokio::sync::{Mutex, watch};
 
-use super::http::{ApiError, json_response};
+use super::error::{ApiError, json_response};
 use chladni_core::plate::photo::input::{self, PhotoError};
 use chladni_media::vision::verify::{self, Check, Outcome, Verification};
 
@@ -159,12 +159,12 @@ impl Verifier {
     /// Examines a posted photo and publishes the result (also when the photo is refused).
     pub async fn verify(&self, photo: Bytes) -> Result<Arc<Published>, ApiError> {
         if self.inner.setup.is_none() {
-            return Err(ApiError {
-                status: StatusCode::SERVICE_UNAVAILABLE,
-                message: "this cell checks no photos: start `chladni serve` with --verify-plan \
-                          plan.json --verify-part P.json --verify-plate PLATE.toml"
-                    .into(),
-            });
+            return Err(ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "not_set_up",
+                "this cell checks no photos: start `chladni serve` with --verify-plan \
+                          plan.json --verify-part P.json --verify-plate PLATE.toml",
+            ));
         }
         let mut seq = self.inner.turn.lock().await;
         let inner = Arc::clone(&self.inner);
@@ -173,9 +173,12 @@ impl Verifier {
             None => Err(("not_set_up", String::new())),
         })
         .await
-        .map_err(|e| ApiError {
-            status: StatusCode::INTERNAL_SERVER_ERROR,
-            message: format!("examining the photo failed: {e}"),
+        .map_err(|e| {
+            ApiError::new(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                "internal",
+                format!("examining the photo failed: {e}"),
+            )
         })?;
         *seq = seq.wrapping_add(1);
         let published = Arc::new(publishable(*seq, outcome));
@@ -207,8 +210,8 @@ fn publishable(seq: u32, outcome: Result<(Verification, Bytes), (&str, String)>)
             found: 0,
             oriented: 0,
             success_rate: None,
-            json: json!({"seq": seq, "result": ResultCode::Refused.name(), "error": message,
-                         "kind": kind, "found": 0, "oriented": 0, "success_rate": null}),
+            json: json!({"seq": seq, "result": ResultCode::Refused.name(), "error": kind,
+                         "message": message, "found": 0, "oriented": 0, "success_rate": null}),
             png: None,
         },
     }
@@ -258,14 +261,15 @@ pub fn check_photo_type(headers: &HeaderMap) -> Result<(), ApiError> {
     if essence.as_deref().is_some_and(|e| PHOTO_TYPES.contains(&e)) {
         return Ok(());
     }
-    Err(ApiError {
-        status: StatusCode::UNSUPPORTED_MEDIA_TYPE,
-        message: format!(
+    Err(ApiError::new(
+        StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        "unsupported_media_type",
+        format!(
             "the body is {}: {ROUTE} takes the photo itself, `Content-Type: image/png` or \
              `image/jpeg`",
             given.map_or("sent without a Content-Type".to_owned(), |t| format!("'{t}'"))
         ),
-    })
+    ))
 }
 
 /// The verification routes (behind the cell's guard, see [`super::http::router_with`]).
@@ -277,14 +281,15 @@ pub fn routes(verifier: Verifier) -> Router {
 }
 
 fn too_large(what: &str) -> ApiError {
-    ApiError {
-        status: StatusCode::PAYLOAD_TOO_LARGE,
-        message: format!(
+    ApiError::new(
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "too_large",
+        format!(
             "the photo is {what}, over the {} MiB {ROUTE} takes: post a smaller picture (a few \
              MP is plenty)",
             MAX_PHOTO_BYTES / (1024 * 1024)
         ),
-    }
+    )
 }
 
 async fn post_photo(
@@ -313,19 +318,21 @@ async fn post_photo(
 async fn last(State(verifier): State<Verifier>) -> Result<Response, ApiError> {
     match verifier.last() {
         Some(p) => Ok(json_response(StatusCode::OK, &p.json)),
-        None => Err(ApiError {
-            status: StatusCode::NOT_FOUND,
-            message: format!("no photo checked yet: POST one (image/png or image/jpeg) to {ROUTE}"),
-        }),
+        None => Err(ApiError::new(
+            StatusCode::NOT_FOUND,
+            "not_found",
+            format!("no photo checked yet: POST one (image/png or image/jpeg) to {ROUTE}"),
+        )),
     }
 }
 
 async fn figure(State(verifier): State<Verifier>) -> Result<Response, ApiError> {
     let Some(png) = verifier.last().and_then(|p| p.png.clone()) else {
-        return Err(ApiError {
-            status: StatusCode::NOT_FOUND,
-            message: format!("no figure: no photo was examined yet (POST one to {ROUTE})"),
-        });
+        return Err(ApiError::new(
+            StatusCode::NOT_FOUND,
+            "not_found",
+            format!("no figure: no photo was examined yet (POST one to {ROUTE})"),
+        ));
     };
     let mut response = (StatusCode::OK, png).into_response();
     let headers = response.headers_mut();
@@ -406,7 +413,7 @@ mod tests {
         let mut events = v.watch();
         let refused = v.verify(Bytes::from_static(b"not a photo")).await.unwrap();
         assert_eq!((refused.seq, refused.code), (1, ResultCode::Refused));
-        assert_eq!(refused.json["kind"], "not_a_photo");
+        assert_eq!(refused.json["error"], "not_a_photo");
         assert!(events.has_changed().unwrap());
         assert_eq!(events.borrow_and_update().as_ref().unwrap().seq, 1);
         assert_eq!(v.registers(), [1, 4, 0, 0, RATE_NONE]);

@@ -2,7 +2,7 @@
 //! fields. Parts: smooth non-symmetric "blobs" (an ellipse with a few harmonics), so the
 //! rest count does not change with n and the timing shows the per-vertex cost.
 //!
-//! `cargo bench -p chladni-host --bench analysis -- --warm-up-time 1 --measurement-time 2`
+//! `cargo bench -p chladni --bench analysis -- --warm-up-time 1 --measurement-time 2`
 
 use std::hint::black_box;
 

@@ -6,7 +6,7 @@
 //! - an ordinary part on a solver plate: the rectangle on examples/plates/hinged-rod-solver.toml,
 //!   planned here by the planner with its default options (no example plan file exists for it).
 //!
-//! `cargo bench -p chladni-host --bench bulk -- --warm-up-time 1 --measurement-time 5`
+//! `cargo bench -p chladni --bench bulk -- --warm-up-time 1 --measurement-time 5`
 
 use std::hint::black_box;
 

@@ -3,7 +3,7 @@
 //! loop and 50 Modbus clients writing run commands, against the controller in QEMU. Also the
 //! heartbeat (status reads a second) in both phases: the poll must keep its 100 ms rate.
 //!
-//! `cargo bench -p chladni-host --bench cell_stop` (about a minute; numbers in docs/cell.md).
+//! `cargo bench -p chladni --bench cell_stop` (about a minute; numbers in docs/cell.md).
 //! `CELL_BENCH_STOPS=N` sets the stops per phase (default 100). A bench binary, not criterion:
 //! the interesting figure is the tail (p99) under a load that runs for the whole phase.
 

@@ -5,7 +5,7 @@
 //! --count 4|6 --write-modes` and `chladni plate modes examples/plate-hinged-rod.toml --count 4
 //! --write-modes` with the forced rocking mode removed (elastic modes only).
 //!
-//! `cargo bench -p chladni-host --bench feed -- --warm-up-time 1 --measurement-time 3`
+//! `cargo bench -p chladni --bench feed -- --warm-up-time 1 --measurement-time 3`
 //! (a few minutes; one row: add its name as a filter, e.g. `-- "free 6, L-shape"`).
 
 use std::hint::black_box;

@@ -12,10 +12,10 @@
 //! other's nearest; `appears` when one map has boundaries and the other none), with the margin
 //! `auto` sets and the time of the mode's map and of the resampled one.
 //!
-//! `cargo bench -p chladni-host --bench margin_evidence` (release; prints a markdown table).
+//! `cargo bench -p chladni --bench margin_evidence` (release; prints a markdown table).
 //! Filters, comma-separated substrings: `CHLADNI_MARGIN_PLATES=cantilever`,
 //! `CHLADNI_MARGIN_PARTS=rectangle,gear`; `CHLADNI_MARGIN_STARTS=90` (start orientations per
-//! simulated map, the planner's default). A debug run (`cargo test -p chladni-host --bench
+//! simulated map, the planner's default). A debug run (`cargo test -p chladni --bench
 //! margin_evidence`) takes minutes per plate and part.
 
 use std::path::{Path, PathBuf};

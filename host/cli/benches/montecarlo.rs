@@ -3,7 +3,7 @@
 //! the default) and without one (the unbounded plane of the model before the rim), same
 //! starts. docs/motion.md records the numbers.
 //!
-//! `cargo bench -p chladni-host --bench montecarlo -- --warm-up-time 1 --measurement-time 5`
+//! `cargo bench -p chladni --bench montecarlo -- --warm-up-time 1 --measurement-time 5`
 //! on an idle machine; the ratio "with the rim" / "without the rim" of the two cases' times is
 //! the rim's cost (the target: at most 2×).
 

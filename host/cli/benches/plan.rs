@@ -6,7 +6,7 @@
 //! for all twelve. The plan and search benches reuse the process-wide map cache after their
 //! first run (as a second `plan` call in one process would).
 //!
-//! `cargo bench -p chladni-host --bench plan -- --warm-up-time 1 --measurement-time 3`
+//! `cargo bench -p chladni --bench plan -- --warm-up-time 1 --measurement-time 3`
 
 use std::hint::black_box;
 

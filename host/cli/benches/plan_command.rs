@@ -10,7 +10,7 @@
 //! region. `CHLADNI_BENCH_PROFILE=PART.json` instead prints where one plan's CPU time goes
 //! ([`profile`]).
 //!
-//! `cargo bench -p chladni-host --bench plan_command` (N = 30; `CHLADNI_BENCH_RUNS=N`;
+//! `cargo bench -p chladni --bench plan_command` (N = 30; `CHLADNI_BENCH_RUNS=N`;
 //! `CHLADNI_BENCH_GRID=0` leaves the solver plate out, `CHLADNI_BENCH_PARTS=key,gear` keeps
 //! the parts whose file name contains one of these).
 

@@ -2,7 +2,7 @@
 //! and a curved synthetic photo, the signed-distance grid from photo nodes, and one point of
 //! the string model's averaged force.
 //!
-//! `cargo bench -p chladni-host --bench plate -- --warm-up-time 1 --measurement-time 3`
+//! `cargo bench -p chladni --bench plate -- --warm-up-time 1 --measurement-time 3`
 
 use std::hint::black_box;
 

@@ -15,7 +15,7 @@
 //! A part that flips (`"flips": true`) is planned on both faces, with `--feed` too.
 //!
 //! Prints the markdown table and the counts (stdout) and a line per case (stderr).
-//! `cargo bench -p chladni-host --bench plates_table` (release). Filters, comma-separated
+//! `cargo bench -p chladni --bench plates_table` (release). Filters, comma-separated
 //! substrings: `CHLADNI_TABLE_PLATES=free`, `CHLADNI_TABLE_PARTS=gear,key`;
 //! `CHLADNI_TABLE_SUGGEST=0` skips the suggest rows, `only` runs them alone (each `plate suggest` stops at its
 //! default `--budget-s 60`, past it by at most the first candidate that is planned); `CHLADNI_TABLE_JOBS=2` runs two cases at

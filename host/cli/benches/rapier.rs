@@ -15,7 +15,7 @@
 //! fixed boxes outside the plate's rectangle.
 //!
 //! Outside the default build (rapier is an optional dependency):
-//! `cargo bench -p chladni-host --features rapier-compare --bench rapier`
+//! `cargo bench -p chladni --features rapier-compare --bench rapier`
 
 use std::time::Instant;
 

@@ -3,7 +3,7 @@
 //! `chladni device info` and `ping` for scale. The link's requests one by one are in the e2e
 //! crate's bench (`cargo bench -p chladni-e2e --bench link`).
 //!
-//! `cargo bench -p chladni-host --bench upload_command` (builds the QEMU firmware if needed).
+//! `cargo bench -p chladni --bench upload_command` (builds the QEMU firmware if needed).
 //! QEMU's clock follows the host's: these are wall-clock times on this machine, with QEMU's
 //! semihosting file flash.
 

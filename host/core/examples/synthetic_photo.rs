@@ -1,5 +1,5 @@
 //! Writes a synthetic Chladni photo for trying `chladni plate from-photo`:
-//! `cargo run -p chladni-host --example synthetic_photo -- OUT.png` draws sand on two known
+//! `cargo run -p chladni-core --example synthetic_photo -- OUT.png` draws sand on two known
 //! straight node lines, (angle 90°, offset 40 mm) and (angle 20°, offset −30 mm);
 //! `... -- OUT.png --curved [OVERLAY.png]` draws the nodes of mode 5 of the free 300 × 200 mm
 //! plate (examples/plate-free.toml: two curved arcs and a straight line) at 360 × 240 px and,

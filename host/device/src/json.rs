@@ -285,10 +285,14 @@ pub struct SweepJson<'a> {
     pub resonances: &'a [Resonance],
 }
 
-/// The ready line of `chladni emulator --json`: where the link listens and QEMU's process id;
-/// with `--mips`, the emulated speed and its `-icount` shift.
+/// The ready line of `chladni emulator --json`: where the link listens, QEMU's process id, the
+/// file holding the controller's flash and whether it outlives the emulator; with `--mips`,
+/// the emulated speed and its `-icount` shift.
 #[derive(Debug, Clone, Serialize)]
 pub struct EmulatorJson {
+    pub flash_file: String,
+    /// `false`: the flash file is the emulator's own, removed when it stops.
+    pub flash_kept: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub icount_shift: Option<u8>,
     #[serde(skip_serializing_if = "Option::is_none")]

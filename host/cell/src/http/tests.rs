@@ -1,6 +1,6 @@
 //! The HTTP front end without a controller: request validation, error statuses and the JSON
 //! shapes, through a real server on loopback and a cell whose link cannot open (the QEMU
-//! controller is exercised in host/tests/cli_serve_http.rs).
+//! controller is exercised in host/cli/tests/integration/cli_serve_http.rs).
 
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
@@ -9,6 +9,8 @@ use chladni_shared::icd::link::Refusal;
 use tokio::runtime::Runtime;
 
 use super::*;
+use crate::CellError;
+use chladni_device::client::DeviceError;
 
 #[test]
 fn a_run_request_takes_a_slot_and_an_optional_repeat() {
@@ -123,7 +125,9 @@ fn without_a_controller_the_api_answers_link_down_and_validates_requests() {
 
     let (code, answer) = json_request(addr, "POST /api/run", r#"{"slot": 99}"#);
     assert_eq!(code, 422);
-    assert!(answer["error"].as_str().unwrap().contains("slot 99 does not exist"), "{answer}");
+    assert!(answer["message"].as_str().unwrap().contains("slot 99 does not exist"), "{answer}");
+    // The CLI's failure shape: the kind, the message, and the kind's own fields.
+    assert_eq!((&answer["error"], &answer["slot"]), (&Value::from("bad_slot"), &Value::from(99)));
     let (code, answer) = json_request(addr, "POST /api/run", "{}");
     assert_eq!(code, 400, "{answer}");
     for (head, body) in
@@ -131,7 +135,8 @@ fn without_a_controller_the_api_answers_link_down_and_validates_requests() {
     {
         let (code, answer) = json_request(addr, head, body);
         assert_eq!(code, 503, "{head}: {answer}");
-        assert!(answer["error"].as_str().unwrap().contains("link is down"), "{answer}");
+        assert!(answer["message"].as_str().unwrap().contains("link is down"), "{answer}");
+        assert_eq!(answer["error"], "link_down", "{answer}");
     }
 }
 
@@ -140,11 +145,12 @@ fn unknown_routes_and_methods_answer_json_naming_the_routes() {
     let (_runtime, addr) = server_without_controller();
     let (code, answer) = json_request(addr, "GET /api/nothing", "");
     assert_eq!(code, 404);
-    assert!(answer["error"].as_str().unwrap().contains("no route GET /api/nothing"));
-    assert!(answer["error"].as_str().unwrap().contains("POST /api/run"));
+    assert!(answer["message"].as_str().unwrap().contains("no route GET /api/nothing"));
+    assert_eq!(answer["error"], "not_found");
+    assert!(answer["message"].as_str().unwrap().contains("POST /api/run"));
     let (code, answer) = json_request(addr, "GET /api/run", "");
     assert_eq!(code, 405);
-    assert!(answer["error"].as_str().unwrap().contains("/api/run does not take GET"));
+    assert!(answer["message"].as_str().unwrap().contains("/api/run does not take GET"));
 }
 
 #[test]
@@ -186,7 +192,8 @@ fn raw(addr: SocketAddr, head: &str, headers: &[&str], body: &str) -> (u16, Stri
 fn error_of(body: &str) -> String {
     let value: Value =
         serde_json::from_str(body).unwrap_or_else(|e| panic!("not JSON ({e}): {body}"));
-    value["error"].as_str().unwrap_or_else(|| panic!("no error: {body}")).to_owned()
+    assert!(value["error"].is_string(), "no error kind: {body}");
+    value["message"].as_str().unwrap_or_else(|| panic!("no message: {body}")).to_owned()
 }
 
 #[test]

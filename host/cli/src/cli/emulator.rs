@@ -19,7 +19,8 @@ pub struct EmulatorArgs {
     #[arg(long)]
     firmware: Option<PathBuf>,
     /// Keep the controller's flash (plans, configuration) in this file across restarts;
-    /// created erased (512 KiB of 0xFF) if missing.
+    /// created erased (512 KiB of 0xFF) if missing. Without it the controller keeps its plans
+    /// in a file of its own in the temp folder, removed when the emulator stops.
     #[arg(long)]
     flash_file: Option<PathBuf>,
     /// Write the firmware's decoded log here instead of stderr.
@@ -56,16 +57,40 @@ fn time_limit(s: &str) -> Result<u64, String> {
     }
 }
 
+/// The emulator's own flash file when none is given: erased at start, removed at the end,
+/// so plans stored on the controller last as long as the emulator (as on a board whose bank
+/// is erased at every power-on), never shared with another emulator.
+struct SessionFlash(PathBuf);
+
+impl SessionFlash {
+    fn new() -> SessionFlash {
+        let name = format!("chladni-emulator-{}.flash", std::process::id());
+        let path = std::env::temp_dir().join(name);
+        // A file left by an earlier process of the same pid would not be erased.
+        let _ = std::fs::remove_file(&path);
+        SessionFlash(path)
+    }
+}
+
+impl Drop for SessionFlash {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
 impl EmulatorArgs {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
+        let session = self.flash_file.is_none().then(SessionFlash::new);
+        let flash_file = self.flash_file.clone().or_else(|| session.as_ref().map(|s| s.0.clone()));
         let config = EmulatorConfig {
             port: self.tcp,
             firmware: self.firmware.clone(),
             log_file: self.log.clone(),
             time_limit: self.time_limit_s.map(std::time::Duration::from_secs),
-            flash_file: self.flash_file.clone(),
+            flash_file: flash_file.clone(),
             speed: self.mips,
         };
+        let flash = flash_file.unwrap_or_default().display().to_string();
         let (stop_tx, stop_rx) = mpsc::channel();
         ctrlc::set_handler(move || {
             let _ = stop_tx.send(());
@@ -76,6 +101,8 @@ impl EmulatorArgs {
         })?;
         if self.json {
             let ready = EmulatorJson {
+                flash_file: flash,
+                flash_kept: session.is_none(),
                 icount_shift: self.mips.map(|s| s.shift),
                 mips: self.mips.map(|s| s.mips()),
                 pid: emulator.pid(),
@@ -90,6 +117,13 @@ impl EmulatorArgs {
                     speed.mips(),
                     speed.shift
                 );
+            }
+            match &session {
+                Some(_) => println!(
+                    "plans kept until the emulator stops (in {flash}); --flash-file F keeps them \
+                     across restarts"
+                ),
+                None => println!("plans kept in {flash}"),
             }
             println!("try: chladni device info --port {}", emulator.address());
         }

@@ -7,7 +7,7 @@
 //! than [`RSS_GROWTH_LIMIT_KB`].
 //!
 //! CI runs 45 s (a short smoke of the same mix); the documented long run is 30 minutes:
-//! `CHLADNI_SOAK_SECS=1800 cargo test -p chladni-host --test cell_soak -- --nocapture`.
+//! `CHLADNI_SOAK_SECS=1800 cargo test -p chladni --test integration cell_soak:: -- --nocapture`.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{SocketAddr, TcpStream};

@@ -91,7 +91,7 @@ fn two_parts_plan_and_simulate_per_part() {
     assert_eq!(entries.len(), 2);
     // Both parts are dropped together and touch (docs/motion.md, "Contacts between parts"):
     // the plan brings them to nearly one spot, so both cannot end where it predicts; each
-    // part's report is still there (host/tests/bulk.rs checks that they end apart).
+    // part's report is still there (host/cli/tests/integration/bulk.rs checks that they end apart).
     for e in entries {
         let s = e["success_rate"].as_f64().unwrap();
         assert!((0.0..=1.0).contains(&s) && e["trials"] == 4, "{e}");

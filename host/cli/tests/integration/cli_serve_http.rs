@@ -164,7 +164,7 @@ fn check_api_requests(addr: SocketAddr) {
     ] {
         let (got, answer) = http(addr, "POST /api/run", body);
         assert_eq!(got, code, "{body}: {answer}");
-        assert!(answer["error"].as_str().unwrap().contains(words), "{body}: {answer}");
+        assert!(answer["message"].as_str().unwrap().contains(words), "{body}: {answer}");
     }
 }
 
@@ -175,8 +175,9 @@ fn refused_while_another_session_owns(emu: &Emulator, addr: SocketAddr) {
     other.clear_fault().unwrap();
     let (code, answer) = http(addr, "POST /api/run", r#"{"slot": 0}"#);
     assert_eq!(code, 409, "{answer}");
-    let error = answer["error"].as_str().unwrap();
-    assert!(error.contains("busy: cli_serve_http other owner holds it"), "{answer}");
+    assert_eq!(answer["error"], "refused", "{answer}");
+    let message = answer["message"].as_str().unwrap();
+    assert!(message.contains("busy: cli_serve_http other owner holds it"), "{answer}");
     drop(other);
 }
 
@@ -343,7 +344,7 @@ fn the_dashboard_runs_a_stored_plan_and_the_api_reports_a_lost_link() {
     assert!(lost["error"].as_str().unwrap().contains("controller link down"), "{lost}");
     let (code, refused) = http_as(addr, Some(&token), "POST /api/run", r#"{"slot": 0}"#);
     assert_eq!(code, 503, "{refused}");
-    assert!(refused["error"].as_str().unwrap().contains("link is down"), "{refused}");
+    assert!(refused["message"].as_str().unwrap().contains("link is down"), "{refused}");
     assert_eq!(serve.terminate(), Some(0));
 }
 
@@ -426,13 +427,13 @@ fn check_photo_route(addr: SocketAddr, png: &Path) {
     ] {
         let (code, v) = post_bytes(addr, &headers, &bytes);
         assert_eq!(code, status, "{headers:?}: {v}");
-        assert!(v["error"].as_str().unwrap().contains(words), "{headers:?}: {v}");
+        assert!(v["message"].as_str().unwrap().contains(words), "{headers:?}: {v}");
     }
     let (_, last) = http(addr, "GET /api/verify", "");
     assert_eq!(last["seq"], 2, "a refused request was checked: {last}");
     // Not a photo: refused by name, and published (a PLC must not read the old result).
     let (code, v) = post_bytes(addr, &["Content-Type: image/png"], b"not a photo at all");
-    assert_eq!((code, &v["kind"], &v["seq"]), (422, &"not_a_photo".into(), &3.into()), "{v}");
+    assert_eq!((code, &v["error"], &v["seq"]), (422, &"not_a_photo".into(), &3.into()), "{v}");
     let (_, last) = http(addr, "GET /api/verify", "");
     assert_eq!((&last["seq"], &last["result"]), (&3.into(), &"refused".into()), "{last}");
 }

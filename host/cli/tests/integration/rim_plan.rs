@@ -1,5 +1,5 @@
 //! The rim as an orienting feature (docs/plan.md, "The rim in the step maps"): a plan that
-//! needs the wall. On `host/tests/data/rim-push.toml` the two straight nodes have equal gains,
+//! needs the wall. On `host/cli/tests/integration/data/rim-push.toml` the two straight nodes have equal gains,
 //! so each maps θ and θ + 180° alike and the triangle's 180° twins stay apart; the third mode
 //! pushes the part into the left wall, whose reaction turns it onto a stable edge and so
 //! tells the twins apart. With `edge = "open"` the same field pushes the part off the plate:
@@ -13,7 +13,8 @@ use chladni_core::planner::{self, PlanFailure, PlanOptions, Problem, cdist, rim_
 use support::examples::{part, root};
 
 fn rim_plate(edge: Edge) -> PlateModel {
-    let mut plate = PlateModel::load(&root().join("host/tests/data/rim-push.toml")).unwrap();
+    let mut plate =
+        PlateModel::load(&root().join("host/cli/tests/integration/data/rim-push.toml")).unwrap();
     plate.edge = edge;
     plate
 }

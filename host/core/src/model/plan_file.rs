@@ -533,7 +533,7 @@ mod tests {
         for needed in ["7200000 ms", "3600000 ms", "plate calibrate-speed", "--feed", "another"] {
             assert!(w.contains(needed), "{needed}: {w}");
         }
-        // `plan --json`'s key (built in shapes::plan; host/tests/cli_plan.rs checks it there).
+        // `plan --json`'s key (built in shapes::plan; host/cli/tests/integration/cli_plan.rs checks it there).
         let json =
             serde_json::json!({"warning": w, "plan_ms": 7_200_000, "max_total_ms": 3_600_000});
         // Saved `plan --json` output with the key still reads as a plan file.

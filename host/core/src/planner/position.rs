@@ -12,7 +12,7 @@
 //! Perpendicular last two nodes fix it at once (the projection of a segment onto a
 //! perpendicular line is a point). Two non-parallel nodes at angle Δ shrink a segment by
 //! |cos Δ| per step only: after nodes at 0° and 60° the part can still be anywhere along half
-//! the first node's chord, which the simulation confirms (`host/tests/goal_plan.rs`).
+//! the first node's chord, which the simulation confirms (`host/cli/tests/integration/goal_plan.rs`).
 
 use crate::model::part::Part;
 use crate::model::plate::{Node, PlateModel};

@@ -110,7 +110,7 @@ fn partly_hidden_parts_are_named_never_posed_wrong() {
 }
 
 /// Time per photo of the bench's scene, printed (never asserted: numbers live in the bench,
-/// `cargo bench -p chladni-host --bench locate`); `--ignored` to run, in a debug build a
+/// `cargo bench -p chladni --bench locate`); `--ignored` to run, in a debug build a
 /// relative measure only.
 #[test]
 #[ignore]

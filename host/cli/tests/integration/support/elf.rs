@@ -1,6 +1,6 @@
 //! Test fixture: small hand-assembled 32-bit little-endian ELF executables, enough for
 //! `chladni_device::flash::check_image` (program headers, one section per segment, a symbol table with
-//! the board tag). Shared by the unit tests in host/src/flash.rs and host/tests/cli_flash.rs.
+//! the board tag). Shared by the unit tests in host/device/src/flash.rs and host/cli/tests/integration/cli_flash.rs.
 // Each includer uses only part of it.
 #![allow(dead_code)]
 

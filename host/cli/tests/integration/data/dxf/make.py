@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
-"""Writes the DXF test parts of host/tests/dxf_import.rs with ezdxf, a real CAD library.
+"""Writes the DXF test parts of host/cli/tests/integration/dxf_import.rs with ezdxf, a real CAD library.
 
 The generated .dxf files (and the JSON twin of the arc part) are committed, so the tests and
 CI need no Python; run this again (pip install ezdxf) only to change them:
 
-    python3 host/tests/data/dxf/make.py
+    python3 host/cli/tests/integration/data/dxf/make.py
 
 Each file tests one thing of `Part::load` for DXF (docs/analyze.md, "DXF parts"):
   rectangle.dxf   closed LWPOLYLINE, mm               twin examples/parts/rectangle.json

@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
-"""Writes the SVG test parts of host/tests/svg_import.rs with svgwrite, a Python SVG library,
+"""Writes the SVG test parts of host/cli/tests/integration/svg_import.rs with svgwrite, a Python SVG library,
 and each part's JSON twin: its exact area (mm²), centroid (mm, y up, as the reader gives it)
 and hole count, computed here from the shapes' formulas (not from the SVG).
 
 The files are committed, so tests and CI need no Python; to change them:
 
-    pip install svgwrite && python3 host/tests/data/svg/make.py
+    pip install svgwrite && python3 host/cli/tests/integration/data/svg/make.py
 
   circle-hole.svg     40 x 20 mm rect, a <circle> hole (r 5) drawn on top; width/height in mm
   rounded-inch.svg    2 x 1 in rounded rect (rx 0.1 in) with viewBox in hundredths of an inch
