@@ -12,13 +12,13 @@ use std::time::{Duration, Instant};
 use chladni_device::client::{DeviceClient, DeviceError};
 use chladni_device::sweep::{SweepSample, find_resonances};
 use chladni_e2e::{Controller, plan, poll_until};
-use chladni_shared::drive::dds::SAMPLE_RATE;
 use chladni_shared::icd::link::{
     DriveError, DriveState, FaultCause, Refusal, SensorFault, StatusReport, Sweep, TestFault,
 };
 use chladni_shared::icd::plan::{Level, Step};
 use chladni_shared::icd::sense::ResetCause;
 use chladni_shared::icd::store::PlanRef;
+use chladni_shared::icd::units::SAMPLE_RATE;
 
 /// The simulated plate's resonance (the QEMU board's plant), Hz.
 const PLANT_F0_HZ: f64 = 180.0;

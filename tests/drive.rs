@@ -8,11 +8,11 @@ use std::time::Duration;
 
 use chladni_device::client::{DeviceClient, DeviceError};
 use chladni_e2e::{Controller, plan, poll_until};
-use chladni_shared::drive::dds::SAMPLES_PER_MS;
 use chladni_shared::drive::runner::{BLOCK_LEN, MANUAL_RAMP_MS};
 use chladni_shared::icd::link::{DriveError, DriveState, Refusal, SetpointError};
 use chladni_shared::icd::plan::Step;
 use chladni_shared::icd::store::PlanRef;
+use chladni_shared::icd::units::SAMPLES_PER_MS;
 
 fn start(name: &str) -> (Controller, DeviceClient) {
     let _ = std::fs::remove_file(chladni_e2e::flash_path(&format!("drive-{name}")));

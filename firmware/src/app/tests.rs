@@ -4,12 +4,13 @@
 
 use std::vec::Vec;
 
-use chladni_shared::drive::dds::{DAC_MID, SAMPLE_RATE, SAMPLES_PER_MS};
+use chladni_shared::drive::dds::DAC_MID;
 use chladni_shared::drive::runner::{BLOCK_LEN, STOP_RAMP_MS};
 use chladni_shared::icd::link::{
     self, DriveError, DriveState, OWNER_LEASE_MS, Refusal, Request, RunNumber, SetpointError,
 };
 use chladni_shared::icd::plan::{DeviceLimits, Level, Plan, PlanError, Step};
+use chladni_shared::icd::units::{SAMPLE_RATE, SAMPLES_PER_MS};
 use embassy_futures::block_on;
 use embassy_time::Instant;
 

@@ -187,7 +187,7 @@ pub fn spawn_tasks(spawner: embassy_executor::Spawner, tasks: BoardTasks) {
 /// `None` if the ring has just overrun (the write then reports the underrun).
 fn slack_us<E>(capacity: usize, free: Result<usize, E>) -> Option<u32> {
     let queued = capacity.saturating_sub(free.ok()?) as u64;
-    Some((queued * 1_000_000 / u64::from(chladni_shared::drive::dds::SAMPLE_RATE)) as u32)
+    Some((queued * 1_000_000 / u64::from(chladni_shared::icd::units::SAMPLE_RATE)) as u32)
 }
 
 /// The drive's executor (see the module docs).

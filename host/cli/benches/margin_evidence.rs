@@ -175,7 +175,7 @@ fn main() {
         let short = Path::new(plate_path).file_stem().unwrap().to_string_lossy().to_string();
         for part_path in parts().iter().filter(|p| wanted(&p.to_string_lossy(), &parts_f)) {
             let part = Part::load(part_path).unwrap();
-            let body = Body::with_samples(&part, 160);
+            let body = Body::with_samples(&part, chladni_core::motion::body::PLANNER_BODY_SAMPLES);
             let period = planner::plan_period(&part, &plate);
             for (k, mode) in plate.modes.iter().enumerate() {
                 let row = match mode.node {

@@ -182,7 +182,7 @@ fn profile(spec: &str) {
         let whole = PlanOptions { refine_rounds: planner::whole::REFINE_ROUNDS, ..opt };
         timed("plan (as `chladni plan`)", &|| outcome(planner::plan(&part, &plate, &whole)));
     });
-    let body = Body::with_samples(&part, 160);
+    let body = Body::with_samples(&part, chladni_core::motion::body::PLANNER_BODY_SAMPLES);
     let n = opt.sim_starts;
     let m = planner::symmetry_order(&part) as usize;
     let distinct = if m > 1 && n.is_multiple_of(m) { n / m } else { n };

@@ -34,7 +34,7 @@ fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("grid wrench");
     for path in PARTS {
         let part = Part::load(&dir.join(path)).expect("the part loads");
-        let body = Body::with_samples(&part, 160);
+        let body = Body::with_samples(&part, chladni_core::motion::body::PLANNER_BODY_SAMPLES);
         let edges: usize = body.rings.iter().map(Vec::len).sum();
         let name = format!("{} ({edges} edges)", part.name);
         group.bench_function(name, |b| {

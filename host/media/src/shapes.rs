@@ -4,6 +4,7 @@
 //! Keys are snake_case with their unit in the name (`_deg`, `_mm`, `_s`); steps are numbered
 //! from 1, as `plan` prints them. Every file is written atomically ([`chladni_core::output`]).
 
+use chladni_core::model::angle::wrap_deg;
 use std::path::Path;
 
 use serde::Serialize;
@@ -36,7 +37,7 @@ pub struct PoseJson {
 impl PoseJson {
     /// From (x mm, y mm, θ radians).
     pub fn from_mm_rad(x: f64, y: f64, theta_rad: f64) -> Self {
-        PoseJson { x_mm: x, y_mm: y, theta_deg: theta_rad.to_degrees().rem_euclid(360.0) }
+        PoseJson { x_mm: x, y_mm: y, theta_deg: wrap_deg(theta_rad.to_degrees()) }
     }
 }
 

@@ -31,11 +31,11 @@
 //! [`ClosedLoop::clear_fault`].
 
 use crate::drive::control::{AmplitudeController, Ramp};
-use crate::drive::dds::SAMPLES_PER_MS;
 use crate::drive::lockin::{Estimate, LockIn};
 use crate::drive::monitor::{ClosedInput, MonitorInput, Monitors};
 use crate::drive::timeline::{PhaseMark, SensorTimebase, TIME_FRAC_BITS, dac_time};
 use crate::icd::sense::{ControlConfig, Fault, FaultCause, Measurement, SensorFault};
+use crate::icd::units::SAMPLES_PER_MS;
 use micromath::F32Ext;
 #[cfg(test)]
 extern crate std;

@@ -1,6 +1,6 @@
 //! Direct digital synthesis of the drive sine, in integers only.
 //!
-//! - Sample rate [`SAMPLE_RATE`] (50 kS/s: TIM6 divides 80 MHz by exactly 1600).
+//! - Sample rate [`SAMPLE_RATE`] (the sample clock of the wire contract, `icd::units`).
 //! - Phase: a 32-bit accumulator, one turn = 2³². Tuning word = f·2³²/f_s, so the frequency
 //!   resolution is f_s/2³² ≈ 11.6 µHz; frequencies are given in millihertz.
 //! - Sine: a [`TABLE_LEN`]-entry table of sin in Q30 (plus one guard entry), linearly
@@ -13,10 +13,8 @@
 //! The per-sample path is [`Dds::fill_steady`] / [`Dds::fill_ramp`]: a handful of loads,
 //! two 32×32→64 multiplies and shifts.
 
-/// Samples per second of the drive stream.
-pub const SAMPLE_RATE: u32 = 50_000;
-/// Samples per millisecond (plans are written in ms; the runner counts samples).
-pub const SAMPLES_PER_MS: u32 = SAMPLE_RATE / 1000;
+use crate::icd::units::SAMPLE_RATE;
+
 /// log2 of the sine table length.
 pub const TABLE_BITS: u32 = 10;
 /// Sine table entries per turn.

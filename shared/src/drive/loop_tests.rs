@@ -6,12 +6,13 @@
 extern crate std;
 
 use crate::drive::closed_loop::{BlockInput, ClosedLoop, LoopOutput, Stage};
-use crate::drive::dds::{Dds, SAMPLES_PER_MS, gain_of_q15, tuning_word};
+use crate::drive::dds::{Dds, gain_of_q15, tuning_word};
 use crate::drive::plant::{Plant, PlantFault, PlantParams};
 use crate::drive::runner::BLOCK_LEN;
 use crate::drive::sensor_sim::{SensorSim, SensorSimConfig};
 use crate::drive::timeline::PhaseMark;
 use crate::icd::sense::{ControlConfig, FaultCause, SensorFault};
+use crate::icd::units::SAMPLES_PER_MS;
 use std::vec::Vec;
 
 /// The simulated rig and the firmware's per-block loop.
@@ -288,7 +289,7 @@ fn disconnected_plant_fails_the_loop_check() {
 
 /// The loop-open bound: 3 drive cycles or 50 ms, whichever is longer, in DAC samples.
 fn loop_open_bound(freq_mhz: u32) -> u64 {
-    let three_cycles = 3 * crate::drive::dds::SAMPLE_RATE as u64 * 1000 / freq_mhz as u64;
+    let three_cycles = 3 * crate::icd::units::SAMPLE_RATE as u64 * 1000 / freq_mhz as u64;
     three_cycles.max(50 * SAMPLES_PER_MS as u64)
 }
 

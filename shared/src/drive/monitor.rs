@@ -45,8 +45,8 @@
 //! timed fault trips between its threshold and one block after it. Conditions on the response
 //! are evaluated when a measurement arrives (per lock-in window).
 
-use crate::drive::dds::SAMPLES_PER_MS;
 use crate::icd::sense::{ControlConfig, Fault, FaultCause, SensorFault};
+use crate::icd::units::SAMPLES_PER_MS;
 
 /// What the monitors are told once per block.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

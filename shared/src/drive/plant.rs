@@ -9,7 +9,8 @@
 //! [`PlantFault`] breaks the simulated rig on purpose, for the fault monitors' tests and the
 //! QEMU board: a disconnected shaker (no force at all) or an amplifier that clips its output.
 
-use crate::drive::dds::{DAC_MID, SAMPLE_RATE};
+use crate::drive::dds::DAC_MID;
+use crate::icd::units::SAMPLE_RATE;
 
 /// Parameters of the simulated shaker + plate.
 #[derive(Debug, Clone, Copy, PartialEq)]

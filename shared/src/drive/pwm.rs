@@ -26,8 +26,9 @@
 //!   of 2.2 kΩ / 10 nF (corner 7.23 kHz), keeps the top drive frequency within 0.96 dB and
 //!   46° of lag and puts the worst-case carrier ripple 48 dB below full scale.
 
-use crate::drive::dds::{DAC_MAX, DAC_MID, SAMPLE_RATE};
+use crate::drive::dds::{DAC_MAX, DAC_MID};
 use crate::icd::plan::DeviceLimits;
+use crate::icd::units::SAMPLE_RATE;
 
 /// Timer kernel clock of the board's PWM timer (TIM3 on APB1, SYSCLK 80 MHz, APB1 ÷ 1).
 pub const TIMER_CLOCK_HZ: u32 = 80_000_000;

@@ -25,11 +25,12 @@
 
 use core::ops::Deref;
 
-use crate::drive::dds::{self, DAC_MID, Dds, SAMPLE_RATE, SAMPLES_PER_MS};
+use crate::drive::dds::{self, DAC_MID, Dds};
 use crate::drive::timeline::PhaseMark;
 use crate::icd::link::{DriveError, DriveState, StatusReport};
 use crate::icd::plan::{DeviceLimits, Level, Plan, Step};
 use crate::icd::sense::Fault;
+use crate::icd::units::{SAMPLE_RATE, SAMPLES_PER_MS};
 
 /// Samples per block: one DMA half-buffer on the board, one tick of the QEMU pacer (5 ms).
 pub const BLOCK_LEN: usize = 250;

@@ -15,8 +15,8 @@
 //!
 //! Everything is f32 or integer (IEEE single is identical on the host and the M4F's FPU).
 
-use crate::drive::dds::SAMPLE_RATE;
 use crate::drive::lockin::LSB_16G_MPS2;
+use crate::icd::units::SAMPLE_RATE;
 
 /// How the simulated sensor behaves.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -90,7 +90,7 @@ pub const PERIOD_WINDOW: u64 = 8192;
 
 /// The nominal period in DAC samples per sensor sample, Q16.16, of an output data rate in mHz.
 pub const fn nominal_period_q16(odr_mhz: u32) -> u32 {
-    let num = (crate::drive::dds::SAMPLE_RATE as u64 * 1000) << TIME_FRAC_BITS;
+    let num = (crate::icd::units::SAMPLE_RATE as u64 * 1000) << TIME_FRAC_BITS;
     if odr_mhz == 0 { 0 } else { ((num + odr_mhz as u64 / 2) / odr_mhz as u64) as u32 }
 }
 

@@ -690,7 +690,7 @@ impl StatusReport {
         reset_cause: ResetCause::PowerOn,
         clock: 0,
         elapsed_samples: 0,
-        sample_rate: crate::drive::dds::SAMPLE_RATE,
+        sample_rate: crate::icd::units::SAMPLE_RATE,
         freq_mhz: 0,
         amplitude_q15: 0,
         underruns: 0,

@@ -16,7 +16,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::drive::dds::SAMPLES_PER_MS;
+use super::units::SAMPLES_PER_MS;
 pub use crate::icd::sense::Level;
 
 /// Most steps a plan may hold (it is uploaded in chunks, see [`crate::icd::store`]).

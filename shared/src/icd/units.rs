@@ -284,10 +284,21 @@ impl MilliDeg {
 
 // ---- Time on the sample clock ----
 
+/// Samples per second of the drive stream: the sample clock every plan duration and every
+/// controller time is counted on (50 kS/s: TIM6 divides 80 MHz by exactly 1600).
+pub const SAMPLE_RATE: u32 = 50_000;
+/// Samples per millisecond (plans are written in ms; the runner counts samples).
+pub const SAMPLES_PER_MS: u32 = SAMPLE_RATE / 1000;
+
 /// `samples` of the drive's sample clock at `sample_rate` (Hz) in milliseconds (a rate of 0, a
 /// status never filled in, counts as 1 Hz rather than dividing by zero).
 pub fn ms_from_samples(samples: u64, sample_rate: u32) -> f64 {
     samples as f64 * 1000.0 / f64::from(sample_rate.max(1))
+}
+
+/// A duration in milliseconds (plans are written in ms) in seconds.
+pub fn s_from_ms(ms: u64) -> f64 {
+    ms as f64 / 1000.0
 }
 
 /// `samples` at `sample_rate` (Hz) in seconds (a rate of 0 counts as 1 Hz).

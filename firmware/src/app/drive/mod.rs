@@ -654,5 +654,5 @@ impl RefillCost {
 
 /// Block period: [`BLOCK_LEN`] samples at the sample rate.
 pub const BLOCK_PERIOD: Duration = Duration::from_micros(
-    BLOCK_LEN as u64 * 1_000_000 / chladni_shared::drive::dds::SAMPLE_RATE as u64,
+    BLOCK_LEN as u64 * 1_000_000 / chladni_shared::icd::units::SAMPLE_RATE as u64,
 );

@@ -8,7 +8,6 @@
 
 use core::ops::Deref;
 
-use chladni_shared::drive::dds::SAMPLES_PER_MS;
 use chladni_shared::drive::runner::Runner;
 use chladni_shared::icd::link::{
     DriveError, MAX_SWEEP_POINTS, RunNumber, SWEEP_PAGE, StatusReport, Sweep, SweepError,
@@ -16,6 +15,7 @@ use chladni_shared::icd::link::{
 };
 use chladni_shared::icd::plan::{Level, Plan};
 use chladni_shared::icd::sense::Measurement;
+use chladni_shared::icd::units::SAMPLES_PER_MS;
 
 /// A sweep whose shape was checked ([`Sweep::check`]): the only kind the drive accepts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -7,8 +7,8 @@
 //! catches up with the writer (a refill missed its half period) the ring reports an overrun
 //! and resets itself: counted as an underrun.
 
-use chladni_shared::drive::dds::SAMPLE_RATE;
 use chladni_shared::drive::runner::BLOCK_LEN;
+use chladni_shared::icd::units::SAMPLE_RATE;
 use embassy_stm32::dac::{self, DacChannel};
 use embassy_stm32::dma::{self, TransferOptions, WritableRingBuffer};
 use embassy_stm32::mode::Blocking;

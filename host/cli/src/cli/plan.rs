@@ -1,5 +1,6 @@
 //! `chladni plan PART --plate P` and `chladni simulate PART --plate P --plan PLAN`.
 
+use chladni_core::motion::body::PLANNER_BODY_SAMPLES;
 use chladni_media::shapes::plan::PartReport;
 use chladni_media::shapes::{self, SimulateReport, TraceLine};
 use std::path::{Path, PathBuf};
@@ -353,7 +354,7 @@ const NO_ZONE: (Option<CaptureZone>, (usize, usize)) = (None, (0, 0));
 /// it, drop points).
 fn capture_zone(parts: &[Part], plate: &PlateModel) -> (Option<CaptureZone>, (usize, usize)) {
     let Some(zone) = planner::capture::zone_for_parts(plate, parts) else { return NO_ZONE };
-    let body = Body::with_samples(&parts[0], 160);
+    let body = Body::with_samples(&parts[0], PLANNER_BODY_SAMPLES);
     let drops = planner::whole::drops(&body, plate);
     let n = drops.iter().filter(|(p, _)| zone.contains(plate, *p)).count();
     if n > 0 {

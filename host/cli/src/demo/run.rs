@@ -11,12 +11,12 @@
 use std::ops::ControlFlow;
 use std::time::{Duration, Instant};
 
-use chladni_shared::drive::dds::SAMPLES_PER_MS;
 use chladni_shared::drive::runner::STOP_RAMP_MS;
 use chladni_shared::icd::link::{DriveState, RunNumber, StatusReport, Telemetry};
 use chladni_shared::icd::plan::Plan;
 use chladni_shared::icd::sense::Fault;
 use chladni_shared::icd::store::PlanRef;
+use chladni_shared::icd::units::SAMPLES_PER_MS;
 use chladni_shared::icd::units::ms_from_samples;
 use serde::Serialize;
 

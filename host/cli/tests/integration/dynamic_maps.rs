@@ -79,7 +79,7 @@ fn dynamic_maps_find_a_plan_where_the_static_plan_fails_the_dynamic_check() {
     // The static maps' shortest plan: mode 1, then mode 2; the part turns while crossing
     // mode 2's node and some transition is not confirmed.
     assert_eq!(path.iter().map(|s| s.0).collect::<Vec<_>>(), [0, 1]);
-    let body = Body::with_samples(&p, 160);
+    let body = Body::with_samples(&p, chladni_core::motion::body::PLANNER_BODY_SAMPLES);
     let rejected = path[0].1.iter().any(|&u| {
         let v = statics.maps[1].apply(u, st.margin_deg).unwrap();
         !planner::confirm(&body, &plate.modes[1], &plate, u, v, statics.period)

@@ -38,7 +38,7 @@ fn the_cantilever_rectangle_plan_holds_from_the_far_side_only_and_the_failure_na
     let syn = planner::plan(&rect, &plate, &base).unwrap();
     assert_eq!(syn.steps.iter().map(|s| s.mode).collect::<Vec<_>>(), [1]);
     assert!(syn.whole_plate.is_none());
-    let body = Body::with_samples(&rect, 160);
+    let body = Body::with_samples(&rect, chladni_core::motion::body::PLANNER_BODY_SAMPLES);
     let (drops, failed) = check(&body, &plate, &syn);
     assert_eq!(drops, DROP_GRID[0] * DROP_GRID[1] * DROP_TURNS);
     assert!(!failed.is_empty());
@@ -103,7 +103,10 @@ fn a_plan_for_both_faces_is_checked_on_every_face_and_a_face_that_fails_is_named
     // of its drops fails, and none of the face up's.
     let mut wrong = syn.clone();
     wrong.parts[1].final_orientation_deg += 90.0;
-    let bodies: Vec<Body> = faces.iter().map(|p| Body::with_samples(p, 160)).collect();
+    let bodies: Vec<Body> = faces
+        .iter()
+        .map(|p| Body::with_samples(p, chladni_core::motion::body::PLANNER_BODY_SAMPLES))
+        .collect();
     let (per, together) = check_parts(&bodies, OnPlate::Alone, &plate, &wrong).unwrap();
     assert!(!together);
     assert_eq!((per[0].drops, per[0].failed.len()), (one, 0));

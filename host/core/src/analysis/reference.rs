@@ -5,6 +5,7 @@
 //! sampling (0.5°) over the full turn and bisection. Slow and simple; used by the tests to
 //! check the fixed-point code (agreement within 0.05° on stable orientations).
 
+use crate::model::angle::wrap_deg;
 pub use crate::model::field::Law;
 use crate::model::part::Part;
 
@@ -178,7 +179,7 @@ impl Reference {
                         hi = mid;
                     }
                 }
-                out.push(RefRest { deg: (0.5 * (lo + hi)).rem_euclid(360.0), stable: a > 0.0 });
+                out.push(RefRest { deg: wrap_deg(0.5 * (lo + hi)), stable: a > 0.0 });
             }
         }
         out.sort_by(|p, q| p.deg.total_cmp(&q.deg));

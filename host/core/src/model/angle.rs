@@ -1,6 +1,11 @@
 //! Angles on a circle: the one home for circular distance and the signed wrap (degrees or
 //! any unit; `p` is the circumference: 360°, or a part's symmetry period).
 
+/// An angle in degrees wrapped to [0°, 360°).
+pub fn wrap_deg(deg: f64) -> f64 {
+    deg.rem_euclid(360.0)
+}
+
 /// Circular distance between `a` and `b` on a circle of circumference `p` (in [0, p/2]).
 pub fn cdist(a: f64, b: f64, p: f64) -> f64 {
     let d = (a - b).rem_euclid(p);

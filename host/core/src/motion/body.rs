@@ -8,6 +8,10 @@ use crate::model::part::Part;
 
 /// Target number of interior sample points for numerical force integration.
 pub const BODY_SAMPLES: usize = 400;
+/// The planner's coarser resolution: its many short runs (step maps, settle times, tracked
+/// feed poses) take 160 samples, and its tests compare against runs made the same way.
+/// Grid modes integrate along the outline and use neither.
+pub const PLANNER_BODY_SAMPLES: usize = 160;
 
 pub use crate::model::pose::Pose;
 

@@ -7,6 +7,7 @@ use crate::motion::body::{Body, Pose};
 use crate::motion::contact::Rim;
 use crate::motion::field::FieldModel;
 use crate::motion::integrate::{SimParams, run};
+use chladni_shared::icd::units::s_from_ms;
 
 /// One step of a plan to simulate: the mode, how long, and the drive amplitude relative to
 /// the mode's own (speed scales with the square of the amplitude, K ∝ e·A²·ω: docs/motion.md).
@@ -24,7 +25,7 @@ impl SimStep {
     /// A plan step as the simulator runs it: mode `mode` for `duration_ms`, driven at
     /// `amplitude_ratio` times the mode's own amplitude.
     pub fn new(mode: usize, duration_ms: u32, amplitude_ratio: f64) -> Self {
-        SimStep { mode, duration_s: duration_ms as f64 / 1000.0, amplitude_ratio }
+        SimStep { mode, duration_s: s_from_ms(u64::from(duration_ms)), amplitude_ratio }
     }
 }
 

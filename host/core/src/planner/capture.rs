@@ -35,6 +35,7 @@
 //! It is found from the far edge in, each mode leaving the scan at its first capture, and the
 //! `plan` warning offers the plate past it as the `--feed` box.
 
+use chladni_shared::icd::units::s_from_ms;
 use std::collections::HashMap;
 use std::hash::{Hash, Hasher};
 use std::sync::{Mutex, OnceLock};
@@ -63,7 +64,7 @@ const ZONE_SAMPLES: usize = 40;
 
 /// The device's limit on a plan (s): the time a mode has at most to move a part.
 pub fn device_limit_s() -> f64 {
-    DeviceLimits::DEFAULT.max_total_ms as f64 / 1000.0
+    s_from_ms(DeviceLimits::DEFAULT.max_total_ms)
 }
 
 /// The band along one clamped rim where no mode moves a part off it.

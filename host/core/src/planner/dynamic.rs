@@ -24,6 +24,8 @@
 //! [`MapCache::global`] serves [`super::Problem::new`]; the settle speed, frequency, amplitude
 //! and ramp do not change where a part comes to rest and are not part of the key.
 
+use crate::model::angle::wrap_deg;
+use crate::motion::body::PLANNER_BODY_SAMPLES;
 use std::collections::HashMap;
 use std::hash::{DefaultHasher, Hash, Hasher};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -95,10 +97,10 @@ impl Outcomes {
         if n == 0 {
             return None;
         }
-        let off = (theta - self.first).rem_euclid(360.0);
+        let off = wrap_deg(theta - self.first);
         let i = ((off / self.step).floor() as usize).min(n - 1);
         let j = (i + 1) % n;
-        let past = |b: f64| off >= (b - self.first).rem_euclid(360.0);
+        let past = |b: f64| off >= wrap_deg(b - self.first);
         let mut out = self
             .labels
             .iter()
@@ -274,7 +276,7 @@ pub fn dynamic_line_map(
     if statics.neutral {
         return Ok(statics);
     }
-    let body = Body::with_samples(part, 160);
+    let body = Body::with_samples(part, PLANNER_BODY_SAMPLES);
     let field = FieldModel::new(mode, plate);
     let p = SimParams::to_rest(&body, mode, &field, plate);
     let n = set.orientations.max(4);
@@ -353,7 +355,7 @@ fn change_points(
                             let mid = 0.5 * (lo + hi);
                             if same(a, end(pt, mid)) { lo = mid } else { hi = mid }
                         }
-                        (0.5 * (lo + hi)).rem_euclid(360.0)
+                        wrap_deg(0.5 * (lo + hi))
                     })
                 })
                 .collect()

@@ -30,6 +30,7 @@
 //! checks every part against its own prediction. A search that brings one part there but not
 //! another fails naming the part left apart ([`PlanFailure::PartsApart`]).
 
+use crate::motion::body::PLANNER_BODY_SAMPLES;
 use std::collections::{HashMap, HashSet};
 
 use crate::progress::Progress;
@@ -602,9 +603,10 @@ pub fn plan_parts(
 ) -> Result<Synthesis, PlanFailure> {
     let s = opt.feed_search;
     let periods: Vec<f64> = parts.iter().map(|p| plan_period(p, plate)).collect();
-    // 160 body samples, as `plan_with`'s settle times (grid nodes integrate along the outline
+    // The planner's body resolution, as `plan_with`'s settle times (grid nodes integrate along the outline
     // and do not use them).
-    let bodies: Vec<Body> = parts.iter().map(|p| Body::with_samples(p, 160)).collect();
+    let bodies: Vec<Body> =
+        parts.iter().map(|p| Body::with_samples(p, PLANNER_BODY_SAMPLES)).collect();
     let tag = |f: &dyn Fn(&Body) -> Vec<Pose>| -> Vec<Tagged> {
         (bodies.iter().enumerate())
             .flat_map(|(i, b)| f(b).into_iter().map(move |q| (i, q)))
@@ -832,7 +834,11 @@ mod tests {
     pub(super) fn tracker(plate: &PlateModel) -> Tracker<'_> {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
         let part = Part::load(&path.join("../../examples/parts/triangle.json")).unwrap();
-        Tracker::new(vec![Body::with_samples(&part, 160)], plate, vec![360.0])
+        Tracker::new(
+            vec![Body::with_samples(&part, crate::motion::body::PLANNER_BODY_SAMPLES)],
+            plate,
+            vec![360.0],
+        )
     }
 
     fn outcome(x: f64) -> Outcome {

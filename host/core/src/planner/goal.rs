@@ -8,6 +8,7 @@
 //! [`super::plan_with`] always did), and names the failures: an unreachable goal with the
 //! orientations that are reachable, a position no plan fixes, parts kept apart.
 
+use crate::motion::body::PLANNER_BODY_SAMPLES;
 use std::collections::HashMap;
 
 use crate::model::part::Part;
@@ -183,7 +184,8 @@ pub fn plan_parts_with(
     problems: &[&Problem],
     goals: &[Option<f64>],
 ) -> Result<Synthesis, PlanFailure> {
-    let bodies: Vec<Body> = parts.iter().map(|p| Body::with_samples(p, 160)).collect();
+    let bodies: Vec<Body> =
+        parts.iter().map(|p| Body::with_samples(p, PLANNER_BODY_SAMPLES)).collect();
     let mut durations = Durations { bodies: &bodies, plate, problems, opt, memo: HashMap::new() };
     let mut forbidden: Vec<Vec<(f64, usize)>> = vec![Vec::new(); parts.len()];
     // Search, then check every straight-node transition of the plan dynamically (approaching

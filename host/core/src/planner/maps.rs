@@ -2,6 +2,7 @@
 //! the static straight-node map ([`line_map`]) and the simulated map of curved and grid
 //! nodes ([`sampled_map`]); dynamic straight-node maps are [`super::dynamic`].
 
+use crate::model::angle::wrap_deg;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use rayon::prelude::*;
@@ -105,7 +106,7 @@ impl StepMap {
     /// images, see [`Self::apply_all`]) gives `Err(0.0)`.
     pub fn apply(&self, theta: f64, margin: f64) -> Result<f64, f64> {
         if self.neutral {
-            return Ok(theta.rem_euclid(360.0));
+            return Ok(wrap_deg(theta));
         }
         self.near_boundary(theta, margin)?;
         if self.dynamic.is_some() || self.sampled.is_some() {
@@ -123,13 +124,8 @@ impl StepMap {
         if b.is_empty() {
             return Ok(self.stable.first().copied().unwrap_or(theta));
         }
-        let lo = b
-            .iter()
-            .rev()
-            .find(|&&x| x <= theta.rem_euclid(360.0))
-            .copied()
-            .unwrap_or(b[b.len() - 1]);
-        let width = |x: f64| (x - lo).rem_euclid(360.0);
+        let lo = b.iter().rev().find(|&&x| x <= wrap_deg(theta)).copied().unwrap_or(b[b.len() - 1]);
+        let width = |x: f64| wrap_deg(x - lo);
         let next = b.iter().map(|&x| width(x)).filter(|&w| w > 0.0).fold(360.0, f64::min);
         Ok(self
             .stable
@@ -196,7 +192,7 @@ pub fn line_map(part: &Part, mode: &Mode, backend: Backend) -> Result<StepMap, M
     let Node::Line { angle_deg, .. } = mode.node else {
         return Err(MapError::NotALine { mode: mode.name.clone() });
     };
-    let to_plate = |d: f64| (d + angle_deg - 90.0).rem_euclid(360.0);
+    let to_plate = |d: f64| wrap_deg(d + angle_deg - 90.0);
     let (mut stable, mut boundaries, neutral) = (Vec::new(), Vec::new(), false);
     match backend {
         Backend::Fixed => {
@@ -383,7 +379,7 @@ fn combine(
     for i in 0..n {
         let j = (i + 1) % n;
         if combined[i].is_none() || combined[i] != combined[j] {
-            boundaries.push((thetas[i] + 180.0 / n as f64).rem_euclid(360.0));
+            boundaries.push(wrap_deg(thetas[i] + 180.0 / n as f64));
         }
     }
     let sampled = thetas

@@ -25,6 +25,7 @@ use super::maps::{
 use super::options::PlanOptions;
 use super::symmetry::body_symmetry_order;
 use crate::model::angle::cdist;
+use crate::model::angle::wrap_deg;
 use crate::model::grid::Grid;
 use crate::model::plate::{Mode, Node, PlateModel};
 use crate::motion::field::grid_eval;
@@ -292,7 +293,7 @@ pub fn windowed_spread(
         }
         if combined[k].is_none() || combined[k] != combined[next] {
             let b = thetas[idx[k]] + 180.0 / n as f64;
-            found.extend((0..m).map(|t| (b + t as f64 * 360.0 / m as f64).rem_euclid(360.0)));
+            found.extend((0..m).map(|t| wrap_deg(b + t as f64 * 360.0 / m as f64)));
         }
     }
     boundary_spread(base, &found)
@@ -426,7 +427,7 @@ mod tests {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../examples/parts/triangle.json");
         let part = crate::model::part::Part::load(&path).unwrap();
-        let body = Body::with_samples(&part, 160);
+        let body = Body::with_samples(&part, crate::motion::body::PLANNER_BODY_SAMPLES);
         let plate = line_grid_plate(&[30.0, 40.0]);
         let (n, period) = (36, 360.0);
         let a = sampled_map(&body, &plate.modes[0], &plate, n, period);

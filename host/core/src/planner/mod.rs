@@ -49,6 +49,7 @@
 
 use crate::model::part::Part;
 use crate::model::plate::{Node, PlateModel};
+use crate::motion::body::PLANNER_BODY_SAMPLES;
 use crate::motion::sim::Body;
 use crate::progress::Progress;
 
@@ -120,7 +121,7 @@ impl Problem {
         progress: &dyn Progress,
     ) -> Result<Problem, PlanFailure> {
         let period = plan_period(part, plate);
-        let body = Body::with_samples(part, 160);
+        let body = Body::with_samples(part, PLANNER_BODY_SAMPLES);
         let n = plate.modes.len();
         progress.stage(&format!("{}: step maps", part.name), n as u64);
         let maps = plate
@@ -251,7 +252,7 @@ fn line_map_of(
     opt: &PlanOptions,
     kind: MapKind,
 ) -> Result<StepMap, MapError> {
-    let body = Body::with_samples(part, 160);
+    let body = Body::with_samples(part, PLANNER_BODY_SAMPLES);
     if rim_line(body.radius, mode, plate) {
         return Ok(sampled_map(&body, mode, plate, opt.sim_starts, period));
     }

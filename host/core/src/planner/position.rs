@@ -16,12 +16,34 @@
 
 use crate::model::part::Part;
 use crate::model::plate::{Node, PlateModel};
+use crate::motion::body::PLANNER_BODY_SAMPLES;
 use crate::motion::sim::{self, Body, FieldModel, Pose};
 
 use super::{Synthesis, balance_offset};
 
 /// A position is fixed when every place the centroid can be lies within this (mm) across.
 pub const POSITION_TOL_MM: f64 = 1.0;
+/// Tracked final poses (simulated runs, with the integrator's scatter) fix the position when
+/// every one lies within this (mm) of their mean: a radius, where [`POSITION_TOL_MM`] bounds
+/// the exact region's diameter.
+pub const TRACKED_POSITION_TOL_MM: f64 = 2.0;
+
+/// A fixed position as plans report it: the mean of `points`, rounded to 1 µm.
+fn reported_mean(points: impl ExactSizeIterator<Item = [f64; 2]> + Clone) -> [f64; 2] {
+    let n = points.len().max(1) as f64;
+    let sum = points.fold([0.0, 0.0], |s, p| [s[0] + p[0], s[1] + p[1]]);
+    [(sum[0] / n * 1000.0).round() / 1000.0, (sum[1] / n * 1000.0).round() / 1000.0]
+}
+
+/// The position tracked final poses fix ([`TRACKED_POSITION_TOL_MM`]), rounded to 1 µm, or
+/// `None` when they spread wider.
+pub fn tracked_position(poses: &[Pose]) -> Option<[f64; 2]> {
+    let n = poses.len().max(1) as f64;
+    let m =
+        [poses.iter().map(|q| q.x).sum::<f64>() / n, poses.iter().map(|q| q.y).sum::<f64>() / n];
+    let fixed = poses.iter().all(|q| (q.x - m[0]).hypot(q.y - m[1]) <= TRACKED_POSITION_TOL_MM);
+    fixed.then(|| reported_mean(poses.iter().map(|q| [q.x, q.y])))
+}
 
 /// The points whose convex hull holds every place the centroid can be after `path` (mode,
 /// predicted orientations after the step, deg), starting anywhere on the plate.
@@ -93,9 +115,7 @@ pub fn fixed_position(
     if pts.is_empty() || diameter(&pts) >= POSITION_TOL_MM {
         return None;
     }
-    let n = pts.len() as f64;
-    let m = [pts.iter().map(|p| p[0]).sum::<f64>() / n, pts.iter().map(|p| p[1]).sum::<f64>() / n];
-    Some([(m[0] * 1000.0).round() / 1000.0, (m[1] * 1000.0).round() / 1000.0])
+    Some(reported_mean(pts.iter().copied()))
 }
 
 /// Runs a plan (as `chladni simulate` does, fixed durations) from the inset plate corners and
@@ -107,7 +127,7 @@ pub fn simulated_position_error(
     syn: &Synthesis,
     predicted: [f64; 2],
 ) -> f64 {
-    let body = Body::with_samples(part, 160);
+    let body = Body::with_samples(part, PLANNER_BODY_SAMPLES);
     let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
     let steps = syn.sim_steps();
     let [w, h] = plate.size_mm;

@@ -15,6 +15,8 @@
 //! its drops no plan holds from, where they lie and how they end, with a feed region that
 //! avoids them.
 
+use crate::model::angle::wrap_deg;
+use crate::motion::body::PLANNER_BODY_SAMPLES;
 use rayon::prelude::*;
 
 use super::maps::{on_plate_edge, sampled_map_from};
@@ -200,8 +202,8 @@ pub fn drops(body: &Body, plate: &PlateModel) -> Vec<([f64; 2], f64)> {
             let x = (w * (i as f64 + 0.5) / nx as f64).clamp(r, w - r);
             let y = (h * (j as f64 + 0.5) / ny as f64).clamp(r, h - r);
             for k in 0..DROP_TURNS {
-                let th = (17.0 + 53.0 * (i * ny + j) as f64 + 360.0 * k as f64 / DROP_TURNS as f64)
-                    .rem_euclid(360.0);
+                let turn = 360.0 * k as f64 / DROP_TURNS as f64;
+                let th = wrap_deg(17.0 + 53.0 * (i * ny + j) as f64 + turn);
                 out.push(([x, y], th));
             }
         }
@@ -358,7 +360,8 @@ pub(super) fn refined(
     if opt.refine_rounds == 0 || opt.feed.is_some() || !(0..plate.modes.len()).any(grid) {
         return Ok(syn);
     }
-    let bodies: Vec<Body> = parts.iter().map(|p| Body::with_samples(p, 160)).collect();
+    let bodies: Vec<Body> =
+        parts.iter().map(|p| Body::with_samples(p, PLANNER_BODY_SAMPLES)).collect();
     let mut extra: Vec<Vec<Vec<[f64; 2]>>> = vec![vec![Vec::new(); plate.modes.len()]; parts.len()];
     let mut round = 0;
     loop {

@@ -3,6 +3,7 @@
 //! the part before the step in white and after it in dark), and motion traces like Figs. 8d
 //! and 9 (centroid paths with the part drawn along them, and θ(t)).
 
+use chladni_core::model::angle::wrap_deg;
 use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
@@ -365,7 +366,7 @@ fn unwrapped_deg(tr: &Trace) -> Vec<(f64, f64)> {
         };
         out.push((t, d));
     }
-    let shift = out.last().map_or(0.0, |&(_, d)| d.rem_euclid(360.0) - d);
+    let shift = out.last().map_or(0.0, |&(_, d)| wrap_deg(d) - d);
     out.iter_mut().for_each(|p| p.1 += shift);
     out
 }

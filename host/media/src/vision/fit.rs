@@ -400,7 +400,7 @@ mod tests {
             .max_by(|a, b| a.score.total_cmp(&b.score))
             .unwrap();
         let d = (best.pose.c[0] - truth.c[0]).hypot(best.pose.c[1] - truth.c[1]);
-        let a = (best.pose.theta - truth.theta).to_degrees().rem_euclid(360.0);
+        let a = chladni_core::model::angle::wrap_deg((best.pose.theta - truth.theta).to_degrees());
         assert!(best.score > 0.9 && d < 0.05 && a.min(360.0 - a) < 0.1, "{best:?}");
     }
 }

@@ -28,6 +28,7 @@
 //! (DIMENSION, TEXT, MTEXT, HATCH, LEADER, POINT, …) is skipped and named with its count in a
 //! note.
 
+use crate::model::angle::wrap_deg;
 use std::f64::consts::TAU;
 use std::path::Path;
 
@@ -586,7 +587,7 @@ impl Reader<'_> {
             EntityType::Arc(a) => {
                 let mirror = ocs_mirror(&a.normal).ok_or_else(|| off_plane("ARC"))?;
                 let start = a.start_angle.to_radians();
-                let mut sweep = (a.end_angle - a.start_angle).rem_euclid(360.0).to_radians();
+                let mut sweep = wrap_deg(a.end_angle - a.start_angle).to_radians();
                 if sweep == 0.0 {
                     sweep = TAU;
                 }

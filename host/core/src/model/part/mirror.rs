@@ -14,6 +14,7 @@
 //! is its own mirror image turned by some angle: its flipped face rests exactly as the face
 //! up, turned, and needs no plan of its own ([`flip_turn_deg`]).
 
+use crate::model::angle::wrap_deg;
 use std::collections::HashMap;
 
 use super::Part;
@@ -91,7 +92,7 @@ pub fn flip_turn_deg(part: &Part) -> Option<f64> {
             mirror.iter().all(|p| grid.has([co * p[0] - s * p[1], s * p[0] + co * p[1]]))
         })
         // φ turns the mirror onto the part, so the mirror is the part turned by −φ.
-        .map(|phi| (-phi.to_degrees()).rem_euclid(360.0))
+        .map(|phi| wrap_deg(-phi.to_degrees()))
         .map(|d| if 360.0 - d < 1e-6 || d < 1e-9 { 0.0 } else { d })
         .collect();
     turns.sort_by(f64::total_cmp);

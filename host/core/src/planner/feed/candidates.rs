@@ -7,9 +7,10 @@ use super::{
     FeedCheck, FeedRegion, Node, Tagged, Tracker, cdist, of_part, orientations, part_orientations,
     spreads,
 };
+use crate::planner::position::tracked_position;
 use crate::progress::Progress;
+use chladni_shared::icd::units::s_from_ms;
 
-use crate::motion::sim::Pose;
 use crate::planner::{PartPlan, PlanFailure, PlanOptions, PlannedStep, Settle, Synthesis};
 use crate::planner::{deadline, margin, slowest_settled, step_duration_ms};
 
@@ -221,14 +222,14 @@ fn check(
                 name: name.to_string(),
                 period_deg: periods[i],
                 final_orientation_deg: thetas[i],
-                final_position_mm: common_position(&of_part(&d.poses, i)),
+                final_position_mm: tracked_position(&of_part(&d.poses, i)),
                 after: d.afters[i].clone(),
                 ..PartPlan::default()
             })
             .collect()
     };
     Ok(Synthesis {
-        final_position_mm: common_position(&of_part(&d.poses, 0)),
+        final_position_mm: tracked_position(&of_part(&d.poses, 0)),
         steps: d.steps,
         final_orientation_deg: thetas[0],
         period_deg: periods[0],
@@ -262,7 +263,7 @@ fn checked_error(
     for batch in starts.chunks(64) {
         let mut poses = batch.to_vec();
         for s in steps {
-            poses = t.after(s.mode, s.duration_ms as f64 / 1000.0, &poses);
+            poses = t.after(s.mode, s_from_ms(u64::from(s.duration_ms)), &poses);
         }
         for (&(i, q), &start) in poses.iter().zip(batch) {
             let err = cdist(q.theta.to_degrees(), thetas[i], t.sim.periods[i]);
@@ -280,20 +281,11 @@ fn checked_error(
     (worst.0, worst.1, off)
 }
 
-/// The mean centroid when every final pose lies within 2 mm of it (the nodes fix the
-/// position), else `None`.
-fn common_position(poses: &[Pose]) -> Option<[f64; 2]> {
-    let n = poses.len().max(1) as f64;
-    let m =
-        [poses.iter().map(|q| q.x).sum::<f64>() / n, poses.iter().map(|q| q.y).sum::<f64>() / n];
-    let fixed = poses.iter().all(|q| (q.x - m[0]).hypot(q.y - m[1]) <= 2.0);
-    fixed.then(|| [(m[0] * 1000.0).round() / 1000.0, (m[1] * 1000.0).round() / 1000.0])
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::model::plate::PlateModel;
+    use crate::motion::sim::Pose;
     use crate::planner::feed::{FeedSearch, interleaved_starts, tests::tracker, tracked_starts};
 
     /// The exhaustive confirmation: every candidate tracked, then checked in order of (total

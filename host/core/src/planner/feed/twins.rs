@@ -227,7 +227,11 @@ mod tests {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
         let plate = PlateModel::load(&path.join("../../examples/plates/four-lines.toml")).unwrap();
         let part = Part::load(&path.join("../../examples/parts/triangle.json")).unwrap();
-        let tracker = Tracker::new(vec![Body::with_samples(&part, 160)], &plate, vec![360.0]);
+        let tracker = Tracker::new(
+            vec![Body::with_samples(&part, crate::motion::body::PLANNER_BODY_SAMPLES)],
+            &plate,
+            vec![360.0],
+        );
         let mut s =
             Search { tracker, deadline: None, seen: HashSet::new(), tally: Tally::default() };
         let start = (0, Pose { x: 140.0, y: 100.0, theta: 0.5 });
@@ -254,7 +258,11 @@ mod tests {
             PlateModel::load(&path.join("../../examples/plates/hinged-rod-6-modes.toml")).unwrap();
         let part =
             Part::load(&path.join("../../examples/parts/ordinary/crank-lever.json")).unwrap();
-        let tracker = Tracker::new(vec![Body::with_samples(&part, 160)], &plate, vec![360.0]);
+        let tracker = Tracker::new(
+            vec![Body::with_samples(&part, crate::motion::body::PLANNER_BODY_SAMPLES)],
+            &plate,
+            vec![360.0],
+        );
         let mut s =
             Search { tracker, deadline: None, seen: HashSet::new(), tally: Tally::default() };
         let up = std::f64::consts::FRAC_PI_2;
