@@ -41,15 +41,23 @@ fn defect_1_a_second_client_is_told_busy_at_once_and_its_command_never_runs_late
     assert_eq!(second.status().expect("status from the second client").run, run);
     second.ping().expect("ping from the second client");
 
-    // The owner leaves (Release on drop); the refused drive never runs later.
+    // The owner leaves (Release on drop): the second client's drive is refused until the
+    // release arrives, and the refused drive never runs, before or after it.
     drop(first);
-    std::thread::sleep(Duration::from_millis(1500));
-    let status = second.status().unwrap();
-    assert_eq!((status.run, status.freq_mhz), (run, 100_000), "{status:?}");
-    // Now the second client may drive (ownership was released), and stop.
-    let mine = second
-        .drive(123_000, chladni_shared::icd::plan::Level::Drive(4_000))
-        .expect("drive after the owner left");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let mine = loop {
+        let status = second.status().unwrap();
+        assert_eq!((status.run, status.freq_mhz), (run, 100_000), "{status:?}");
+        match second.drive(123_000, chladni_shared::icd::plan::Level::Drive(4_000)) {
+            Ok(mine) => break mine,
+            Err(DeviceError::Refused(Refusal::Busy { .. })) if Instant::now() < deadline => {
+                std::thread::sleep(Duration::from_millis(20))
+            }
+            Err(e) => panic!("drive after the owner left: {e}"),
+        }
+    };
+    // No run number went to the refused drive in between.
+    assert_eq!(mine.0, run.0 + 1, "runs {run:?} then {mine:?}");
     poll_until(&mut second, Duration::from_secs(30), |s| s.run == mine && s.freq_mhz == 123_000);
     second.stop().expect("stop");
 }

@@ -36,7 +36,7 @@ pub const MAX_HEADERS: usize = 64;
 /// The most bytes of header names and values a request may carry.
 pub const MAX_HEADER_BYTES: usize = 8 * 1024;
 /// The cookie the login URL sets.
-pub const COOKIE: &str = "chladni_token";
+pub(crate) const COOKIE: &str = "chladni_token";
 
 /// Who may use the HTTP front end.
 #[derive(Debug, Clone, Default)]
@@ -145,7 +145,7 @@ fn check_host(access: &Access, headers: &HeaderMap) -> Result<String, ApiError> 
 }
 
 /// The name of a Host value: `[::1]:80` → `::1`, `cell.local:8080` → `cell.local`.
-pub fn host_name(host: &str) -> &str {
+pub(crate) fn host_name(host: &str) -> &str {
     if let Some(rest) = host.strip_prefix('[') {
         return rest.split(']').next().unwrap_or(rest);
     }
@@ -157,7 +157,7 @@ pub fn host_name(host: &str) -> &str {
 
 /// IP literals (a rebinding page reaches the server by a name, never by an address),
 /// `localhost` and its subdomains, and the names allowed.
-pub fn host_allowed(access: &Access, name: &str) -> bool {
+pub(crate) fn host_allowed(access: &Access, name: &str) -> bool {
     name.parse::<std::net::IpAddr>().is_ok()
         || name == "localhost"
         || name.ends_with(".localhost")

@@ -73,11 +73,11 @@ pub const MAX_BODY: usize = 4 * 1024;
 /// How long a request may take from its head to its answer (a run waits for the link).
 pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(15);
 /// How long a body may take to arrive.
-pub const BODY_TIMEOUT: Duration = Duration::from_secs(5);
+pub(crate) const BODY_TIMEOUT: Duration = Duration::from_secs(5);
 /// How long a connection may take to send a request's head, and stay idle between requests.
-pub const HEADER_TIMEOUT: Duration = Duration::from_secs(10);
+pub(crate) const HEADER_TIMEOUT: Duration = Duration::from_secs(10);
 /// The same for connections beyond the cap (served one request, no keep-alive).
-pub const OVERFLOW_HEADER_TIMEOUT: Duration = Duration::from_secs(2);
+pub(crate) const OVERFLOW_HEADER_TIMEOUT: Duration = Duration::from_secs(2);
 /// hyper's read buffer: headers beyond it get hyper's own bare 431 (the guard answers JSON
 /// for anything above [`guard::MAX_HEADER_BYTES`] and below this).
 const READ_BUFFER: usize = 64 * 1024;
@@ -166,7 +166,7 @@ pub fn router(cell: Cell, access: Access) -> Router {
 
 /// The same with the photo check's routes on `verifier` ([`super::verify`]): a photo is far
 /// larger than [`MAX_BODY`], so that route has its own limit inside the guard.
-pub fn router_with(cell: Cell, access: Access, verifier: Verifier) -> Router {
+pub(crate) fn router_with(cell: Cell, access: Access, verifier: Verifier) -> Router {
     routes(cell)
         .layer(axum::Extension(verifier.clone()))
         .layer(RequestBodyLimitLayer::new(MAX_BODY))
@@ -274,7 +274,7 @@ async fn method_not_allowed(method: Method, uri: Uri) -> ApiError {
 
 /// The body of `POST /api/run`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct RunRequest {
+pub(crate) struct RunRequest {
     /// The slot, as sent: [`Cell::run`] checks it against the store and names it.
     pub slot: u32,
     /// Repeat count instead of the plan's own (`None`: as stored).

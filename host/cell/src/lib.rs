@@ -28,7 +28,7 @@ pub mod owner;
 pub mod ratelog;
 pub mod verify;
 
-pub use owner::{Cell, CellError, CellState, CellStatus, OwnerEnd, POLL_PERIOD, RunStarted};
+pub use owner::{Cell, CellError, CellState, CellStatus, OwnerEnd, RunStarted};
 
 /// The line `chladni serve --json` prints when a front end listens: `{"<front end>":
 /// address}`, with `"login"` (the URL carrying the token) for an HTTP front end behind one.

@@ -24,9 +24,9 @@ use super::ratelog;
 /// The MBAP length field's largest value taken: the spec's is 254 (the unit id and a PDU of 253
 /// bytes), but a client that sends an FC16 of 124 registers (255) gets the spec's exception for
 /// the quantity, not a closed connection; beyond this the frame is broken.
-pub const MAX_LENGTH: u16 = 260;
+pub(crate) const MAX_LENGTH: u16 = 260;
 /// How long the rest of a frame may take once its first byte arrived.
-pub const FRAME_TIMEOUT: Duration = Duration::from_secs(2);
+pub(crate) const FRAME_TIMEOUT: Duration = Duration::from_secs(2);
 /// Function code 0x2B, MEI type 0x0E: read device identification (basic objects).
 const FC_MEI: u8 = 0x2B;
 const MEI_DEVICE_ID: u8 = 0x0E;
@@ -118,7 +118,7 @@ pub fn exception(function: u8, code: ExceptionCode) -> Vec<u8> {
 }
 
 /// Read device identification, basic objects: vendor, product, revision.
-pub fn device_id(code: u8, object: u8) -> Vec<u8> {
+pub(crate) fn device_id(code: u8, object: u8) -> Vec<u8> {
     let objects: [(u8, &str); 3] =
         [(0, "chladni"), (1, "chladni serve"), (2, env!("CARGO_PKG_VERSION"))];
     let chosen: Vec<(u8, &str)> = if code == 4 {

@@ -36,47 +36,47 @@ use super::verify::Verifier;
 use chladni_device::client::DeviceError;
 
 /// Holding register: the plan slot a run command runs (0..[`PLAN_SLOTS`]).
-pub const HOLDING_SLOT: u16 = 0;
+pub(crate) const HOLDING_SLOT: u16 = 0;
 /// Holding register: how many times a run command runs the plan (0: as stored in the plan).
-pub const HOLDING_REPEAT: u16 = 1;
+pub(crate) const HOLDING_REPEAT: u16 = 1;
 /// Holding register: the command, carried out when written ([`Command`]); reads back the last
 /// command carried out (0: none yet).
 pub const HOLDING_COMMAND: u16 = 2;
 /// Number of holding registers; addresses from here on are illegal.
-pub const HOLDING_COUNT: u16 = 3;
+pub(crate) const HOLDING_COUNT: u16 = 3;
 
 /// Input register addresses (FC04).
 pub mod input {
     /// The cell's state: 0 idle, 1 busy, 2 done, 3 error ([`crate::CellState::code`]).
-    pub const STATE: u16 = 0;
+    pub(crate) const STATE: u16 = 0;
     /// 1 when the cell holds a working session with the controller, else 0.
-    pub const LINK_UP: u16 = 1;
+    pub(crate) const LINK_UP: u16 = 1;
     /// The slot of the plan running, or of the one this cell ran last; [`super::NONE`] if none.
     pub const SLOT: u16 = 2;
     /// The plan step running (0-based); [`super::NONE`] outside a plan.
-    pub const STEP: u16 = 3;
+    pub(crate) const STEP: u16 = 3;
     /// The repetition of the plan running (0-based).
-    pub const REPETITION: u16 = 4;
+    pub(crate) const REPETITION: u16 = 4;
     /// Time left in the plan, ms, 32 bits: high word here, low word at `REMAINING_MS + 1`.
-    pub const REMAINING_MS: u16 = 5;
+    pub(crate) const REMAINING_MS: u16 = 5;
     /// Measured acceleration amplitude, 0.01 m/s² (0: no measurement; saturates at 65535).
-    pub const ACCEL: u16 = 7;
+    pub(crate) const ACCEL: u16 = 7;
     /// Drive frequency, 0.1 Hz.
-    pub const FREQ: u16 = 8;
+    pub(crate) const FREQ: u16 = 8;
     /// Fault code ([`super::fault_code`], [`super::FAULT_LINK_DOWN`]); 0: none.
     pub const FAULT: u16 = 9;
     /// The last write's result ([`super::CommandResult`]): 0 ok, else why it was refused.
-    pub const RESULT: u16 = 10;
+    pub(crate) const RESULT: u16 = 10;
     /// Status reads from the controller so far, low 16 bits: it counts while the link is up.
-    pub const HEARTBEAT: u16 = 11;
+    pub(crate) const HEARTBEAT: u16 = 11;
     /// The controller's run number for the last command this front end had accepted, 32 bits
     /// (high word first); 0: none yet.
-    pub const COMMAND_RUN: u16 = 12;
+    pub(crate) const COMMAND_RUN: u16 = 12;
     /// The run number of the drive command in effect on the controller, 32 bits (high word
     /// first).
-    pub const DEVICE_RUN: u16 = 14;
+    pub(crate) const DEVICE_RUN: u16 = 14;
     /// Number of the registers above, from the cell's status ([`super::input_registers`]).
-    pub const STATUS_COUNT: u16 = 16;
+    pub(crate) const STATUS_COUNT: u16 = 16;
     /// The last photo check's number, low 16 bits (0: none yet; [`crate::verify`]).
     pub const VERIFY_SEQ: u16 = 16;
     /// Its result: 0 none, 1 ok, 2 off, 3 no part found, 4 photo refused
@@ -99,7 +99,7 @@ pub const FAULT_LINK_DOWN: u16 = 100;
 /// Most registers one read may ask for (Modbus application protocol, FC03/FC04).
 const MAX_READ: u16 = 125;
 /// Most registers one FC16 write may carry.
-pub const MAX_WRITE: u16 = 123;
+pub(crate) const MAX_WRITE: u16 = 123;
 
 /// The commands of the command register.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -286,7 +286,7 @@ fn saturate(value: u32) -> u16 {
 
 /// The registers `[address, address + quantity)` of a table of `len`, checked the Modbus way:
 /// a quantity outside `1..=max` is a bad value, a range past the table a bad address.
-pub fn read_range<T: Copy>(
+pub(crate) fn read_range<T: Copy>(
     table: &[T],
     address: u16,
     quantity: u16,
@@ -378,7 +378,7 @@ impl Registers {
     }
 
     /// The whole input map: the status registers, then the last photo check's.
-    pub fn input_table(&self) -> Vec<u16> {
+    pub(crate) fn input_table(&self) -> Vec<u16> {
         let mut table = input_registers(&self.cell.status(), &self.holding()).to_vec();
         table.extend(self.verifier.registers());
         table

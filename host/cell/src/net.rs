@@ -20,7 +20,7 @@ use super::ratelog;
 /// Descriptors kept for the rest of the process (the controller link, stdio, the runtime).
 pub const RESERVED_FILES: u64 = 64;
 /// The longest back-off after a failed accept.
-pub const MAX_ACCEPT_BACKOFF: Duration = Duration::from_secs(1);
+pub(crate) const MAX_ACCEPT_BACKOFF: Duration = Duration::from_secs(1);
 
 /// The process's soft open-file limit, read at start (1024 if it cannot be read).
 pub fn open_file_limit() -> u64 {

@@ -54,7 +54,7 @@ pub const PLAN_REFRESH: Duration = Duration::from_secs(10);
 pub const MAX_QUEUED_RUNS: usize = 8;
 /// How long an accepted run may stay missing from the controller's report before the cell
 /// takes it as lost (it shows within one control block, a few ms).
-pub const RUN_REPORT_LIMIT: Duration = Duration::from_secs(2);
+pub(crate) const RUN_REPORT_LIMIT: Duration = Duration::from_secs(2);
 
 /// Why a cell command was not carried out.
 #[derive(Debug, thiserror::Error)]
@@ -253,7 +253,7 @@ impl Drop for Alive {
 
 /// The stored plans as the owner last read them from the controller.
 #[derive(Debug, Clone, Default)]
-pub struct PlanCache {
+pub(crate) struct PlanCache {
     /// The plans, by slot.
     pub plans: Vec<PlanSummary>,
     /// The controller's free plan flash, bytes.
@@ -663,7 +663,7 @@ impl Owner {
 }
 
 /// The cell's state and, for `error`, why (see the module doc for the rules).
-pub fn cell_state(
+pub(crate) fn cell_state(
     link_up: bool,
     down_reason: &str,
     report: Option<&StatusReport>,

@@ -41,11 +41,11 @@ use chladni_media::vision::verify::{self, Check, Outcome, Verification};
 /// The route a photo is posted to (and the last verification read from).
 pub const ROUTE: &str = "/api/verify";
 /// The last verification's figure.
-pub const PHOTO_ROUTE: &str = "/api/verify/photo.png";
+pub(crate) const PHOTO_ROUTE: &str = "/api/verify/photo.png";
 /// The largest photo taken: a 12 MP camera's JPEG is 3–8 MB, a 2 MP grey PNG about 2 MB.
 pub const MAX_PHOTO_BYTES: usize = 16 * 1024 * 1024;
 /// The content types a photo may be posted as.
-pub const PHOTO_TYPES: [&str; 2] = ["image/png", "image/jpeg"];
+pub(crate) const PHOTO_TYPES: [&str; 2] = ["image/png", "image/jpeg"];
 
 /// What a photo is judged by.
 #[derive(Debug, Clone)]
@@ -219,7 +219,7 @@ fn publishable(seq: u32, outcome: Result<(Verification, Bytes), (&str, String)>)
 
 /// Decodes, locates and judges one photo: the verification and its figure (PNG), or the
 /// refusal's name and message.
-pub fn examine(
+pub(crate) fn examine(
     setup: &Setup,
     photo: &[u8],
 ) -> Result<(Verification, Bytes), (&'static str, String)> {
@@ -273,7 +273,7 @@ pub fn check_photo_type(headers: &HeaderMap) -> Result<(), ApiError> {
 }
 
 /// The verification routes (behind the cell's guard, see [`super::http::router_with`]).
-pub fn routes(verifier: Verifier) -> Router {
+pub(crate) fn routes(verifier: Verifier) -> Router {
     Router::new()
         .route(ROUTE, get(last).post(post_photo))
         .route(PHOTO_ROUTE, get(figure))

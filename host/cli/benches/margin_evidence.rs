@@ -23,7 +23,7 @@ use std::time::Instant;
 
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::{Edge, Mode, Node, PlateModel};
-use chladni_core::motion::sim::Body;
+use chladni_core::motion::body::Body;
 use chladni_core::planner::margin::{self, MarginSource, boundary_spread};
 use chladni_core::planner::{self, Backend, DynSettings, MapCache, StepMap, sampled_map};
 

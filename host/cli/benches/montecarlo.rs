@@ -13,12 +13,13 @@ use std::path::Path;
 use chladni_core::model::part::Part;
 use chladni_core::model::plan_file::PlanFile;
 use chladni_core::model::plate::{DEFAULT_FRICTION, PlateModel};
-use chladni_core::motion::body::{Body, Pose};
+use chladni_core::model::pose::Pose;
+use chladni_core::motion::body::Body;
 use chladni_core::motion::contact::Rim;
 use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::integrate::{SimParams, run};
 use chladni_core::motion::montecarlo::random_pose;
-use chladni_core::motion::sim::plan_steps;
+use chladni_core::motion::steps::plan_steps;
 use chladni_core::rng::Rng;
 use criterion::{Criterion, criterion_group, criterion_main};
 

@@ -152,7 +152,7 @@ fn thread_cpu_s() -> f64 {
 /// field wrench (the per-step work: about two per Heun step).
 fn profile(spec: &str) {
     use chladni_core::model::{part::Part, plate::PlateModel};
-    use chladni_core::motion::sim::Body;
+    use chladni_core::motion::body::Body;
     use chladni_core::planner::{self, PlanOptions, Problem, plan_period, sampled_map};
     let (part_path, plate_path) =
         spec.split_once(',').unwrap_or((spec, "../../examples/plates/cantilever-6-modes.toml"));
@@ -218,13 +218,16 @@ fn profile(spec: &str) {
 fn run_profile(
     name: &str,
     k: usize,
-    body: &chladni_core::motion::sim::Body,
+    body: &chladni_core::motion::body::Body,
     mode: &chladni_core::model::plate::Mode,
     plate: &chladni_core::model::plate::PlateModel,
     n: usize,
     distinct: usize,
 ) {
-    use chladni_core::motion::sim::{self, FieldModel, Pose, Rim, SimParams};
+    use chladni_core::model::pose::Pose;
+    use chladni_core::motion::contact::Rim;
+    use chladni_core::motion::field::FieldModel;
+    use chladni_core::motion::integrate::SimParams;
     let field = FieldModel::new(mode, plate);
     let rim = Rim::of(plate);
     let p = SimParams::to_rest(body, mode, &field, plate);
@@ -235,7 +238,7 @@ fn run_profile(
         for i in 0..distinct {
             let th = (i as f64 + 0.3) * 360.0 / n as f64;
             let q = rim.project(body, Pose { x: s[0], y: s[1], theta: th.to_radians() });
-            let r = sim::run(body, &field, p, q);
+            let r = chladni_core::motion::integrate::run(body, &field, p, q);
             steps += r.steps;
             big = big.max(r.steps);
             capped += usize::from(r.steps >= 20_000);

@@ -19,7 +19,7 @@
 
 use std::time::Instant;
 
-use chladni_core::motion::body::Pose;
+use chladni_core::model::pose::Pose;
 use chladni_core::motion::bulk::{BulkReport, Drops, place};
 use chladni_core::motion::contact::Rim;
 use chladni_core::motion::many::{Group, simulate_plan_many};

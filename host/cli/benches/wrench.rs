@@ -3,8 +3,10 @@
 //! length on the free plate's first solver mode (`examples/plates/free-6-modes.toml`), over
 //! 64 poses spread across the plate (one iteration is all 64; the names give the edges).
 
+use chladni_core::model::pose::Pose;
 use chladni_core::model::{part::Part, plate::PlateModel};
-use chladni_core::motion::sim::{Body, FieldModel, Pose};
+use chladni_core::motion::body::Body;
+use chladni_core::motion::field::FieldModel;
 use criterion::{Criterion, criterion_group, criterion_main};
 
 /// Parts from the smallest outline to the longest (paths from the host crate's folder).

@@ -35,8 +35,9 @@ use serde::Serialize;
 use chladni_core::model::part::Part;
 use chladni_core::model::plan_file::{PlanFile, PlanFileError, StepJson};
 use chladni_core::model::plate::PlateModel;
+use chladni_core::motion::body::Body;
+use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::montecarlo::{self, RmsMax, Setup};
-use chladni_core::motion::sim::{self, Body, FieldModel};
 use chladni_core::output::{OutputError, OutputGuard, write_atomic};
 use chladni_core::planner::{self, PlanFailure, PlanOptions, Synthesis};
 use chladni_device::client::{DeviceClient, DeviceError};
@@ -365,7 +366,8 @@ fn simulate(
     file: &PlanFile,
     traces: &Path,
 ) -> Result<Simulation, DemoError> {
-    let steps = sim::plan_steps(file, plate).map_err(|e| DemoError::Input(e.to_string()))?;
+    let steps = chladni_core::motion::steps::plan_steps(file, plate)
+        .map_err(|e| DemoError::Input(e.to_string()))?;
     let fields: Vec<FieldModel> = plate.modes.iter().map(|m| FieldModel::new(m, plate)).collect();
     let body = Body::new(part);
     let setup = Setup { body: &body, plate, fields: &fields, steps: &steps, feed: None };

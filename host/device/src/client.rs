@@ -42,7 +42,7 @@ pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(3);
 /// Time given to the `Release` a dropped client sends (best effort: the lease lapses anyway).
 pub const RELEASE_TIMEOUT: Duration = Duration::from_millis(300);
 /// How often [`DeviceClient::wait_for_run`] asks for the status.
-pub const WAIT_POLL: Duration = Duration::from_millis(50);
+pub(crate) const WAIT_POLL: Duration = Duration::from_millis(50);
 /// A run whose number the status has not reached after this long never started.
 pub const NEVER_STARTED_AFTER: Duration = Duration::from_secs(2);
 

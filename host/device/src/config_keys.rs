@@ -155,7 +155,7 @@ impl ConfigKey {
     }
 
     /// The key that shows `field` (the device names a refused threshold by its field).
-    pub fn of_field(field: ControlField) -> ConfigKey {
+    pub(crate) fn of_field(field: ControlField) -> ConfigKey {
         ConfigKey::Control(field)
     }
 
@@ -240,7 +240,7 @@ impl ConfigKey {
     }
 
     /// A wire value of this key in the CLI's unit (the one conversion back).
-    pub fn value_of(self, raw: u64) -> ConfigValue {
+    pub(crate) fn value_of(self, raw: u64) -> ConfigValue {
         let r32 = u32::try_from(raw).unwrap_or(u32::MAX);
         match self.unit() {
             Unit::Hz => ConfigValue::Real(MilliHz(r32).to_hz()),

@@ -56,7 +56,7 @@ pub struct EmulatedSpeed {
 }
 
 /// Largest icount shift offered (≈ 0.98 MIPS).
-pub const MAX_ICOUNT_SHIFT: u8 = 10;
+pub(crate) const MAX_ICOUNT_SHIFT: u8 = 10;
 
 /// A `--mips` value that no icount shift gives.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -102,7 +102,7 @@ impl EmulatorConfig {
 }
 
 /// Size of the flash bank the QEMU board keeps in [`EmulatorConfig::flash_file`].
-pub const FLASH_FILE_SIZE: u64 = 512 * 1024;
+pub(crate) const FLASH_FILE_SIZE: u64 = 512 * 1024;
 
 /// Why the emulator could not start.
 #[derive(Debug, thiserror::Error)]
@@ -278,11 +278,6 @@ impl Emulator {
     /// Clients connected to the link's port right now (the proxy's count).
     pub fn clients(&self) -> usize {
         self.proxy.clients()
-    }
-
-    /// QEMU's own serial socket behind the proxy: one client at a time (experiments only).
-    pub fn qemu_port(&self) -> u16 {
-        self.qemu_port
     }
 
     /// The link address for [`DeviceClient::open`]: `tcp://127.0.0.1:PORT`.
@@ -462,12 +457,12 @@ pub fn qemu_command_line(elf: &Path, port: u16, flash: Option<&Path>) -> Vec<Str
 /// QEMU's arguments for a fixed emulated speed. `sleep=on` (QEMU's default, written out):
 /// while the core sleeps in WFI the guest clock follows the host's, so timers still fire in
 /// real time; while it runs, each instruction takes exactly 2^shift ns of guest time.
-pub fn icount_args(speed: EmulatedSpeed) -> Vec<String> {
+pub(crate) fn icount_args(speed: EmulatedSpeed) -> Vec<String> {
     vec!["-icount".into(), format!("shift={},sleep=on", speed.shift)]
 }
 
 /// Checks the flash file (creating it erased if missing) and returns its absolute path.
-pub fn prepare_flash_file(path: &Path) -> Result<PathBuf, EmulatorError> {
+pub(crate) fn prepare_flash_file(path: &Path) -> Result<PathBuf, EmulatorError> {
     let fail = |reason: String| EmulatorError::FlashFile { path: path.to_path_buf(), reason };
     if path.is_dir() {
         return Err(fail("is a directory: pass a file path (created erased if missing)".into()));

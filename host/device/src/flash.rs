@@ -29,15 +29,15 @@ use probe_rs::probe::list::{Accessibility, Lister};
 pub const DEFAULT_CHIP: &str = "STM32L475VGTx";
 
 /// Name of the symbol in which the firmware records the board it was built for.
-pub const BOARD_SYMBOL: &str = "CHLADNI_BOARD";
+pub(crate) const BOARD_SYMBOL: &str = "CHLADNI_BOARD";
 
 /// The board name an image must carry to be flashed (the link's own name for the board).
-pub const FLASHABLE_BOARD: &str = Board::Stm32l475.name();
+pub(crate) const FLASHABLE_BOARD: &str = Board::Stm32l475.name();
 /// The QEMU board's name, refused with a pointer to the emulator.
 const QEMU_BOARD: &str = Board::Qemu.name();
 
 /// The linker memory map of the firmware, as built into this binary.
-pub const MEMORY_X: &str = include_str!("../../../memory.x");
+pub(crate) const MEMORY_X: &str = include_str!("../../../memory.x");
 
 /// What to check when no probe shows up or one cannot be opened.
 const PROBE_HINT: &str = "check

@@ -8,7 +8,7 @@ use chladni_shared::icd::link::{USB_PID, USB_VID};
 use serialport::SerialPortInfo;
 
 /// USB ids of the ST-LINK/V2-1 virtual COM port of the B-L475E-IOT01A.
-pub const STLINK_VCP: (u16, u16) = (0x0483, 0x374b);
+pub(crate) const STLINK_VCP: (u16, u16) = (0x0483, 0x374b);
 
 /// What a port is to Chladni, from its USB ids.
 pub fn role(vid: u16, pid: u16) -> Option<&'static str> {

@@ -178,7 +178,7 @@ impl Proxy {
     }
 
     /// Connects (and after a restart, reconnects) to QEMU's serial socket on `port`.
-    pub fn set_upstream(&self, port: u16) {
+    pub(crate) fn set_upstream(&self, port: u16) {
         self.shared.upstream_port.store(port, Ordering::SeqCst);
         // Drop a connection to an old QEMU at once rather than at its end of file, and what
         // was sent for it: a new controller never gets requests meant for the old one.
@@ -194,13 +194,15 @@ impl Proxy {
         lock(&self.shared.clients).len()
     }
 
+    #[cfg(test)]
     /// Whether the proxy holds a connection to QEMU right now.
-    pub fn upstream_connected(&self) -> bool {
+    pub(crate) fn upstream_connected(&self) -> bool {
         lock(&self.shared.upstream).stream.is_some()
     }
 
+    #[cfg(test)]
     /// Bytes the proxy has read from its clients (all of them) and from QEMU so far.
-    pub fn bytes_in(&self) -> (u64, u64) {
+    pub(crate) fn bytes_in(&self) -> (u64, u64) {
         (
             self.shared.from_clients.load(Ordering::SeqCst),
             self.shared.from_qemu.load(Ordering::SeqCst),
@@ -208,7 +210,7 @@ impl Proxy {
     }
 
     /// Closes the public port and every connection; waits for the threads.
-    pub fn shutdown(&mut self) {
+    pub(crate) fn shutdown(&mut self) {
         self.shared.stop.store(true, Ordering::SeqCst);
         for (_, stream) in lock(&self.shared.clients).drain(..) {
             let _ = stream.shutdown(std::net::Shutdown::Both);

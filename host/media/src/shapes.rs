@@ -10,7 +10,7 @@ use std::path::Path;
 use serde::Serialize;
 
 use chladni_core::model::plan_file::r4;
-use chladni_core::motion::body::Pose;
+use chladni_core::model::pose::Pose;
 use chladni_core::motion::montecarlo::{Report, Trials};
 use chladni_core::output::{OutputError, write_with};
 use chladni_core::planner::PlanFailure;
@@ -36,7 +36,7 @@ pub struct PoseJson {
 
 impl PoseJson {
     /// From (x mm, y mm, θ radians).
-    pub fn from_mm_rad(x: f64, y: f64, theta_rad: f64) -> Self {
+    pub(crate) fn from_mm_rad(x: f64, y: f64, theta_rad: f64) -> Self {
         PoseJson { x_mm: x, y_mm: y, theta_deg: wrap_deg(theta_rad.to_degrees()) }
     }
 }

@@ -11,7 +11,8 @@ use chladni_core::motion::body::Body;
 use chladni_core::motion::bulk::Drop;
 use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::shape::Pieces;
-use chladni_core::motion::sim::{SimStep, plan_steps};
+use chladni_core::motion::steps::SimStep;
+use chladni_core::motion::steps::plan_steps;
 
 /// One case: a part, its plate and plan, and what a drop needs.
 pub struct DropCase {

@@ -10,8 +10,10 @@ use chladni_core::model::part::Part;
 use chladni_core::model::part::mirror::{self, Face, FaceOf, Faces};
 use chladni_core::model::plan_file::PlanFile;
 use chladni_core::model::plate::PlateModel;
+use chladni_core::model::pose::Pose;
+use chladni_core::motion::body::Body;
+use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::montecarlo::{self, Report, Setup, Stats, Trials};
-use chladni_core::motion::sim::{self, Body, FieldModel, Pose};
 use chladni_core::output::write_atomic;
 use chladni_core::planner::capture::CaptureZone;
 use chladni_core::planner::collide::EndOverlap;
@@ -649,16 +651,17 @@ impl SimulateArgs {
         let file = self.read_plan()?;
         let views = self.part_views(&file, parts, &faces)?;
         let runs = face_trials(&faces, self.trials, self.seed);
-        let steps = sim::plan_steps(&file, &plate).map_err(|e| match e {
-            sim::PlanStepsError::NoMode(e) => bad(format!(
-                "plan step {}: no mode of {} at {} Hz (modes: {})",
-                e.step,
-                self.plate.display(),
-                e.freq_hz,
-                e.modes
-            )),
-            other => bad(other.to_string()),
-        })?;
+        let steps =
+            chladni_core::motion::steps::plan_steps(&file, &plate).map_err(|e| match e {
+                chladni_core::motion::steps::PlanStepsError::NoMode(e) => bad(format!(
+                    "plan step {}: no mode of {} at {} Hz (modes: {})",
+                    e.step,
+                    self.plate.display(),
+                    e.freq_hz,
+                    e.modes
+                )),
+                other => bad(other.to_string()),
+            })?;
         let fields: Vec<FieldModel> =
             plate.modes.iter().map(|m| FieldModel::new(m, &plate)).collect();
         let sim =

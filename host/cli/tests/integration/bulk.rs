@@ -9,9 +9,12 @@
 use std::process::Output;
 
 use chladni_core::model::geometry::inside;
+use chladni_core::model::pose::Pose;
+use chladni_core::motion::body::Body;
 use chladni_core::motion::bulk::{self, Drop};
+use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::shape::Pieces;
-use chladni_core::motion::sim::{Body, FieldModel, Pose, plan_steps};
+use chladni_core::motion::steps::plan_steps;
 
 use crate::support;
 use support::cli::{chladni, ex};

@@ -8,8 +8,11 @@ use std::path::{Path, PathBuf};
 
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::PlateModel;
+use chladni_core::model::pose::Pose;
+use chladni_core::motion::body::Body;
 use chladni_core::motion::contact::Rim;
-use chladni_core::motion::sim::{self, Body, FieldModel, Pose, SimParams};
+use chladni_core::motion::field::FieldModel;
+use chladni_core::motion::integrate::SimParams;
 use chladni_media::vision::synth::{Photo, Placed, render};
 use support::cli::{chladni, ex, json, tmp};
 use support::examples;
@@ -36,7 +39,7 @@ fn pose_after(plate: &PlateModel, mode: usize, body: &Body, start: Pose, t: f64)
     let field = FieldModel::new(&plate.modes[mode], plate);
     let rim = Some(Rim::of(plate));
     let p = SimParams { speed: TRUE_SPEED, t_limit: t, run_to_limit: true, rim };
-    if t == 0.0 { start } else { sim::run(body, &field, p, start).pose }
+    if t == 0.0 { start } else { chladni_core::motion::integrate::run(body, &field, p, start).pose }
 }
 
 /// Renders the run as `dir/NAME(t)` photos.

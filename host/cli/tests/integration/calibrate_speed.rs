@@ -6,7 +6,10 @@ use std::path::PathBuf;
 
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::PlateModel;
-use chladni_core::motion::sim::{self, Body, FieldModel, Pose, SimParams};
+use chladni_core::model::pose::Pose;
+use chladni_core::motion::body::Body;
+use chladni_core::motion::field::FieldModel;
+use chladni_core::motion::integrate::SimParams;
 use chladni_core::plate::calibrate::{self, CalPart, FitError, Measured, Observation};
 use chladni_core::rng::Rng;
 
@@ -21,7 +24,7 @@ const TRUE_SPEED: f64 = 14.2;
 /// (computed here from the model's trace, independently of the fit's own reading of it).
 fn time_to_node(body: &Body, field: &FieldModel, mu: f64, start: Pose) -> f64 {
     let p = SimParams { speed: mu, t_limit: 1e9, run_to_limit: false, rim: None };
-    let r = sim::run(body, field, p, start);
+    let r = chladni_core::motion::integrate::run(body, field, p, start);
     assert!(r.rested);
     let d = |q: &Pose| (q.x - r.pose.x).hypot(q.y - r.pose.y);
     let k = r.trace.iter().position(|(_, q)| d(q) <= 1.0).unwrap();
@@ -34,8 +37,13 @@ fn time_to_node(body: &Body, field: &FieldModel, mu: f64, start: Pose) -> f64 {
 
 /// Pose after `t` seconds at μ.
 fn pose_after(body: &Body, field: &FieldModel, mu: f64, start: Pose, t: f64) -> Pose {
-    sim::run(body, field, SimParams { speed: mu, t_limit: t, run_to_limit: true, rim: None }, start)
-        .pose
+    chladni_core::motion::integrate::run(
+        body,
+        field,
+        SimParams { speed: mu, t_limit: t, run_to_limit: true, rim: None },
+        start,
+    )
+    .pose
 }
 
 /// Random starts on the four-lines plate's left half, away from the vertical node.
@@ -138,7 +146,13 @@ fn observations_that_do_not_move_are_refused() {
     // Start where the part comes to rest: nothing depends on μ.
     let body = Body::new(&parts[0]);
     let p = SimParams { speed: 10.0, t_limit: 1e9, run_to_limit: false, rim: None };
-    let rest = sim::run(&body, &field, p, Pose { x: 80.0, y: 100.0, theta: 0.5 }).pose;
+    let rest = chladni_core::motion::integrate::run(
+        &body,
+        &field,
+        p,
+        Pose { x: 80.0, y: 100.0, theta: 0.5 },
+    )
+    .pose;
     let still = [
         Observation { line: 2, part: 0, start: rest, measured: Measured::TimeToNode { t_s: 3.0 } },
         Observation {
@@ -152,7 +166,7 @@ fn observations_that_do_not_move_are_refused() {
     assert!(matches!(e, FitError::Undetermined(_)), "{e}");
     // A pose observed long after the part came to rest does not fix μ either.
     let start = Pose { x: 60.0, y: 100.0, theta: 0.5 };
-    let end = sim::run(&body, &field, p, start).pose;
+    let end = chladni_core::motion::integrate::run(&body, &field, p, start).pose;
     let late = [Observation {
         line: 2,
         part: 0,

@@ -4,8 +4,10 @@
 
 use chladni_core::model::part::Part;
 use chladni_core::model::part::mirror;
+use chladni_core::motion::body::Body;
+use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::montecarlo::{self, Setup};
-use chladni_core::motion::sim::{Body, FieldModel, plan_steps};
+use chladni_core::motion::steps::plan_steps;
 use chladni_core::planner::{self, Backend, PlanOptions, cdist};
 
 use crate::support;

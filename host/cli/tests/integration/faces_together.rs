@@ -5,10 +5,13 @@
 
 use chladni_core::model::part::Part;
 use chladni_core::model::plan_file::PlanFile;
+use chladni_core::model::pose::Pose;
+use chladni_core::motion::body::Body;
 use chladni_core::motion::bulk::{self, Drop};
+use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::montecarlo;
 use chladni_core::motion::shape::{self, Pieces};
-use chladni_core::motion::sim::{Body, FieldModel, Pose, plan_steps};
+use chladni_core::motion::steps::plan_steps;
 
 use crate::support;
 use support::cli::{chladni, ex, json, tmp, write_tmp};

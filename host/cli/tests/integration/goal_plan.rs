@@ -5,7 +5,11 @@ use crate::support;
 
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::PlateModel;
-use chladni_core::motion::sim::{Body, FieldModel, Pose, SimStep, simulate_plan};
+use chladni_core::model::pose::Pose;
+use chladni_core::motion::body::Body;
+use chladni_core::motion::field::FieldModel;
+use chladni_core::motion::steps::SimStep;
+use chladni_core::motion::steps::simulate_plan;
 use chladni_core::planner::position::{self, diameter, reachable_region};
 use chladni_core::planner::{self, Minimize, PlanFailure, PlanOptions, Synthesis, cdist};
 use support::examples::{part, plate, plate_text};

@@ -3,8 +3,9 @@
 //! the fixed 3° refuses, and the plan holds in Monte Carlo; `plan --json` names each step's
 //! margin and its source, and a refusal names the margin it applied.
 
+use chladni_core::motion::body::Body;
+use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::montecarlo::{self, Setup};
-use chladni_core::motion::sim::{Body, FieldModel};
 use chladni_core::planner::margin::{MIN_MARGIN_DEG, MarginSource};
 use chladni_core::planner::{self, PlanOptions, Problem};
 

@@ -6,7 +6,11 @@ use crate::support;
 
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::{Node, PlateModel};
-use chladni_core::motion::sim::{Body, FieldModel, Pose, SimStep, simulate_plan};
+use chladni_core::model::pose::Pose;
+use chladni_core::motion::body::Body;
+use chladni_core::motion::field::FieldModel;
+use chladni_core::motion::steps::SimStep;
+use chladni_core::motion::steps::simulate_plan;
 use chladni_core::planner::{
     self, Backend, MapKind, PlanFailure, PlanOptions, Problem, cdist, symmetry_order,
 };

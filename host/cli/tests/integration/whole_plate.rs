@@ -6,7 +6,7 @@
 use chladni_core::model::part::Part;
 use chladni_core::model::part::mirror::{self, FLIPPED_SUFFIX};
 use chladni_core::model::plate::{Node, PlateModel};
-use chladni_core::motion::sim::Body;
+use chladni_core::motion::body::Body;
 use chladni_core::planner::whole::{
     DROP_GRID, DROP_TURNS, DropEnd, OnPlate, check, check_parts, plate_groups,
 };

@@ -25,8 +25,9 @@ pub enum Law {
     },
 }
 
+#[cfg(test)]
 /// The law names as written in files and on the command line.
-pub const LAW_NAMES: [&str; 3] = ["sign", "linear", "sine"];
+pub(crate) const LAW_NAMES: [&str; 3] = ["sign", "linear", "sine"];
 
 impl Law {
     /// Name as written in files and on the command line.
@@ -69,7 +70,7 @@ impl Law {
     }
 
     /// G(d) = ∫₀ᵈ g (the potential per unit gain).
-    pub fn big_g(&self, d: f64) -> f64 {
+    pub(crate) fn big_g(&self, d: f64) -> f64 {
         match *self {
             Law::Sign => d.abs(),
             Law::Linear => 0.5 * d * d / LINEAR_SCALE_MM,
@@ -96,7 +97,7 @@ impl Law {
 /// Why a field law cannot be built.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum LawError {
-    /// Not one of [`LAW_NAMES`].
+    /// Not one of `LAW_NAMES`.
     #[error("\"{0}\": must be \"sign\", \"linear\" or \"sine\"")]
     Unknown(String),
     /// Sine without a wavelength.

@@ -4,7 +4,7 @@
 //! vertices (the closing edge from the last vertex back to the first is implied).
 
 /// Nearest point to `p` on the segment `a`–`b` and its distance (a point if `a == b`).
-pub fn segment_foot(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> ([f64; 2], f64) {
+pub(crate) fn segment_foot(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> ([f64; 2], f64) {
     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
     let len2 = dx * dx + dy * dy;
     let t = if len2 > 0.0 {
@@ -17,7 +17,7 @@ pub fn segment_foot(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> ([f64; 2], f64) {
 }
 
 /// Signed area (counter-clockwise positive, mm²).
-pub fn signed_area(ring: &[[f64; 2]]) -> f64 {
+pub(crate) fn signed_area(ring: &[[f64; 2]]) -> f64 {
     let n = ring.len();
     (0..n)
         .map(|i| {

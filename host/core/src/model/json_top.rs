@@ -6,7 +6,7 @@
 /// What the top level of `text` is when it is not a JSON object (`"an array"`, `"a string"`,
 /// `"a number"`, `"true or false"`, `"null"`); `None` for an object, and for text serde's own
 /// error describes better (empty, not JSON).
-pub fn not_an_object(text: &str) -> Option<&'static str> {
+pub(crate) fn not_an_object(text: &str) -> Option<&'static str> {
     let t = text.trim_start_matches('\u{feff}').trim_start();
     let mut chars = t.chars();
     // Only what the start shows for sure: a word like `nope` or `-x` is not JSON at all.

@@ -29,7 +29,7 @@ pub fn grid_mode(name: &str, freq_hz: f64, lambda: f64, grid: &Grid) -> ModeEntr
 
 /// A `[[mode]]` entry holding a grid node that is not a solver mode (no λ; the frequency only
 /// if known), e.g. the signed distance to the nodes seen in a photo.
-pub fn sampled_mode(name: &str, freq_hz: Option<f64>, grid: &Grid) -> ModeEntry {
+pub(crate) fn sampled_mode(name: &str, freq_hz: Option<f64>, grid: &Grid) -> ModeEntry {
     ModeEntry {
         name: Some(name.into()),
         freq_hz,
@@ -60,7 +60,12 @@ fn grid_node(grid: &Grid) -> NodeEntry {
 }
 
 /// A `[[mode]]` entry holding a straight node line.
-pub fn line_mode(name: &str, freq_hz: Option<f64>, angle_deg: f64, offset_mm: f64) -> ModeEntry {
+pub(crate) fn line_mode(
+    name: &str,
+    freq_hz: Option<f64>,
+    angle_deg: f64,
+    offset_mm: f64,
+) -> ModeEntry {
     ModeEntry {
         name: Some(name.into()),
         freq_hz,
@@ -75,7 +80,7 @@ pub fn line_mode(name: &str, freq_hz: Option<f64>, angle_deg: f64, offset_mm: f6
 /// A `[[mode]]` entry holding all straight node lines `(angle_deg, offset_mm)` of one
 /// frequency: a `line` node for one line, a `lines` node for several (one frequency is one
 /// mode, see [`crate::model::plate`]).
-pub fn lines_mode(name: &str, freq_hz: Option<f64>, lines: &[(f64, f64)]) -> ModeEntry {
+pub(crate) fn lines_mode(name: &str, freq_hz: Option<f64>, lines: &[(f64, f64)]) -> ModeEntry {
     if let [(angle_deg, offset_mm)] = lines {
         return line_mode(name, freq_hz, *angle_deg, *offset_mm);
     }
@@ -168,9 +173,10 @@ pub fn render(plate: &PlateTable, modes: Vec<ModeEntry>) -> Result<String, toml:
     toml::to_string(&PlateFile { plate: plate.clone(), mode: modes })
 }
 
+#[cfg(test)]
 /// The grid of a `node = { kind = "grid", ... }` entry, if it is one with nx·ny samples
 /// (for checks and tools; the planner's check is [`crate::model::plate::check_mode`]).
-pub fn grid_of(entry: &ModeEntry, size_mm: [f64; 2]) -> Option<Grid> {
+pub(crate) fn grid_of(entry: &ModeEntry, size_mm: [f64; 2]) -> Option<Grid> {
     let Some(NodeEntry::Grid { nx: Some(nx), ny: Some(ny), values: Some(values) }) = &entry.node
     else {
         return None;

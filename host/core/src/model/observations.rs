@@ -21,7 +21,7 @@ use crate::model::part::Part;
 use crate::model::pose::Pose;
 
 /// The header, column by column.
-pub const COLUMNS: [&str; 8] =
+pub(crate) const COLUMNS: [&str; 8] =
     ["part", "x_mm", "y_mm", "theta_deg", "t_s", "end_x_mm", "end_y_mm", "end_theta_deg"];
 
 /// Most rows read (a stopwatch session has tens).

@@ -21,8 +21,9 @@ use std::path::Path;
 use chladni_shared::analysis::fx::Fx;
 use chladni_shared::analysis::geometry::Pt;
 
+pub use crate::model::geometry::inside;
+pub(crate) use crate::model::geometry::signed_area;
 use crate::model::geometry::{self, orient, segments_meet};
-pub use crate::model::geometry::{inside, signed_area};
 pub use dxf::{DxfError, ImportOptions};
 
 pub mod dxf;
@@ -40,7 +41,7 @@ pub const MIN_SIZE_MM: f64 = 1.0e-3;
 /// significant digits.
 pub const MIN_AREA_FRACTION: f64 = 1.0e-6;
 /// Rings with more vertices than this are rejected.
-pub const MAX_VERTICES: usize = 1_000_000;
+pub(crate) const MAX_VERTICES: usize = 1_000_000;
 
 /// Which ring of a part.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -304,7 +305,7 @@ impl Part {
     }
 
     /// Parses the JSON part format; `default_name` is used when the file has none.
-    pub fn from_json(text: &str, default_name: &str) -> Result<Part, PartError> {
+    pub(crate) fn from_json(text: &str, default_name: &str) -> Result<Part, PartError> {
         if let Some(kind) = crate::model::json_top::not_an_object(text) {
             return Err(PartError::NotAnObject(kind));
         }
@@ -314,8 +315,9 @@ impl Part {
         Ok(Part { flips: j.flips, ..part })
     }
 
+    #[cfg(test)]
     /// Parses an SVG drawing with the default chord tolerance ([`svg`]).
-    pub fn from_svg(text: &str, name: &str) -> Result<Part, PartError> {
+    pub(crate) fn from_svg(text: &str, name: &str) -> Result<Part, PartError> {
         svg::read(text, name, dxf::DEFAULT_CHORD_MM).map(|(part, _)| part)
     }
 

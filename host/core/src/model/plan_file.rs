@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 /// Keys `chladni plan --json` prints beside the plan file's own (the step margins, the parts
 /// that end overlapping, the `--copies` numbers): [`PlanFile::parse`] reads past them, so the
 /// printed object saved to a file is a plan file; they are never written by `--out`.
-pub const REPORT_KEYS: [&str; 8] = [
+pub(crate) const REPORT_KEYS: [&str; 8] = [
     "margins",
     "end_overlaps",
     "copies",
@@ -41,7 +41,7 @@ pub fn r4(v: f64) -> f64 {
 
 /// The one check of a drive frequency (Hz) against the controller's limits: the shared
 /// conversion, [`MilliHz::from_hz`], and its one message.
-pub fn check_drive_freq(hz: f64) -> Result<u32, FrequencyError> {
+pub(crate) fn check_drive_freq(hz: f64) -> Result<u32, FrequencyError> {
     MilliHz::from_hz(hz).map(|f| f.0)
 }
 
@@ -331,8 +331,9 @@ impl PlanFile {
         Ok(plan)
     }
 
+    #[cfg(test)]
     /// The file form of a device plan (no predictions).
-    pub fn from_plan(plan: &Plan) -> PlanFile {
+    pub(crate) fn from_plan(plan: &Plan) -> PlanFile {
         PlanFile {
             name: plan.name.to_string(),
             repeat: plan.repeat,

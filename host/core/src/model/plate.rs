@@ -25,8 +25,8 @@
 
 use std::path::Path;
 
+pub use crate::model::field::Law;
 use crate::model::field::LawError;
-pub use crate::model::field::{LINEAR_SCALE_MM, Law};
 use crate::model::grid::Grid;
 use crate::model::plan_file::check_drive_freq;
 use crate::model::plate_file::{LineEntry, ModeEntry, NodeEntry, PlateFile, PlateFileError};
@@ -112,7 +112,7 @@ pub struct Mode {
 
 impl Mode {
     /// Equal gains on a straight node: orientations only matter modulo 180°.
-    pub fn is_symmetric_line(&self) -> bool {
+    pub(crate) fn is_symmetric_line(&self) -> bool {
         matches!(self.node, Node::Line { .. }) && self.gain_left == self.gain_right
     }
 }
@@ -286,7 +286,11 @@ const MODE_KEYS: &[&str] = &[
 ];
 
 /// Checks one `[[mode]]` entry and types it (`index` is 1-based, for messages).
-pub fn check_mode(index: usize, e: &ModeEntry, size_mm: [f64; 2]) -> Result<Mode, ModelError> {
+pub(crate) fn check_mode(
+    index: usize,
+    e: &ModeEntry,
+    size_mm: [f64; 2],
+) -> Result<Mode, ModelError> {
     let name = e.name.clone().unwrap_or_else(|| format!("mode {index}"));
     let c = Ctx { index, name: name.clone() };
     if let Some((k, v)) = e.unknown.iter().next() {
@@ -329,8 +333,13 @@ pub fn check_mode(index: usize, e: &ModeEntry, size_mm: [f64; 2]) -> Result<Mode
     Ok(Mode { name, freq_hz, amplitude, law, gain_left, gain_right, speed_mm_s, ramp_ms, node })
 }
 
+#[cfg(test)]
 /// Checks one `[[mode]]` table in hand (as [`check_mode`] after deserialising it).
-pub fn parse_mode(index: usize, t: &toml::Table, size_mm: [f64; 2]) -> Result<Mode, ModelError> {
+pub(crate) fn parse_mode(
+    index: usize,
+    t: &toml::Table,
+    size_mm: [f64; 2],
+) -> Result<Mode, ModelError> {
     use serde::Deserialize;
     let e = ModeEntry::deserialize(toml::Value::Table(t.clone()))
         .map_err(|source| ModelError::Entry { index, source })?;

@@ -147,7 +147,7 @@ pub struct LineEntry {
 }
 
 /// The node kinds as written.
-pub const NODE_KINDS: [&str; 4] = ["line", "lines", "hyperbola", "grid"];
+pub(crate) const NODE_KINDS: [&str; 4] = ["line", "lines", "hyperbola", "grid"];
 
 /// `node`: the kind is checked first so that a wrong one is named as written.
 fn node_entry<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<NodeEntry>, D::Error> {

@@ -9,7 +9,8 @@ use serde::Serialize;
 use crate::model::feed_region::FeedRegion;
 use crate::model::plan_file::PlanFile;
 use crate::model::plate::PlateModel;
-use crate::motion::body::{Body, Pose};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
 use crate::motion::contact::Rim;
 use crate::motion::field::FieldModel;
 use crate::motion::many::{Group, ManyRun, simulate_plan_many};
@@ -19,7 +20,7 @@ use crate::motion::steps::{SimStep, simulate_plan};
 use crate::rng::Rng;
 
 /// Random poses tried for each part before a drop is refused.
-pub const PLACE_ATTEMPTS: usize = 500;
+pub(crate) const PLACE_ATTEMPTS: usize = 500;
 
 /// A drop that cannot place every part without overlap.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

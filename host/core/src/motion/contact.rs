@@ -17,11 +17,12 @@
 #[cfg(test)]
 use crate::model::plate::DEFAULT_FRICTION;
 use crate::model::plate::{Edge, PlateModel, on_plate};
-use crate::motion::body::{Body, Pose};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
 
 /// Vertices within this fraction of the part's radius of the wall count as touching it (a
 /// part resting flush ends within 10⁻⁴ rad of the wall's direction).
-pub const CONTACT_GAP: f64 = 1e-4;
+pub(crate) const CONTACT_GAP: f64 = 1e-4;
 
 /// Gauss–Seidel sweeps at most per solve (a few contacts converge in tens).
 const SWEEPS: usize = 200;
@@ -47,7 +48,7 @@ impl Rim {
     /// over the plate, and by how much (mm, the larger of the two overshoots; ≤ 0 when the
     /// part fits inside the plate there). A part with no orientation that fits can never lie
     /// on the plate: the wall would have to hold it on two opposite sides at once.
-    pub fn best_fit(&self, body: &Body) -> (f64, f64) {
+    pub(crate) fn best_fit(&self, body: &Body) -> (f64, f64) {
         let [w, h] = self.size_mm;
         let over = |deg: f64| {
             let (s, c) = deg.to_radians().sin_cos();
@@ -127,7 +128,7 @@ impl Rim {
 
     /// The twist of the part at `q` under the field's `free` twist (μF/A, μF/A, μM/J), with
     /// the wall's contact forces: projected Gauss–Seidel on the complementarity conditions.
-    pub fn constrain(&self, body: &Body, speed: f64, q: Pose, free: [f64; 3]) -> [f64; 3] {
+    pub(crate) fn constrain(&self, body: &Body, speed: f64, q: Pose, free: [f64; 3]) -> [f64; 3] {
         let contacts = self.contacts(body, q);
         if contacts.is_empty() {
             return free;

@@ -23,7 +23,8 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use crate::model::grid::Grid;
-use crate::motion::body::{Body, Pose};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
 use crate::motion::potential::{Bicubic, kinked_outline_wrench};
 
 /// Longest outline piece of the hyperbola's outline rule, as a fraction of the part's
@@ -31,7 +32,7 @@ use crate::motion::potential::{Bicubic, kinked_outline_wrench};
 /// the largest force from R/4 to R alike (the bilinear distance table's kinks at every cell
 /// line set that floor; test `hyperbola_outline_pieces_are_converged`), so R/2 halves the
 /// table reads of R/4 at no measurable cost.
-pub const HYPERBOLA_PIECE: f64 = 0.5;
+pub(crate) const HYPERBOLA_PIECE: f64 = 0.5;
 
 /// A mode's field, ready to evaluate.
 #[derive(Debug, Clone)]
@@ -465,7 +466,7 @@ impl FieldModel {
 
     /// Force and moment by the midpoint rule over the body's interior samples (the rule for
     /// hyperbola and several-line nodes; the reference the exact rules are tested against).
-    pub fn sampled_wrench(&self, body: &Body, pose: Pose) -> Wrench {
+    pub(crate) fn sampled_wrench(&self, body: &Body, pose: Pose) -> Wrench {
         let (s, c) = pose.theta.sin_cos();
         let mut w = Wrench::default();
         for &(q, wt) in &body.samples {
@@ -481,7 +482,7 @@ impl FieldModel {
     /// Distance (mm) from a plate point to the mode's nearest node: exact for straight and
     /// hyperbolic nodes, |φ| / |∇φ| (first order) on a grid; infinite where a grid's field is
     /// flat and not zero.
-    pub fn node_distance(&self, p: [f64; 2]) -> f64 {
+    pub(crate) fn node_distance(&self, p: [f64; 2]) -> f64 {
         let xi = |(xhat, c): &([f64; 2], f64)| (xhat[0] * p[0] + xhat[1] * p[1] - c).abs();
         match self {
             FieldModel::Line { xhat, c, .. } => xi(&(*xhat, *c)),
@@ -499,7 +500,7 @@ impl FieldModel {
     }
 
     /// Largest gain.
-    pub fn max_gain(&self) -> f64 {
+    pub(crate) fn max_gain(&self) -> f64 {
         match self {
             FieldModel::Line { k, .. }
             | FieldModel::Lines { k, .. }

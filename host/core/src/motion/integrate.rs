@@ -5,7 +5,8 @@
 //! Units: mm, s, rad.
 
 use crate::model::plate::{Mode, PlateModel};
-use crate::motion::body::{Body, Pose};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
 use crate::motion::contact::Rim;
 use crate::motion::field::FieldModel;
 
@@ -79,7 +80,7 @@ impl SimParams {
 pub const STEP_TOL: f64 = 1e-3;
 
 /// How many integration steps [`run_while`] takes between two questions to its caller.
-pub const GO_EVERY: usize = 64;
+pub(crate) const GO_EVERY: usize = 64;
 
 /// The velocity field of one run: the field's wrench turned into velocities, with the rim's
 /// walls and contact forces when there is a rim.
@@ -173,7 +174,7 @@ pub fn run(body: &Body, field: &FieldModel, p: SimParams, start: Pose) -> Run {
 /// caller whose answer no longer depends on the run (a step map's start point already found
 /// outside the mode's reach) stops paying for it, e.g. for a run creeping for its whole step
 /// budget where the pull vanishes.
-pub fn run_while(
+pub(crate) fn run_while(
     body: &Body,
     field: &FieldModel,
     p: SimParams,
@@ -255,7 +256,7 @@ fn run_stuck_after(
 /// [`run_while`] ends the run, not at rest: such a run would otherwise creep by one ulp per
 /// step to the 20 000-step cap (measured: runs pushed along a wall on the cantilever's grid
 /// modes, 3 Heun evaluations per step, steps of 10⁻¹⁵ T₀; docs/plan.md, "Planning time").
-pub const STUCK_STEPS: usize = 64;
+pub(crate) const STUCK_STEPS: usize = 64;
 
 /// Did a step from `a` to `b` move a part of radius `r` by no more than rounding (10⁻⁹ R in
 /// position and 10⁻⁹ rad)? A run still coming to rest moves ≥ 10⁻⁶ R per step (speed above

@@ -18,7 +18,8 @@
 //! Units: mm, s, rad.
 
 use crate::model::plate::PlateModel;
-use crate::motion::body::{Body, Pose};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
 use crate::motion::contact::{CONTACT_GAP, Rim};
 use crate::motion::field::FieldModel;
 use crate::motion::integrate::STEP_TOL;
@@ -190,7 +191,7 @@ impl Group<'_> {
     }
 
     /// The deepest overlap of any two bodies at `qs` (mm).
-    pub fn max_overlap(&self, qs: &[Pose], lost: &[bool]) -> f64 {
+    pub(crate) fn max_overlap(&self, qs: &[Pose], lost: &[bool]) -> f64 {
         let mut worst = 0.0f64;
         for i in 0..qs.len() {
             for j in i + 1..qs.len() {
@@ -265,7 +266,7 @@ fn solve(rows: &[Row], mob: &[[f64; 3]], mu: f64, free: &[[f64; 3]]) -> Vec<[f64
 /// Integrates the group's quasi-static motion from `start` under one mode: Heun's method with
 /// the error-controlled step of [`crate::motion::integrate::run`] (each body's error at most
 /// [`STEP_TOL`] of its radius; one step for all), the poses separated after every stage.
-pub fn run_many(
+pub(crate) fn run_many(
     g: &Group<'_>,
     field: &FieldModel,
     speed: f64,

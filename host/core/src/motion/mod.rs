@@ -1,6 +1,5 @@
 //! How parts move: the quasi-static motion of a part under a mode's field (the part
-//! [`body`], the [`field`] models, the [`integrate`]r, plan [`steps`]; [`sim`] re-exports
-//! them at their old path), the Monte Carlo check of a plan, and the paper's particle
+//! [`body`], the [`field`] models, the [`integrate`]r, plan [`steps`]), the Monte Carlo check of a plan, and the paper's particle
 //! bouncing on a vibrating string.
 
 pub mod body;
@@ -12,7 +11,6 @@ pub mod many;
 pub mod montecarlo;
 pub mod potential;
 pub mod shape;
-pub mod sim;
 pub mod steps;
 pub mod string;
 #[cfg(test)]

@@ -8,7 +8,12 @@ use serde::Serialize;
 use crate::model::feed_region::FeedRegion;
 use crate::model::plan_file::PlanFile;
 use crate::model::plate::PlateModel;
-use crate::motion::sim::{Body, FieldModel, Pose, Rim, SimStep, simulate_plan};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
+use crate::motion::contact::Rim;
+use crate::motion::field::FieldModel;
+use crate::motion::steps::SimStep;
+use crate::motion::steps::simulate_plan;
 use crate::rng::Rng;
 
 /// Missed trials listed in a [`Report`] (all are counted).
@@ -317,7 +322,7 @@ mod tests {
             final_position_mm: None,
             ..PlanFile::default()
         };
-        let steps = crate::motion::sim::plan_steps(&plan, &plate).unwrap();
+        let steps = crate::motion::steps::plan_steps(&plan, &plate).unwrap();
         let setup =
             Setup { body: &body, plate: &plate, fields: &fields, steps: &steps, feed: None };
         let calls = crate::progress::Count::default();

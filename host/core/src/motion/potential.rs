@@ -7,7 +7,7 @@
 //! F = −∮ Ψ n ds, M = ∫∫ r × f dA = −∮ Ψ (r × n) ds = ∮ Ψ (r · dr).
 //! For a grid node Ψ is a polynomial of degree 12 in the edge parameter inside each grid cell
 //! (Catmull–Rom bicubic φ, squared), so splitting every edge at the grid lines and using
-//! 7-point Gauss–Legendre per piece ([`boundary_wrench`]) is exact up to rounding; the
+//! 7-point Gauss–Legendre per piece (`boundary_wrench`, the tests' reference) is exact up to rounding; the
 //! simulator uses 4 points per piece, 2 on pieces under a quarter of a cell
 //! ([`Bicubic::outline_wrench`], within 10⁻⁶ of it, tested).
 //! This replaced a midpoint rule over 160–400 interior cells, each needing φ and ∇φ, whose
@@ -18,6 +18,7 @@
 
 use crate::model::grid::Grid;
 
+#[cfg(test)]
 /// 7-point Gauss–Legendre nodes on [0, 1] and weights (summing to 1): exact for degree 13.
 const GL7: [(f64, f64); 7] = [
     (0.025_446_043_828_620_8, 0.064_742_483_084_434_85),
@@ -47,7 +48,7 @@ const GL2: [(f64, f64); 2] = [(0.211_324_865_405_187_1, 0.5), (0.788_675_134_594
 const SHORT: f64 = 0.25;
 
 /// A Catmull–Rom bicubic interpolant of grid samples, as per-cell polynomial coefficients:
-/// the same surface as [`crate::motion::sim::grid_eval`] (to rounding), evaluated with one
+/// the same surface as [`crate::motion::field::grid_eval`] (to rounding), evaluated with one
 /// look-up of 16 coefficients instead of 16 clamped sample reads and 10 spline evaluations.
 #[derive(Debug, Clone)]
 pub struct Bicubic {
@@ -142,7 +143,7 @@ impl Bicubic {
 impl Bicubic {
     /// Force (x, y) and moment of f = −∇(k φ²) (k = `k[0]` where φ < 0, `k[1]` where φ > 0)
     /// on `rings` (relative to the centroid) turned by (sin θ, cos θ) and moved to `origin`:
-    /// [`boundary_wrench`] specialised to the grid. Each vertex is turned once, and each edge
+    /// `boundary_wrench` specialised to the grid. Each vertex is turned once, and each edge
     /// walks the cells it crosses in order (`edge_integrals`): no sort, no allocation, no
     /// rounding call per piece.
     pub fn outline_wrench(
@@ -362,6 +363,7 @@ fn node_crossing(
     (s0 * x1 - s1 * x0) / (x1 - x0)
 }
 
+#[cfg(test)]
 /// Where the segment a → b crosses the lines x = i·h[0] and y = j·h[1] (edge parameters in
 /// (0, 1), ascending, with 0 and 1 at the ends). `h` = ∞ splits nothing.
 fn splits(a: [f64; 2], b: [f64; 2], h: [f64; 2], out: &mut Vec<f64>) {
@@ -382,11 +384,12 @@ fn splits(a: [f64; 2], b: [f64; 2], h: [f64; 2], out: &mut Vec<f64>) {
     out.push(1.0);
 }
 
+#[cfg(test)]
 /// Force (x, y) and moment about the pose's centroid, F = −∮ Ψ n ds and M = ∮ Ψ (r · dr), over
 /// `rings` placed at (x, y) (outline CCW, holes CW; relative to the centroid, already turned).
 /// Every edge is split at the lines of the `cells` spacing and where it is longer than
 /// `max_piece`, and each piece integrated with 7-point Gauss–Legendre.
-pub fn boundary_wrench(
+pub(crate) fn boundary_wrench(
     rings: &[Vec<[f64; 2]>],
     origin: [f64; 2],
     cells: [f64; 2],
@@ -435,7 +438,7 @@ pub fn boundary_wrench(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::motion::sim::grid_eval;
+    use crate::motion::field::grid_eval;
 
     fn grid() -> Grid {
         let (nx, ny) = (17, 12);

@@ -16,7 +16,8 @@ use parry2d_f64::query::details::contact_manifold_pfm_pfm;
 use parry2d_f64::shape::ConvexPolygon;
 use parry2d_f64::transformation::hertel_mehlhorn;
 
-use crate::motion::body::{Body, Pose};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
 
 /// A part's area as convex pieces (relative to the centroid).
 #[derive(Debug, Clone)]

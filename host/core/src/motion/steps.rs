@@ -3,7 +3,8 @@
 
 use crate::model::plan_file::{PlanFile, PlanFileError, StepLevel};
 use crate::model::plate::{PlateModel, SAME_FREQ_HZ};
-use crate::motion::body::{Body, Pose};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
 use crate::motion::contact::Rim;
 use crate::motion::field::FieldModel;
 use crate::motion::integrate::{SimParams, run};

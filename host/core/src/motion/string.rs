@@ -401,9 +401,10 @@ fn release(p: &StringParams, x: f64, k: usize, members: usize) -> State {
     State { t: t0, x, y: p.amplitude + h, u: 0.0, v: 0.0, riding: false }
 }
 
+#[cfg(test)]
 /// Trajectories of `members` particles dropped near `x0` (see `release`; member k is
 /// released at time t0 < T and sampled from t = 0 with x = x0 until then).
-pub fn simulate_ensemble(
+pub(crate) fn simulate_ensemble(
     p: &StringParams,
     x0: f64,
     members: usize,
@@ -505,7 +506,7 @@ pub const JSON_SAMPLES: usize = 61;
 /// Points of the drift profile of an [`experiment`].
 pub const PROFILE_POINTS: usize = 16;
 /// Particles averaged per point of the force profile of an [`experiment`].
-pub const PROFILE_MEMBERS: usize = 8;
+pub(crate) const PROFILE_MEMBERS: usize = 8;
 
 /// The period-1 bounce height g/(8 f²) (m): the default release height.
 pub fn period1_drop(p: &StringParams) -> f64 {

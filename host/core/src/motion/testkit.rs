@@ -29,7 +29,7 @@ pub fn rect() -> Part {
 }
 
 /// An irregular quadrilateral with a triangular hole: wrench accuracy tests.
-pub fn holed_part() -> Part {
+pub(crate) fn holed_part() -> Part {
     Part::new(
         "h".into(),
         vec![[0.0, 0.0], [40.0, 0.0], [31.0, 16.0], [5.0, 26.0]],
@@ -39,7 +39,7 @@ pub fn holed_part() -> Part {
 }
 
 /// The pull of a law at 20 mm (a scale for force errors).
-pub fn law_scale(law: Law) -> f64 {
+pub(crate) fn law_scale(law: Law) -> f64 {
     law.g(20.0).abs()
 }
 
@@ -50,14 +50,14 @@ pub fn uniform(dir: [f64; 2]) -> FieldModel {
 }
 
 /// An irregular quadrilateral (no symmetry: its stable edges differ).
-pub fn quad() -> Part {
+pub(crate) fn quad() -> Part {
     Part::new("q".into(), vec![[0.0, 0.0], [30.0, 0.0], [24.0, 14.0], [4.0, 20.0]], vec![]).unwrap()
 }
 
 /// Push alignment: the distance from the centroid to the wall (+x) when the part touches
 /// it, d(θ) = max over vertices of their x; a part pushed against a fence descends d(θ)
 /// from the orientation it arrives at to the local minimum (a stable edge).
-pub fn predicted_rest(body: &Body, theta0: f64) -> f64 {
+pub(crate) fn predicted_rest(body: &Body, theta0: f64) -> f64 {
     let d = |th: f64| {
         let (s, c) = f64::sin_cos(th);
         body.rings[0].iter().map(|p| c * p[0] - s * p[1]).fold(f64::MIN, f64::max)

@@ -46,7 +46,12 @@ use super::maps::map_thetas;
 use super::whole::PlateEdge;
 use crate::model::part::Part;
 use crate::model::plate::{Mode, Node, PlateModel};
-use crate::motion::sim::{Body, FieldModel, Pose, Rim, SimParams, run};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
+use crate::motion::contact::Rim;
+use crate::motion::field::FieldModel;
+use crate::motion::integrate::SimParams;
+use crate::motion::integrate::run;
 use chladni_shared::icd::plan::DeviceLimits;
 
 /// An edge is clamped (a node of the plate) when every mode's |φ| along it stays below this
@@ -63,7 +68,7 @@ pub const ANGLES: usize = 4;
 const ZONE_SAMPLES: usize = 40;
 
 /// The device's limit on a plan (s): the time a mode has at most to move a part.
-pub fn device_limit_s() -> f64 {
+pub(crate) fn device_limit_s() -> f64 {
     s_from_ms(DeviceLimits::DEFAULT.max_total_ms)
 }
 
@@ -97,7 +102,7 @@ pub struct CaptureZone {
 }
 
 /// The distance of `p` from `edge` on a plate of size `[w, h]`.
-pub fn from_edge(edge: PlateEdge, p: [f64; 2], [w, h]: [f64; 2]) -> f64 {
+pub(crate) fn from_edge(edge: PlateEdge, p: [f64; 2], [w, h]: [f64; 2]) -> f64 {
     match edge {
         PlateEdge::Left => p[0],
         PlateEdge::Right => w - p[0],
@@ -168,7 +173,7 @@ impl CaptureZone {
     }
 
     /// The bands as the messages name them: "x < 62 mm (clamped edge x = 0)".
-    pub fn bands_text(&self, plate: &PlateModel) -> String {
+    pub(crate) fn bands_text(&self, plate: &PlateModel) -> String {
         let bands: Vec<String> = (self.bands.iter())
             .map(|b| {
                 let edge = edge_name(b.edge);
@@ -231,7 +236,7 @@ impl InZone {
 
 /// The plate's clamped rims: the edges along which every mode is a grid whose |φ| stays below
 /// [`RIM_NODE`]. None when some mode is not a grid.
-pub fn clamped_rims(plate: &PlateModel) -> Vec<PlateEdge> {
+pub(crate) fn clamped_rims(plate: &PlateModel) -> Vec<PlateEdge> {
     let grids: Option<Vec<_>> = (plate.modes.iter())
         .map(|m| if let Node::Grid(g) = &m.node { Some(g) } else { None })
         .collect();

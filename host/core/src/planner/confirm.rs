@@ -3,7 +3,9 @@
 
 use crate::model::angle::cdist;
 use crate::model::plate::{Mode, PlateModel};
-use crate::motion::sim::{self, Body, FieldModel, Pose};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
+use crate::motion::field::FieldModel;
 
 /// Does the simulation take orientation `u` to `v` (mod `period`, within 1°) under a straight
 /// node, approaching from either side, from beyond the part's radius and from half-way across?
@@ -12,7 +14,7 @@ pub fn confirm(body: &Body, mode: &Mode, plate: &PlateModel, u: f64, v: f64, per
 }
 
 /// [`confirm`] for several possible images: every approach must end within 1° of one of them.
-pub fn confirm_any(
+pub(crate) fn confirm_any(
     body: &Body,
     mode: &Mode,
     plate: &PlateModel,
@@ -30,7 +32,7 @@ pub fn confirm_any(
     [-(r + 5.0), -0.5 * r, 0.5 * r, r + 5.0].iter().all(|&xi| {
         let start =
             Pose { x: base[0] + xi * xhat[0], y: base[1] + xi * xhat[1], theta: u.to_radians() };
-        let end = sim::run(body, &field, p, start).pose.theta.to_degrees();
+        let end = crate::motion::integrate::run(body, &field, p, start).pose.theta.to_degrees();
         images.iter().any(|&v| cdist(end, v, period) < 1.0)
     })
 }

@@ -19,7 +19,7 @@ use crate::motion::bulk::{BulkReport, CannotPlace, Drop, run_drops};
 use crate::motion::field::FieldModel;
 use crate::motion::shape::Pieces;
 use crate::motion::steps::{PlanStepsError, plan_steps};
-use crate::planner::{self, Minimize, PlanFailure, PlanOptions, Synthesis};
+use crate::planner::{self, Minimize, PlanOptions, Synthesis};
 use crate::progress::Progress;
 
 /// Drops of N copies that score each candidate.
@@ -134,19 +134,21 @@ pub fn rank(
     Ok(Ranked { candidates, chosen })
 }
 
+#[cfg(test)]
 /// Why `plan --copies` gave no plan.
 #[derive(Debug, Clone, thiserror::Error)]
-pub enum BulkPlanError {
+pub(crate) enum BulkPlanError {
     /// The planner found none.
     #[error(transparent)]
-    Plan(#[from] PlanFailure),
+    Plan(#[from] crate::planner::PlanFailure),
     /// The candidates could not be scored.
     #[error(transparent)]
     Copies(#[from] CopiesError),
 }
 
+#[cfg(test)]
 /// [`planner::plan`], then the candidates ranked for `copies` copies over `drops` drops.
-pub fn plan_for_copies(
+pub(crate) fn plan_for_copies(
     part: &Part,
     plate: &PlateModel,
     opt: &PlanOptions,

@@ -8,7 +8,7 @@
 //! sequence holds.
 //!
 //! Here the map is measured instead: the part is simulated quasi-statically
-//! ([`crate::motion::sim`]) to rest from start points on both sides of the node (the farthest
+//! ([`crate::motion::integrate`]) to rest from start points on both sides of the node (the farthest
 //! point along the normal that keeps the part on the plate, just beyond the part's radius, and
 //! half-way across), for a grid of start orientations. Final orientations are clustered (2°,
 //! modulo the period) and snapped to the exact rests of the static analysis (the rests are the
@@ -38,7 +38,10 @@ use super::{Backend, MapError, StepMap, cdist, line_map};
 use crate::model::field::Law;
 use crate::model::part::Part;
 use crate::model::plate::{Mode, Node, PlateModel};
-use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
+use crate::motion::field::FieldModel;
+use crate::motion::integrate::SimParams;
 
 /// Which model gives straight-node step maps ([`super::PlanOptions::maps`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -225,7 +228,7 @@ fn cache_key(
 /// half-way across (0.5 R), just beyond the part (R + 5 mm) and, except under the sign law, as
 /// far as the plate allows (the part's centroid at least R from every edge). R = the part's
 /// radius.
-pub fn approach_starts(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]> {
+pub(crate) fn approach_starts(body: &Body, mode: &Mode, plate: &PlateModel) -> Vec<[f64; 2]> {
     let FieldModel::Line { xhat, c, .. } = FieldModel::new(mode, plate) else {
         return Vec::new();
     };
@@ -287,7 +290,12 @@ pub fn dynamic_line_map(
     // The runs are independent: simulated in parallel, gathered in order and clustered
     // sequentially, so the map does not depend on the thread count.
     let end = |pt: [f64; 2], th: f64| {
-        let run = sim::run(&body, &field, p, Pose { x: pt[0], y: pt[1], theta: th.to_radians() });
+        let run = crate::motion::integrate::run(
+            &body,
+            &field,
+            p,
+            Pose { x: pt[0], y: pt[1], theta: th.to_radians() },
+        );
         run.rested.then(|| run.pose.theta.to_degrees())
     };
     let finals: Vec<Vec<Option<f64>>> = starts

@@ -17,7 +17,7 @@
 //!    Each such sequence of the shortest length is confirmed from scratch: all starts tracked
 //!    without clustering, durations from their settle times
 //!    (× safety + ramp, as [`super::plan_with`]), then the plan run as the simulator runs it
-//!    (fixed durations, [`simulate_plan`](crate::motion::sim::simulate_plan)) from interleaved starts (grid shifted half a cell,
+//!    (fixed durations, [`simulate_plan`](crate::motion::steps::simulate_plan)) from interleaved starts (grid shifted half a cell,
 //!    orientations half a step; and from the tracked starts again when some lingered and
 //!    were left out of the durations); every end must lie within the margin of the
 //!    predicted orientation. The fastest confirmed sequence wins; the candidates are redone
@@ -41,9 +41,13 @@ use super::whole::PlateEdge;
 use super::{PlanFailure, PlanOptions, Synthesis, cdist, plan_period};
 use crate::model::part::Part;
 use crate::model::plate::{PlateModel, on_plate};
-use crate::motion::sim::{self, Body, FieldModel, Pose, REST_LIMIT_T0, SimParams};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
+use crate::motion::field::FieldModel;
+use crate::motion::integrate::REST_LIMIT_T0;
+use crate::motion::integrate::SimParams;
 
-pub use crate::model::feed_region::{FeedError, FeedRegion};
+pub use crate::model::feed_region::FeedRegion;
 
 mod candidates;
 mod twins;
@@ -195,12 +199,17 @@ impl Sim<'_> {
     /// 5000 T₀ of mode `k` for part `i`: the limit of a run to rest, as for simulated maps.
     fn rest_limit(&self, i: usize, k: usize) -> f64 {
         let (mode, field) = (&self.plate.modes[k], &self.fields[k]);
-        REST_LIMIT_T0 * sim::t0(self.bodies[i].radius, mode.speed_mm_s, field)
+        REST_LIMIT_T0 * crate::motion::integrate::t0(self.bodies[i].radius, mode.speed_mm_s, field)
     }
 
     /// The run under mode `k` from the tagged pose, stopped at `t_limit` or at rest.
     fn run(&self, k: usize, (i, pose): Tagged, t_limit: f64) -> Outcome {
-        let run = sim::run(&self.bodies[i], &self.fields[k], self.params(k, t_limit), pose);
+        let run = crate::motion::integrate::run(
+            &self.bodies[i],
+            &self.fields[k],
+            self.params(k, t_limit),
+            pose,
+        );
         let (pose, settle_s, t_end) = (run.pose, run.settle_s, run.t_end);
         Outcome { pose, settle_s, t_end, rested: run.rested, lost: run.lost }
     }

@@ -13,7 +13,9 @@ use std::collections::HashMap;
 
 use crate::model::part::Part;
 use crate::model::plate::{Node, PlateModel};
-use crate::motion::sim::{self, Body, FieldModel, Pose};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
+use crate::motion::field::FieldModel;
 use crate::progress::Progress;
 
 use super::position::{self, POSITION_TOL_MM};
@@ -45,7 +47,7 @@ pub struct PartPlan {
 
 /// A simulated start is at most this far (mm) from the predicted position for the position to
 /// count as confirmed.
-pub const POSITION_CONFIRM_MM: f64 = 2.0;
+pub(crate) const POSITION_CONFIRM_MM: f64 = 2.0;
 
 /// Settle times memoised per (part, mode, orientation): a step's duration from a set of
 /// orientations is computed from them as [`settle_time`] computes it.
@@ -78,7 +80,7 @@ impl Durations<'_> {
                 .into_iter()
                 .map(|pt| {
                     let q = Pose { x: pt[0], y: pt[1], theta: theta.to_radians() };
-                    let r = sim::run(body, &field, p, q);
+                    let r = crate::motion::integrate::run(body, &field, p, q);
                     (r.settle_s, super::maps::outside_reach(body, mode, plate, r.pose))
                 })
                 .collect()
@@ -177,7 +179,7 @@ fn planned_or_fallback(
 }
 
 /// [`plan_parts`] with the maps already built.
-pub fn plan_parts_with(
+pub(crate) fn plan_parts_with(
     parts: &[&Part],
     plate: &PlateModel,
     opt: &PlanOptions,

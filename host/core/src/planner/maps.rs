@@ -22,7 +22,11 @@ use crate::analysis::reference::{RefField, Reference};
 use crate::model::angle::cdist;
 use crate::model::part::Part;
 use crate::model::plate::{Edge, Mode, Node, PlateModel};
-use crate::motion::sim::{self, Body, FieldModel, Pose, Rim, SimParams};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
+use crate::motion::contact::Rim;
+use crate::motion::field::FieldModel;
+use crate::motion::integrate::SimParams;
 
 /// One mode's orientation map.
 #[derive(Debug, Clone)]
@@ -428,7 +432,9 @@ pub(super) fn simulate_starts(
                 return None;
             }
             // A run of a point found dead meanwhile is called off: its outcome no longer counts.
-            let r = sim::run_while(body, field, p, q, &|| !dead[j].load(Ordering::Relaxed))?;
+            let r = crate::motion::integrate::run_while(body, field, p, q, &|| {
+                !dead[j].load(Ordering::Relaxed)
+            })?;
             if outside_reach(body, mode, plate, r.pose) {
                 dead[j].store(true, Ordering::Relaxed);
             }

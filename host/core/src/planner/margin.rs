@@ -28,8 +28,10 @@ use crate::model::angle::cdist;
 use crate::model::angle::wrap_deg;
 use crate::model::grid::Grid;
 use crate::model::plate::{Mode, Node, PlateModel};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
+use crate::motion::contact::Rim;
 use crate::motion::field::grid_eval;
-use crate::motion::sim::{Body, Pose, Rim};
 
 /// The smallest evidence margin (deg): below it a boundary's move is not resolved by the
 /// measurement (boundaries of simulated maps lie on the midpoints of their start spacing).
@@ -71,7 +73,7 @@ pub struct ModeMargin {
 
 impl ModeMargin {
     /// The margin of a resampling measurement that moved the boundaries by `spread_deg`.
-    pub fn from_spread(spread_deg: f64, grid: [usize; 2], coarse: [usize; 2]) -> ModeMargin {
+    pub(crate) fn from_spread(spread_deg: f64, grid: [usize; 2], coarse: [usize; 2]) -> ModeMargin {
         let deg = if spread_deg.is_finite() {
             spread_deg.clamp(MIN_MARGIN_DEG, MAX_MARGIN_DEG)
         } else {
@@ -82,7 +84,7 @@ impl ModeMargin {
 
     /// The source's short name in `plan --json` (`given`, `default`, `no_boundaries`,
     /// `resampled`).
-    pub fn source_name(&self) -> &'static str {
+    pub(crate) fn source_name(&self) -> &'static str {
         match self.source {
             MarginSource::Given => "given",
             MarginSource::Default => "default",
@@ -325,7 +327,7 @@ pub fn fixed(opt: &PlanOptions) -> ModeMargin {
 /// The margin used for a map under options whose fixed margin is `fixed` and whose automatic
 /// margin is on (`auto`): the map's evidence when it has some and `auto` is on, else `fixed`
 /// (given, or the default when `auto`).
-pub fn margin_of(map: &StepMap, fixed: f64, auto: bool) -> ModeMargin {
+pub(crate) fn margin_of(map: &StepMap, fixed: f64, auto: bool) -> ModeMargin {
     match (auto, map.evidence) {
         (true, Some(m)) => m,
         (true, None) => ModeMargin { deg: fixed, source: MarginSource::Default },

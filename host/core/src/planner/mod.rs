@@ -10,7 +10,7 @@
 //!      give no plan): measured by
 //!      simulating the approach to the node from both sides for 72 start orientations; an
 //!      orientation whose outcome depends on the side is mapped to every rest it reaches;
-//!    - hyperbola and grid nodes: quasi-static simulation ([`crate::motion::sim`]) from
+//!    - hyperbola and grid nodes: quasi-static simulation ([`crate::motion::integrate`]) from
 //!      `sim_starts` start orientations at each start point of [`map_starts`] (the hyperbola's
 //!      vertex or the plate centre, and the inset corners);
 //!      final orientations are clustered (2°) into rests; an orientation whose rest depends on
@@ -49,8 +49,8 @@
 
 use crate::model::part::Part;
 use crate::model::plate::{Node, PlateModel};
+use crate::motion::body::Body;
 use crate::motion::body::PLANNER_BODY_SAMPLES;
-use crate::motion::sim::Body;
 use crate::progress::Progress;
 
 pub mod capture;
@@ -74,26 +74,27 @@ mod settle;
 mod symmetry;
 pub mod whole;
 
-pub use goal::{PartPlan, plan_parts, plan_parts_progress, plan_parts_with};
+pub(crate) use goal::{PartPlan, plan_parts_with};
+pub use goal::{plan_parts, plan_parts_progress};
 pub use search::Minimize;
 
 pub use dynamic::{DynSettings, MapCache, MapKind};
 
 pub use crate::model::angle::cdist;
-pub use confirm::{confirm, confirm_any};
+pub use confirm::confirm;
+pub(crate) use confirm::confirm_any;
 pub use deadline::Deadline;
 pub use failure::PlanFailure;
-pub use input::{MAX_PLAN_VERTICES, PlanInputError, check_input, plan_name};
+pub use input::{MAX_PLAN_VERTICES, check_input, plan_name};
+pub(crate) use maps::MapError;
 pub(crate) use maps::balance_offset;
-pub use maps::{MapError, StepMap, line_map, map_starts, rim_line, sampled_map};
+pub use maps::{StepMap, line_map, map_starts, rim_line, sampled_map};
 pub use options::{Backend, PlanOptions};
 pub use result::{PlannedStep, Synthesis};
-pub use settle::{LINGER_GAP, Settle, settle_time};
+pub use settle::{Settle, settle_time};
 pub(crate) use settle::{slowest_settled, start_points, step_duration_ms};
-pub use symmetry::{
-    central_symmetry_sentence, centrally_symmetric, plan_period, symmetry_centre, symmetry_note,
-    symmetry_order,
-};
+pub(crate) use symmetry::{central_symmetry_sentence, symmetry_note};
+pub use symmetry::{plan_period, symmetry_centre, symmetry_order};
 
 /// Everything the search needs, computed once per part and plate.
 #[derive(Debug, Clone)]
@@ -114,7 +115,7 @@ impl Problem {
     }
 
     /// [`Self::new`], advancing `progress` by one after each mode's map.
-    pub fn with_progress(
+    pub(crate) fn with_progress(
         part: &Part,
         plate: &PlateModel,
         opt: &PlanOptions,
@@ -152,7 +153,7 @@ impl Problem {
 
     /// [`Self::search`] with some transitions (orientation, mode) ruled out: the shortest
     /// plan, the first found breadth-first ([`search`]).
-    pub fn search_without(
+    pub(crate) fn search_without(
         &self,
         opt: &PlanOptions,
         forbidden: &[(f64, usize)],

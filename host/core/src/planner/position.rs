@@ -16,8 +16,10 @@
 
 use crate::model::part::Part;
 use crate::model::plate::{Node, PlateModel};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
 use crate::motion::body::PLANNER_BODY_SAMPLES;
-use crate::motion::sim::{self, Body, FieldModel, Pose};
+use crate::motion::field::FieldModel;
 
 use super::{Synthesis, balance_offset};
 
@@ -26,7 +28,7 @@ pub const POSITION_TOL_MM: f64 = 1.0;
 /// Tracked final poses (simulated runs, with the integrator's scatter) fix the position when
 /// every one lies within this (mm) of their mean: a radius, where [`POSITION_TOL_MM`] bounds
 /// the exact region's diameter.
-pub const TRACKED_POSITION_TOL_MM: f64 = 2.0;
+pub(crate) const TRACKED_POSITION_TOL_MM: f64 = 2.0;
 
 /// A fixed position as plans report it: the mean of `points`, rounded to 1 µm.
 fn reported_mean(points: impl ExactSizeIterator<Item = [f64; 2]> + Clone) -> [f64; 2] {
@@ -37,7 +39,7 @@ fn reported_mean(points: impl ExactSizeIterator<Item = [f64; 2]> + Clone) -> [f6
 
 /// The position tracked final poses fix ([`TRACKED_POSITION_TOL_MM`]), rounded to 1 µm, or
 /// `None` when they spread wider.
-pub fn tracked_position(poses: &[Pose]) -> Option<[f64; 2]> {
+pub(crate) fn tracked_position(poses: &[Pose]) -> Option<[f64; 2]> {
     let n = poses.len().max(1) as f64;
     let m =
         [poses.iter().map(|q| q.x).sum::<f64>() / n, poses.iter().map(|q| q.y).sum::<f64>() / n];
@@ -105,7 +107,7 @@ pub fn diameter(pts: &[[f64; 2]]) -> f64 {
 
 /// The fixed final position after `path` (the region's centre, rounded to 1 µm), or `None`
 /// when the region is [`POSITION_TOL_MM`] or more across.
-pub fn fixed_position(
+pub(crate) fn fixed_position(
     part: &Part,
     plate: &PlateModel,
     period: f64,
@@ -121,7 +123,7 @@ pub fn fixed_position(
 /// Runs a plan (as `chladni simulate` does, fixed durations) from the inset plate corners and
 /// centre, 8 orientations each: the largest distance (mm) of a final centroid from
 /// `predicted`.
-pub fn simulated_position_error(
+pub(crate) fn simulated_position_error(
     part: &Part,
     plate: &PlateModel,
     syn: &Synthesis,
@@ -137,7 +139,8 @@ pub fn simulated_position_error(
     for p in points {
         for j in 0..8 {
             let start = Pose { x: p[0], y: p[1], theta: (j as f64 * 45.0 + 7.0).to_radians() };
-            let (poses, _, _) = sim::simulate_plan(&body, plate, &fields, &steps, start);
+            let (poses, _, _) =
+                crate::motion::steps::simulate_plan(&body, plate, &fields, &steps, start);
             let end = poses.last().copied().unwrap_or(start);
             worst = worst.max((end.x - predicted[0]).hypot(end.y - predicted[1]));
         }

@@ -7,7 +7,6 @@ use super::margin::ModeMargin;
 use super::settle::Settle;
 use crate::model::plan_file::{PartPrediction, PlanFile, StepJson, r4};
 use crate::model::plate::PlateModel;
-use crate::motion::sim;
 
 /// One planned step.
 #[derive(Debug, Clone)]
@@ -67,8 +66,11 @@ impl Synthesis {
     }
 
     /// The steps as the simulator runs them (each at its mode's own amplitude).
-    pub fn sim_steps(&self) -> Vec<sim::SimStep> {
-        self.steps.iter().map(|s| sim::SimStep::new(s.mode, s.duration_ms, 1.0)).collect()
+    pub fn sim_steps(&self) -> Vec<crate::motion::steps::SimStep> {
+        self.steps
+            .iter()
+            .map(|s| crate::motion::steps::SimStep::new(s.mode, s.duration_ms, 1.0))
+            .collect()
     }
 
     /// The plan file (device steps plus predictions).

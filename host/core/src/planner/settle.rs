@@ -7,7 +7,10 @@ use rayon::prelude::*;
 
 use super::maps::outside_reach;
 use crate::model::plate::{Mode, PlateModel};
-use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
+use crate::motion::field::FieldModel;
+use crate::motion::integrate::SimParams;
 
 /// Inset plate corners (by the part radius) farthest from a straight node on each side, or
 /// the corners, edge midpoints and centre for curved and grid nodes.
@@ -75,7 +78,7 @@ pub fn settle_time(body: &Body, mode: &Mode, plate: &PlateModel, orientations: &
                     return None;
                 }
                 let q = Pose { x: pt[0], y: pt[1], theta: th.to_radians() };
-                let r = sim::run(body, &field, p, q);
+                let r = crate::motion::integrate::run(body, &field, p, q);
                 if outside_reach(body, mode, plate, r.pose) {
                     edge.store(true, Ordering::Relaxed);
                 }
@@ -94,7 +97,7 @@ pub fn settle_time(body: &Body, mode: &Mode, plate: &PlateModel, orientations: &
 
 /// Ratio between consecutive sorted settle times, above the median, beyond which the slower
 /// starts count as lingering (see `slowest_settled`).
-pub const LINGER_GAP: f64 = 3.0;
+pub(crate) const LINGER_GAP: f64 = 3.0;
 
 /// The slowest of some settle times (s) and how many were left out as lingering: those above
 /// the first gap of more than [`LINGER_GAP`]× between consecutive sorted times above the

@@ -4,7 +4,8 @@
 use crate::model::angle::cdist;
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
-use crate::motion::sim::{Body, FieldModel};
+use crate::motion::body::Body;
+use crate::motion::field::FieldModel;
 
 /// Rotational symmetry order of a part (largest m such that turning it by 360°/m about its
 /// centroid maps it onto itself, vertex for vertex, within 10⁻⁶ of its size).
@@ -59,7 +60,7 @@ pub fn plan_period(part: &Part, plate: &PlateModel) -> f64 {
 /// corners (a point on a diagonal through the centre is equidistant from two crossing lines,
 /// and which is nearest would be a tie of rounding), to 10⁻³ of the largest force (a solver grid's rounding stays far below that; a drive point or clamp off
 /// the centre far above).
-pub fn centrally_symmetric(plate: &PlateModel) -> bool {
+pub(crate) fn centrally_symmetric(plate: &PlateModel) -> bool {
     let [w, h] = plate.size_mm;
     let c = plate.center();
     let pts: Vec<[f64; 2]> = (0..31)
@@ -79,7 +80,7 @@ pub fn centrally_symmetric(plate: &PlateModel) -> bool {
     })
 }
 
-/// The plate centre when every mode is [`centrally_symmetric`] about it.
+/// The plate centre when every mode is centrally symmetric (`centrally_symmetric`) about it.
 pub fn symmetry_centre(plate: &PlateModel) -> Option<[f64; 2]> {
     centrally_symmetric(plate).then(|| plate.center())
 }
@@ -109,7 +110,7 @@ fn one_sided_fixes(feed: bool) -> String {
 /// The sentence naming a plate's central symmetry about `centre` (mm) and what breaks it: one
 /// home for the planner's failures ([`symmetry_note`]) and `plate suggest`'s refusal of a
 /// centrally symmetric plate before any map is made.
-pub fn central_symmetry_sentence(centre: [f64; 2]) -> String {
+pub(crate) fn central_symmetry_sentence(centre: [f64; 2]) -> String {
     format!(
         "every mode's field is centrally symmetric about the plate centre ({:.1}, {:.1}) mm, so \
          a pose and its twin turned 180° about the centre are moved alike by every sequence; \
@@ -124,7 +125,12 @@ pub fn central_symmetry_sentence(centre: [f64; 2]) -> String {
 /// symmetry that keeps them apart and what breaks it; `None` when no two of `set` are 180°
 /// apart modulo the period `p`. `centre`: [`symmetry_centre`]; `feed`: the search ran from a
 /// feed region (`--feed`), so its remedy is another region.
-pub fn symmetry_note(centre: Option<[f64; 2]>, set: &[f64], p: f64, feed: bool) -> Option<String> {
+pub(crate) fn symmetry_note(
+    centre: Option<[f64; 2]>,
+    set: &[f64],
+    p: f64,
+    feed: bool,
+) -> Option<String> {
     let twins = |a: f64, b: f64| cdist(a, b, p) > 1.0 && cdist(a + 180.0, b, p) < 1.0;
     let (a, b) = set.iter().find_map(|&a| set.iter().find(|&&b| twins(a, b)).map(|&b| (a, b)))?;
     Some(match centre {

@@ -25,9 +25,13 @@ use crate::model::angle::cdist;
 use crate::model::part::Part;
 use crate::model::part::mirror::{Face, FaceOf};
 use crate::model::plate::{Node, PlateModel, on_plate};
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
 use crate::motion::bulk::{Drop, run_drops};
+use crate::motion::field::FieldModel;
 use crate::motion::shape::Pieces;
-use crate::motion::sim::{Body, FieldModel, Pose, SimStep, simulate_plan};
+use crate::motion::steps::SimStep;
+use crate::motion::steps::simulate_plan;
 
 /// Drop points across the plate: columns (along x) and rows (along y) of the grid.
 pub const DROP_GRID: [usize; 2] = [6, 4];
@@ -35,7 +39,7 @@ pub const DROP_GRID: [usize; 2] = [6, 4];
 pub const DROP_TURNS: usize = 2;
 /// A drop counts as held when it ends within this of the predicted orientation (deg), as
 /// `chladni simulate`'s default `--tol-deg`.
-pub const DROP_TOL_DEG: f64 = 5.0;
+pub(crate) const DROP_TOL_DEG: f64 = 5.0;
 /// The default of [`PlanOptions::refine_rounds`] in `chladni plan` (`--refine-rounds`).
 pub const REFINE_ROUNDS: usize = 3;
 /// New start points added per round at most (each costs a map's runs per mode).

@@ -23,8 +23,11 @@ use serde::Serialize;
 pub use crate::model::observations::{Measured, Observation};
 use crate::model::part::Part;
 use crate::model::plate::PlateModel;
+use crate::model::pose::Pose;
+use crate::motion::body::Body;
 use crate::motion::contact::Rim;
-use crate::motion::sim::{self, Body, FieldModel, Pose, SimParams};
+use crate::motion::field::FieldModel;
+use crate::motion::integrate::SimParams;
 
 /// The speeds (mm/s) a fit may return: a value outside says the observations do not fit the
 /// model (or its units), not a plate.
@@ -182,9 +185,11 @@ fn models(
     // The rim's contacts are quasi-static too (constraint forces scale with the field's), so
     // a run against the wall keeps the same 1/μ time scaling.
     let p = SimParams { speed: 1.0, t_limit: 1e12, run_to_limit: false, rim: Some(rim) };
-    let runs: Vec<sim::Run> = {
+    let runs: Vec<crate::motion::integrate::Run> = {
         use rayon::prelude::*;
-        obs.par_iter().map(|o| sim::run(&parts[o.part].body, field, p, o.start)).collect()
+        obs.par_iter()
+            .map(|o| crate::motion::integrate::run(&parts[o.part].body, field, p, o.start))
+            .collect()
     };
     obs.iter()
         .zip(runs)

@@ -131,11 +131,11 @@ pub fn total_length(lines: &[Polyline]) -> f64 {
         .sum()
 }
 
-pub use crate::model::geometry::segment_foot;
+pub(crate) use crate::model::geometry::segment_foot;
 
 /// Distance from `p` to the nearest of `lines` (∞ if there are none); a one-point polyline
 /// counts as that point.
-pub fn distance_to(p: [f64; 2], lines: &[Polyline]) -> f64 {
+pub(crate) fn distance_to(p: [f64; 2], lines: &[Polyline]) -> f64 {
     lines
         .iter()
         .flat_map(|l| {

@@ -62,7 +62,7 @@ fn nearest_edge(p: [f64; 2], size_mm: [f64; 2]) -> ([f64; 2], f64) {
 /// Closes the gaps at open node ends: an end within `snap_mm` of the plate edge or of another
 /// node gets the nearest such point appended; a polyline whose two ends are that close (and
 /// that is long enough not to be a blob) is closed.
-pub fn snap_ends(nodes: &[Polyline], size_mm: [f64; 2], snap_mm: f64) -> Vec<Polyline> {
+pub(crate) fn snap_ends(nodes: &[Polyline], size_mm: [f64; 2], snap_mm: f64) -> Vec<Polyline> {
     let target = |p: [f64; 2], k: usize| {
         let other = nearest_on(p, nodes, Some(k));
         let edge = nearest_edge(p, size_mm);

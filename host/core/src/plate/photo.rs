@@ -32,9 +32,11 @@ pub mod synth;
 #[cfg(test)]
 mod tests;
 
-pub use curves::{Curve, douglas_peucker, turning};
-pub use input::{MAX_PIXELS, PhotoError, WORK_PIXELS};
-pub use sand::{box_blur, clean, otsu, sand_mask, skeleton};
+pub(crate) use curves::Curve;
+pub use curves::turning;
+pub use input::PhotoError;
+pub(crate) use sand::sand_mask;
+pub use sand::{clean, skeleton};
 
 /// Tuning of the pipeline.
 #[derive(Debug, Clone)]
@@ -254,14 +256,14 @@ impl Found {
 /// Most of the plate that sand may cover: Otsu splits any picture in two, and on a Chladni
 /// photo the sand (the minority class) is a band along the nodes (the synthetic photos: 6–25 %),
 /// while noise or texture splits about evenly (random noise: 50 %).
-pub const MAX_SAND_FRACTION: f64 = 0.4;
+pub(crate) const MAX_SAND_FRACTION: f64 = 0.4;
 /// Largest RMS distance (pixels) of a line's skeleton pixels from it: a node's skeleton lies
 /// within a pixel of its line (synthetic photos: 0.7–0.9 px), while pixels scattered evenly over
 /// the ±3 px band a line collects have an RMS of 3/√3 ≈ 1.7 px (random noise: 1.5–1.6 px).
-pub const MAX_LINE_RMS_PX: f64 = 1.2;
+pub(crate) const MAX_LINE_RMS_PX: f64 = 1.2;
 /// Least skeleton pixels per pixel of a line's length: a node's skeleton is continuous
 /// (synthetic photos: 1.0–1.1), a line through a maze of noise is not (0.6–0.9).
-pub const MIN_LINE_COVERAGE: f64 = 0.9;
+pub(crate) const MIN_LINE_COVERAGE: f64 = 0.9;
 
 /// Nodes found, but not convincingly: the measure that failed, with its value and bound.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

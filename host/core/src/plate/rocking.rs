@@ -11,7 +11,7 @@ use crate::plate::solver::ModalSolution;
 pub const DEFAULT_ROCKING_HZ: f64 = 10.0;
 
 /// Highest rocking frequency whatever the plate (Hz).
-pub const MAX_ROCKING_HZ: f64 = 2000.0;
+pub(crate) const MAX_ROCKING_HZ: f64 = 2000.0;
 
 /// Why a plate cannot rock at the frequency asked for.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

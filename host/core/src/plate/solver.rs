@@ -82,7 +82,7 @@ pub enum Support {
 }
 
 /// Gauss–Legendre nodes and weights on [−1, 1] (Newton iteration on `P_n`).
-pub fn gauss_legendre(n: usize) -> (Vec<f64>, Vec<f64>) {
+pub(crate) fn gauss_legendre(n: usize) -> (Vec<f64>, Vec<f64>) {
     let mut x = vec![0.0; n];
     let mut w = vec![0.0; n];
     for k in 0..n {
@@ -256,13 +256,14 @@ fn null_space(c: &DMatrix<f64>, m: usize) -> DMatrix<f64> {
     DMatrix::from_fn(m, keep.len(), |r, k| eig.eigenvectors[(r, keep[k])])
 }
 
+#[cfg(test)]
 /// Non-dimensional modal analysis: returns `(λ, coefficients)` pairs ascending, elastic only.
-pub fn solve_nondim(setup: &Setup, terms: usize) -> Vec<(f64, Vec<f64>)> {
+pub(crate) fn solve_nondim(setup: &Setup, terms: usize) -> Vec<(f64, Vec<f64>)> {
     solve_nondim_all(setup, terms).into_iter().filter(|(lam, _)| *lam >= RIGID_LAMBDA).collect()
 }
 
 /// Every mode of the Ritz problem, rigid-body motions (λ ≈ 0) included, ascending.
-pub fn solve_nondim_all(setup: &Setup, terms: usize) -> Vec<(f64, Vec<f64>)> {
+pub(crate) fn solve_nondim_all(setup: &Setup, terms: usize) -> Vec<(f64, Vec<f64>)> {
     let n = terms;
     let m = n * n;
     let k = stiffness(n, setup.aspect, setup.poisson);
@@ -304,7 +305,7 @@ impl Setup {
 }
 
 /// Hz per unit of λ for a plate: `f = λ/(2π a²)·√(D/ρh)`.
-pub fn hz_per_lambda(plate: &Plate) -> f64 {
+pub(crate) fn hz_per_lambda(plate: &Plate) -> f64 {
     let a = plate.size_mm[0] * 1e-3;
     let h = plate.thickness_mm * 1e-3;
     let e = plate.youngs_modulus_gpa * 1e9;
@@ -344,7 +345,7 @@ pub fn grid_dims(nx: usize, size: [f64; 2]) -> (usize, usize) {
 
 /// `w(p) = Σ q_ij p_i(ξ) p_j(η)` of Ritz coefficients `q` (`terms` per direction) at plate
 /// point `p` (mm) of a plate of `size` (mm).
-pub fn value_at(q: &[f64], terms: usize, size: [f64; 2], p: [f64; 2]) -> f64 {
+pub(crate) fn value_at(q: &[f64], terms: usize, size: [f64; 2], p: [f64; 2]) -> f64 {
     let bx = basis(terms, 2.0 * p[0] / size[0] - 1.0);
     let by = basis(terms, 2.0 * p[1] / size[1] - 1.0);
     (0..terms * terms).map(|k| q[k] * bx[0][k / terms] * by[0][k % terms]).sum()
@@ -352,7 +353,8 @@ pub fn value_at(q: &[f64], terms: usize, size: [f64; 2], p: [f64; 2]) -> f64 {
 
 impl ModalSolution {
     /// Mode `index`'s shape at plate point `p` (mm), unnormalised Ritz units.
-    pub fn value_at(&self, index: usize, p: [f64; 2]) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn value_at(&self, index: usize, p: [f64; 2]) -> f64 {
         value_at(&self.modes[index].coeffs, self.terms, self.size_mm, p)
     }
 
@@ -363,7 +365,13 @@ impl ModalSolution {
 }
 
 /// Samples Ritz coefficients `q` on an `nx × ny` grid (both ≥ 2), normalised as [`Grid`] says.
-pub fn sample_coeffs(q: &[f64], terms: usize, size_mm: [f64; 2], nx: usize, ny: usize) -> Grid {
+pub(crate) fn sample_coeffs(
+    q: &[f64],
+    terms: usize,
+    size_mm: [f64; 2],
+    nx: usize,
+    ny: usize,
+) -> Grid {
     let n = terms;
     let bx: Vec<Vec<f64>> =
         (0..nx).map(|i| basis(n, -1.0 + 2.0 * i as f64 / (nx - 1) as f64)[0].clone()).collect();

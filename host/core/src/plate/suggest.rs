@@ -40,7 +40,7 @@ use crate::plate::{drive, rocking};
 
 /// Drive points tried, as fractions of [W, H]: off the mid-lines and diagonals, so no
 /// symmetry of a rectangular plate maps one onto a node of every mode.
-pub const DRIVE_FRACTIONS: [[f64; 2]; 3] = [[0.3, 0.37], [0.69, 0.28], [0.4, 0.73]];
+pub(crate) const DRIVE_FRACTIONS: [[f64; 2]; 3] = [[0.3, 0.37], [0.69, 0.28], [0.4, 0.73]];
 
 /// Clamp sets tried, as fractions of [W, H], in this order: one support near a corner, one on
 /// an edge off its middle (a node on the rim, a wall the field pushes parts against), in turn
@@ -48,7 +48,7 @@ pub const DRIVE_FRACTIONS: [[f64; 2]; 3] = [[0.3, 0.37], [0.69, 0.28], [0.4, 0.7
 /// plate φ² stays symmetric whatever the drive point (docs/plate.md, "Drive point"), a support
 /// off the centre and off both mid-lines is what breaks a pose's 180° twin and its mirror
 /// image, so a short budget is spent where plans are.
-pub const CLAMP_FRACTIONS: [&[[f64; 2]]; 7] = [
+pub(crate) const CLAMP_FRACTIONS: [&[[f64; 2]]; 7] = [
     &[[0.1, 0.12]],
     &[[0.3, 0.0]],
     &[[0.88, 0.1]],
@@ -216,7 +216,11 @@ pub fn candidates(size: [f64; 2]) -> Vec<Candidate> {
 
 /// The forced responses as `[[mode]]` entries (the entries `plate modes --write-modes`
 /// writes for a drive point, less a hinged-rod plate's forced rocking).
-pub fn forced_entries(forced: &drive::Forced, all: &ModalSolution, grid: usize) -> Vec<ModeEntry> {
+pub(crate) fn forced_entries(
+    forced: &drive::Forced,
+    all: &ModalSolution,
+    grid: usize,
+) -> Vec<ModeEntry> {
     let sol = forced.as_solution(all);
     let (nx, ny) = solver::grid_dims(grid, all.size_mm);
     forced
@@ -379,7 +383,7 @@ fn try_candidate(
 /// The refusal of a plate whose every mode is centrally symmetric for a part whose period
 /// does not divide 180° (a pose and its twin turned 180° about the centre end 180° apart
 /// modulo the period, whatever the sequence); `None` otherwise.
-pub fn symmetric_refusal(part: &Part, model: &PlateModel) -> Option<String> {
+pub(crate) fn symmetric_refusal(part: &Part, model: &PlateModel) -> Option<String> {
     let c = planner::symmetry_centre(model)?;
     let p = planner::plan_period(part, model);
     let k = 180.0 / p;

@@ -80,7 +80,7 @@ impl Link {
     }
 
     /// Sends `request` and returns the body of the answer with the session and id of it.
-    pub fn exchange(&mut self, request: Request) -> Result<Response, DeviceError> {
+    pub(crate) fn exchange(&mut self, request: Request) -> Result<Response, DeviceError> {
         let name = request.name();
         let id = self.send(request, Tamper::None)?;
         self.wait_answer(id, name)

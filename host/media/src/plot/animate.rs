@@ -21,8 +21,8 @@ use super::plan::{
 use super::{PlotError, text, write_figure};
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::PlateModel;
+use chladni_core::model::pose::Pose;
 use chladni_core::motion::montecarlo::{Setup, TRACED_TRIALS, Trials};
-use chladni_core::motion::sim::Pose;
 
 /// The most frames an animation has (keeps the file small: the README's is well under 1 MB).
 pub const MAX_FRAMES: usize = 120;

@@ -18,8 +18,12 @@ use super::{Figure, PlotError, text, write_chart};
 use chladni_core::model::feed_region::FeedRegion;
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::{Mode, Node, PlateModel};
+use chladni_core::model::pose::Pose;
+use chladni_core::motion::body::Body;
+use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::montecarlo::{self, Setup, Trials};
-use chladni_core::motion::sim::{Body, FieldModel, Pose, SimStep, simulate_plan};
+use chladni_core::motion::steps::SimStep;
+use chladni_core::motion::steps::simulate_plan;
 use chladni_core::planner::Synthesis;
 use chladni_core::plate::contour;
 use chladni_core::rng::Rng;
@@ -29,7 +33,7 @@ fn err<E: std::fmt::Display>(e: E) -> String {
 }
 
 /// Polylines of a mode's node inside the plate (mm).
-pub fn node_polylines(mode: &Mode, plate: &PlateModel) -> Vec<Vec<(f64, f64)>> {
+pub(crate) fn node_polylines(mode: &Mode, plate: &PlateModel) -> Vec<Vec<(f64, f64)>> {
     let [w, h] = plate.size_mm;
     let inside = |p: [f64; 2]| p[0] >= 0.0 && p[0] <= w && p[1] >= 0.0 && p[1] <= h;
     let runs = |pts: Vec<[f64; 2]>| {
@@ -137,7 +141,7 @@ where
 }
 
 /// One example start: the pose before each step and after the last.
-pub type Example = Vec<Pose>;
+pub(crate) type Example = Vec<Pose>;
 
 /// The plan figure: `examples[r][k]` is the pose before step k (and `[steps]` the end).
 /// PNG or SVG by the extension of `path` (see `plot::write_chart`).

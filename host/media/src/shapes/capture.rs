@@ -11,7 +11,7 @@ use chladni_core::planner::capture::{Band, CaptureZone, InZone, edge_name};
 /// "outside_mm", "clear_box_mm", "message"}`: `outside_mm` is the plate minus the zone (a
 /// `--feed` box, or null), `clear_box_mm` the plate past each band's `clear_mm`, where one
 /// mode takes no sampled drop to the clamp (a `--feed` box, or null).
-pub fn zone_json(zone: &CaptureZone, plate: &PlateModel) -> Value {
+pub(crate) fn zone_json(zone: &CaptureZone, plate: &PlateModel) -> Value {
     json!({"bands": bands_json(&zone.bands), "radius_mm": r4(zone.radius_mm),
         "floor_mm_s": zone.floor_mm_s, "outside_mm": zone.outside_mm(plate),
         "clear_box_mm": zone.clear_box_mm(plate),
@@ -30,7 +30,7 @@ fn bands_json(bands: &[Band]) -> Vec<Value> {
 
 /// The failure's zone: [`zone_json`]'s keys with `failed_in` and `failed` (its failed drops
 /// that start in the zone, of all).
-pub fn in_zone_json(z: &InZone) -> Value {
+pub(crate) fn in_zone_json(z: &InZone) -> Value {
     json!({"bands": bands_json(&z.zone.bands), "radius_mm": r4(z.zone.radius_mm),
         "floor_mm_s": z.zone.floor_mm_s, "outside_mm": z.outside_mm,
         "clear_box_mm": z.clear_box_mm,

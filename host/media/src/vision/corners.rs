@@ -217,7 +217,7 @@ fn intersect((p, d): ([f64; 2], [f64; 2]), (q, e): ([f64; 2], [f64; 2])) -> Opti
 
 /// The plate's corners (photo pixels, x right, y down; bottom-left, bottom-right, top-right,
 /// top-left), found from the plate's contrast with its surroundings.
-pub fn find_corners(img: &GrayImage) -> Result<[[f64; 2]; 4], LocateError> {
+pub(crate) fn find_corners(img: &GrayImage) -> Result<[[f64; 2]; 4], LocateError> {
     let k = img.width().max(img.height()).div_ceil(ROUGH_SIDE_PX).max(1);
     let small = rough_corners(&plate_mask(&shrink(img, k))?)?;
     // Shrunk pixel i spans photo pixels [k·i, k·(i + 1)): continuous positions scale by k.
@@ -251,7 +251,7 @@ pub fn find_corners(img: &GrayImage) -> Result<[[f64; 2]; 4], LocateError> {
 
 /// The square-on view of the plate (`size_mm`) whose corners sit at `corners` in the photo,
 /// with square pixels as fine as the photo's finest view of the plate: (image, mm per pixel).
-pub fn rectify_square(
+pub(crate) fn rectify_square(
     img: &GrayImage,
     corners: [[f64; 2]; 4],
     size_mm: [f64; 2],

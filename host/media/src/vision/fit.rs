@@ -116,7 +116,7 @@ impl Fitted {
 
 impl View<'_> {
     /// Continuous pixel coordinates (pixel i spans [i, i + 1)) of plate point `q` (mm).
-    pub fn to_px(&self, q: [f64; 2]) -> [f64; 2] {
+    pub(crate) fn to_px(&self, q: [f64; 2]) -> [f64; 2] {
         [q[0] / self.pix, (self.h_mm - q[1]) / self.pix]
     }
 
@@ -149,7 +149,7 @@ impl View<'_> {
 
     /// Signed distance (mm, along `n`) from `q` to the edge crossing nearest it, if the grey
     /// profile there has one with enough contrast.
-    pub fn edge_offset(&self, q: [f64; 2], n: [f64; 2]) -> Option<f64> {
+    pub(crate) fn edge_offset(&self, q: [f64; 2], n: [f64; 2]) -> Option<f64> {
         let steps = (2.0 * PROFILE_PX / STEP_PX) as usize;
         let mut v = [0.0f64; 16];
         let v = &mut v[..=steps.min(15)];

@@ -42,15 +42,15 @@ pub mod verify;
 use fit::{Fitted, Sample, View};
 
 /// A part must cover at least this many pixels in the rectified photo to be located.
-pub const MIN_PART_PX: f64 = 200.0;
+pub(crate) const MIN_PART_PX: f64 = 200.0;
 /// Blobs smaller than this (mm²) are dust, not reported.
-pub const MIN_BLOB_MM2: f64 = 2.0;
+pub(crate) const MIN_BLOB_MM2: f64 = 2.0;
 /// Share of the outline whose edge must be found for a lone part's pose to be reported.
-pub const ACCEPT_SCORE: f64 = 0.8;
+pub(crate) const ACCEPT_SCORE: f64 = 0.8;
 /// The same for a part touching another (its contact edge is lost).
-pub const ACCEPT_TOUCHING: f64 = 0.55;
+pub(crate) const ACCEPT_TOUCHING: f64 = 0.55;
 /// A blob's area within this ratio of a part's counts as that part's.
-pub const AREA_TOLERANCE: f64 = 0.15;
+pub(crate) const AREA_TOLERANCE: f64 = 0.15;
 /// A chiral part's face is told when its better face's [`Fitted::quality`] beats the other
 /// face's by at least this; closer, `face_certain` is false. Measured at 0.5 mm per pixel: the
 /// example key's faces differ by 0.09, the example triangle's (its mirror image within 0.3 mm

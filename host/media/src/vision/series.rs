@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 
 use crate::vision::{self, LocateError, Located, Template};
 use chladni_core::model::part::Part;
-use chladni_core::motion::sim::Pose;
+use chladni_core::model::pose::Pose;
 use chladni_core::plate::photo::input::{self, PhotoError};
 
 use chladni_core::model::observations::{Measured, Observation};

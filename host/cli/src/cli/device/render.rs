@@ -369,7 +369,11 @@ mod tests {
             serde_json::to_value(PlansJson { free_bytes: 1000, plans: vec![PlanJson::from(&p)] })
                 .unwrap();
         assert_eq!(keys(&v), ["free_bytes", "plans"]);
-        assert_eq!(keys(&v["plans"][0]), ["bytes", "crc", "name", "slot", "steps", "total_ms"]);
+        assert_eq!(
+            keys(&v["plans"][0]),
+            ["bytes", "crc", "name", "repeat", "slot", "steps", "total_ms"]
+        );
+        assert_eq!(v["plans"][0]["repeat"], 2);
         assert_eq!(v["plans"][0]["crc"], 0xdead_beef_u32);
         assert_eq!(v["plans"][0]["name"], "a");
     }

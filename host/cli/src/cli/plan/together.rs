@@ -10,10 +10,12 @@ use chladni_core::model::part::Part;
 use chladni_core::model::part::mirror::{Face, Faces};
 use chladni_core::model::plan_file::PlanFile;
 use chladni_core::model::plate::PlateModel;
+use chladni_core::motion::body::Body;
 use chladni_core::motion::bulk::{self, BulkReport, CannotPlace, Drop, Drops};
+use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::montecarlo::Trials;
 use chladni_core::motion::shape::Pieces;
-use chladni_core::motion::sim::{Body, FieldModel, SimStep};
+use chladni_core::motion::steps::SimStep;
 
 use super::{SimulateArgs, bad};
 

@@ -253,7 +253,7 @@ fn unmodelled_entities(text: &str) -> Vec<String> {
 }
 
 /// Reads a drawing already in hand (see the module docs).
-pub fn from_drawing(
+pub(crate) fn from_drawing(
     drawing: &Drawing,
     name: &str,
     opt: &ImportOptions,

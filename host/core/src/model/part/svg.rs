@@ -24,7 +24,7 @@ use usvg::tiny_skia_path::{PathSegment, Point};
 use super::{Part, PartError, inside, signed_area, svg_non_finite};
 
 /// mm per CSS pixel (96 px = 1 in = 25.4 mm).
-pub const MM_PER_PX: f64 = 25.4 / 96.0;
+pub(crate) const MM_PER_PX: f64 = 25.4 / 96.0;
 /// Deepest curve subdivision: 2¹⁶ chords per segment at most.
 const MAX_DEPTH: u32 = 16;
 

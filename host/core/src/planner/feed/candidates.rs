@@ -247,7 +247,7 @@ fn check(
 
 /// The largest final orientation error (deg, mod the part's period) of the plan run as the
 /// simulator runs it (fixed step durations,
-/// [`simulate_plan`](crate::motion::sim::simulate_plan)) from `starts`, each part against its
+/// [`simulate_plan`](crate::motion::steps::simulate_plan)) from `starts`, each part against its
 /// own prediction `thetas[part]`, the part it was measured on, and the starts whose error
 /// exceeds `bound`. Starts go in batches of 64 (each batch in parallel); after a batch with an
 /// error above `bound` the rest are skipped, so a rejected plan costs less (the result then
@@ -285,7 +285,7 @@ fn checked_error(
 mod tests {
     use super::*;
     use crate::model::plate::PlateModel;
-    use crate::motion::sim::Pose;
+    use crate::model::pose::Pose;
     use crate::planner::feed::{FeedSearch, interleaved_starts, tests::tracker, tracked_starts};
 
     /// The exhaustive confirmation: every candidate tracked, then checked in order of (total

@@ -215,7 +215,7 @@ mod tests {
     use super::*;
     use crate::model::part::Part;
     use crate::model::plate::PlateModel;
-    use crate::motion::sim::Body;
+    use crate::motion::body::Body;
     use std::collections::HashSet;
 
     /// On a straight node with the same field on both sides (four-lines' "vertical", x = 150

@@ -1,6 +1,7 @@
 //! Curved nodes from synthetic photos: recovery accuracy against the drawn curves, and the
 //! grid node built from them.
 
+use super::curves::douglas_peucker;
 use super::synth::{Scene, arc, hyperbola, render};
 use super::*;
 use crate::model::modes_file;

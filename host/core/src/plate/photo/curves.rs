@@ -190,7 +190,7 @@ fn chains(m: &Mask) -> Vec<Vec<usize>> {
 /// Indices of the points Douglas–Peucker keeps at tolerance `tol`: both ends, then, span by
 /// span, the point farthest from the span's chord while it is farther than `tol`. A closed
 /// chain (first == last) has a zero-length chord, so its first split is the farthest point.
-pub fn douglas_peucker(pts: &[[f64; 2]], tol: f64) -> Vec<usize> {
+pub(crate) fn douglas_peucker(pts: &[[f64; 2]], tol: f64) -> Vec<usize> {
     if pts.len() < 3 {
         return (0..pts.len()).collect();
     }

@@ -88,7 +88,7 @@ fn decode_checked<R: std::io::BufRead + std::io::Seek>(
 }
 
 /// The photo scaled down (area-averaging) to at most [`WORK_PIXELS`], or as it is.
-pub fn working_size(img: GrayImage) -> GrayImage {
+pub(crate) fn working_size(img: GrayImage) -> GrayImage {
     let (w, h) = img.dimensions();
     let px = u64::from(w) * u64::from(h);
     if px <= WORK_PIXELS {
@@ -102,7 +102,7 @@ pub fn working_size(img: GrayImage) -> GrayImage {
 /// Refuses a plate size whose aspect ratio contradicts a photo cropped to the plate: the
 /// ratios W/H of `size_mm` and of the `w`×`h` px photo must agree within 15 % (cropping by eye
 /// and lens distortion are a few %), else the message names both and the likely swap.
-pub fn check_aspect(size_mm: [f64; 2], w: u32, h: u32) -> Result<(), String> {
+pub(crate) fn check_aspect(size_mm: [f64; 2], w: u32, h: u32) -> Result<(), String> {
     let plate = size_mm[0] / size_mm[1];
     let photo = w as f64 / h as f64;
     if (plate / photo).ln().abs() <= 1.15f64.ln() {

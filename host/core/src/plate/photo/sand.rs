@@ -13,7 +13,7 @@ use super::{Mask, PhotoParams};
 /// hand: imageproc's `box_filter` rounds each pass down to 8 bits and replicates the edge pixels,
 /// and with it a blank synthetic plate gave a spurious curve and the lentil arc came out whole in
 /// 4 of 6 photos instead of 5 (`curve_tests`).
-pub fn box_blur(img: &GrayImage, r: usize) -> Vec<f32> {
+pub(crate) fn box_blur(img: &GrayImage, r: usize) -> Vec<f32> {
     let (w, h) = (img.width() as usize, img.height() as usize);
     let src: Vec<f32> = img.as_raw().iter().map(|&v| v as f32).collect();
     let pass = |src: &[f32], len: usize, count: usize, stride: usize, step: usize| -> Vec<f32> {
@@ -33,10 +33,11 @@ pub fn box_blur(img: &GrayImage, r: usize) -> Vec<f32> {
     pass(&horiz, h, w, 1, w)
 }
 
+#[cfg(test)]
 /// Otsu's threshold of 8-bit values: the t maximising the between-class variance of
 /// {v ≤ t} and {v > t} (imageproc's `otsu_level`; its sums are u32, so the caller keeps
 /// images under 16 MP: [`super::input::WORK_PIXELS`]).
-pub fn otsu(values: &[u8]) -> u8 {
+pub(crate) fn otsu(values: &[u8]) -> u8 {
     let len = u32::try_from(values.len()).unwrap_or(u32::MAX);
     GrayImage::from_raw(len, 1, values.to_vec())
         .map_or(0, |img| imageproc::contrast::otsu_level(&img))
@@ -44,12 +45,12 @@ pub fn otsu(values: &[u8]) -> u8 {
 
 impl Mask {
     /// The mask as an 8-bit image (set = 255).
-    pub fn to_image(&self) -> GrayImage {
+    pub(crate) fn to_image(&self) -> GrayImage {
         let raw = self.px.iter().map(|&b| if b { 255 } else { 0 }).collect();
         GrayImage::from_raw(self.w as u32, self.h as u32, raw).unwrap_or_default()
     }
     /// The non-zero pixels of an 8-bit image.
-    pub fn from_image(img: &GrayImage) -> Mask {
+    pub(crate) fn from_image(img: &GrayImage) -> Mask {
         let px = img.as_raw().iter().map(|&v| v > 0).collect();
         Mask { w: img.width() as usize, h: img.height() as usize, px }
     }
@@ -114,7 +115,7 @@ fn removable(m: &Mask, i: usize, pass: usize) -> bool {
 /// Sand mask of a photo: a small blur merges the grains, a large blur estimates the plate's
 /// uneven lighting, Otsu thresholds their difference and the minority class is the sand.
 /// Returns (mask, threshold, sand_is_dark).
-pub fn sand_mask(img: &GrayImage, p: &PhotoParams) -> (Mask, u8, bool) {
+pub(crate) fn sand_mask(img: &GrayImage, p: &PhotoParams) -> (Mask, u8, bool) {
     let (w, h) = (img.width() as usize, img.height() as usize);
     let side = w.min(h) as f64;
     let small = box_blur(img, ((side * p.blur).round() as usize).max(1));

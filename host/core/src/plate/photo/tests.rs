@@ -1,5 +1,6 @@
 //! Straight-line accuracy on synthetic photos, and the pipeline's building blocks.
 
+use super::sand::otsu;
 use super::synth::{Scene, render};
 use super::*;
 
