@@ -112,10 +112,18 @@ fn a_stack_overflow_parks_the_output_and_the_watchdog_resets() {
             "after the reset: state Idle, amplitude 0, output code 2048",
         ],
     );
+    let used = code_after(&log, "failsafe: the fault handler used ")
+        .unwrap_or_else(|| panic!("no fault stack figure:\n{log}"));
+    // The handler must leave a margin on its own stack (2048 B): a deeper path would
+    // overflow it into the statics below.
+    assert!((1..=1536).contains(&used), "the fault handler used {used} B of 2048:\n{log}");
     assert_eq!(
         code,
         Some(0),
         "exit code (0 idle after the reset; 11 not idle, 4 no overflow, 102/103 no reset):\n{log}"
     );
-    println!("crash=stack-overflow: output {before} -> parked at {DAC_MID}, reset cause Watchdog");
+    println!(
+        "crash=stack-overflow: output {before} -> parked at {DAC_MID}, reset cause Watchdog, \
+         fault stack {used} B of 2048"
+    );
 }

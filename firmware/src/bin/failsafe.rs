@@ -18,7 +18,7 @@
 
 use chladni_firmware::app::drive::{self, Command, DriveShared};
 use chladni_firmware::app::watchdog::{ResetCause, Supervisor, TaskSet, watchdog_task};
-use chladni_firmware::board::{self, qemu::failsafe, qemu::flash};
+use chladni_firmware::board::{self, fault_entry, qemu::failsafe, qemu::flash};
 use chladni_shared::drive::dds::DAC_MID;
 use chladni_shared::icd::link::DriveState;
 use embassy_time::{Duration, Instant, Timer};
@@ -144,6 +144,12 @@ fn main() -> ! {
     let cause = board::reset_cause();
     defmt::println!("failsafe: boot, reset cause {}", cause);
     if cause != ResetCause::PowerOn {
+        // The fault stack was painted before the crash and survives QEMU's reset.
+        defmt::println!(
+            "failsafe: the fault handler used {=u32} B of the {=usize} B fault stack",
+            fault_entry::high_water(),
+            fault_entry::FAULT_STACK_SIZE
+        );
         // Not started again: this boot only checks what the reset left.
         let _unstarted = board.watchdog;
         board::run(|spawner| {
@@ -151,6 +157,7 @@ fn main() -> ! {
             spawner.spawn(check_idle_task().expect("check task: spawn pool exhausted"));
         })
     }
+    fault_entry::paint();
     let mut arg = [0u8; 256];
     let crash = match flash::cmdline_arg("crash", &mut arg) {
         Some("panic") => Crash::Panic,

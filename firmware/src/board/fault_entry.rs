@@ -16,7 +16,8 @@
 //! `.HardFault.*` section, which that link.x keeps in `.text`.
 
 /// Bytes of the fault stack: the fault handlers park (register writes), log through defmt
-/// (semihosting or RTT) and halt or reset; their deepest path measured under 1 KiB.
+/// (semihosting or RTT) and wait for the watchdog. Their use is measured by the QEMU
+/// `failsafe` image ([`paint`], [`high_water`]; docs/firmware.md has the figure).
 pub const FAULT_STACK_SIZE: usize = 2048;
 
 /// The stack the HardFault handler runs on, 8-byte aligned as AAPCS wants at a call. In
@@ -63,6 +64,21 @@ impl FaultEntry {
         self.cfsr() & (CFSR_STKERR | CFSR_MSTKERR) != 0 || self.sp < bottom
     }
 
+    /// Logs the fault: a stack overflow with the SP and CFSR, else the faulting PC.
+    pub fn log(&self) {
+        if self.stack_overflow() {
+            defmt::error!(
+                "hard fault: stack overflow (sp {=u32:#010x}, CFSR {=u32:#010x})",
+                self.sp,
+                self.cfsr()
+            );
+        } else if let Some(pc) = self.pc() {
+            defmt::error!("hard fault at pc {=u32:#010x}", pc);
+        } else {
+            defmt::error!("hard fault (sp {=u32:#010x}: no frame to read)", self.sp);
+        }
+    }
+
     /// The faulting instruction's address from the exception frame, if the frame is there
     /// to read (not after a stack overflow: the push that would have written it failed).
     pub fn pc(&self) -> Option<u32> {
@@ -75,6 +91,35 @@ impl FaultEntry {
         // core wrote it on entry (no stacking error); word 6 is the stacked PC.
         Some(unsafe { (self.sp as *const u32).add(6).read_volatile() })
     }
+}
+
+/// The fault stack's words, bottom first.
+fn fault_stack_words() -> *mut u32 {
+    core::ptr::addr_of_mut!(FAULT_STACK).cast::<u32>()
+}
+
+const FAULT_STACK_WORDS: usize = FAULT_STACK_SIZE / 4;
+
+/// Fills the fault stack with `board::stack::PAINT`, so that [`high_water`] can tell later
+/// how much of it a fault used. Only while no fault runs (the `failsafe` image, at boot).
+pub fn paint() {
+    let words = fault_stack_words();
+    for i in 0..FAULT_STACK_WORDS {
+        // SAFETY: inside FAULT_STACK, which only the HardFault handler uses (not running).
+        unsafe { words.add(i).write_volatile(super::stack::PAINT) };
+    }
+}
+
+/// Bytes of the fault stack used since [`paint`]: from the bottom, the words still painted
+/// are unused. (RAM that was never painted reads as all used.) Survives QEMU's reset: the
+/// stack is in `.uninit`.
+pub fn high_water() -> u32 {
+    let words = fault_stack_words();
+    // SAFETY: reads stay inside FAULT_STACK; any bit pattern is a valid u32.
+    let unused = (0..FAULT_STACK_WORDS)
+        .take_while(|&i| unsafe { words.add(i).read_volatile() } == super::stack::PAINT)
+        .count();
+    ((FAULT_STACK_WORDS - unused) * 4) as u32
 }
 
 /// Called by the entry code on the fault stack. Never returns.

@@ -110,17 +110,7 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 /// started returns at once, and QEMU exits with the code that says what the output did.
 pub(crate) fn hard_fault(entry: crate::board::fault_entry::FaultEntry) -> ! {
     park_output();
-    if entry.stack_overflow() {
-        defmt::error!(
-            "hard fault: stack overflow (sp {=u32:#010x}, CFSR {=u32:#010x})",
-            entry.sp,
-            entry.cfsr()
-        );
-    } else if let Some(pc) = entry.pc() {
-        defmt::error!("hard fault at pc {=u32:#010x}", pc);
-    } else {
-        defmt::error!("hard fault (sp {=u32:#010x}: no frame to read)", entry.sp);
-    }
+    entry.log();
     let code = report_output(EXIT_HARD_FAULT_PARKED);
     super::watchdog::run_out();
     super::exit(code)

@@ -145,17 +145,7 @@ pub(crate) fn hard_fault(entry: crate::board::fault_entry::FaultEntry) -> ! {
     park_output();
     detach_usb();
     if !PANICKED.load(Ordering::Relaxed) {
-        if entry.stack_overflow() {
-            defmt::error!(
-                "hard fault: stack overflow (sp {=u32:#010x}, CFSR {=u32:#010x})",
-                entry.sp,
-                entry.cfsr()
-            );
-        } else if let Some(pc) = entry.pc() {
-            defmt::error!("hard fault at pc {=u32:#010x}", pc);
-        } else {
-            defmt::error!("hard fault (sp {=u32:#010x}: no frame to read)", entry.sp);
-        }
+        entry.log();
         report_output();
     }
     halt()
