@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Builds, checks or tests the firmware for one board, always in target/firmware so that the
 # host-side `cargo test` (which may build the QEMU image itself) never waits on its lock.
-#   scripts/firmware.sh build  qemu|stm32l475   -> prints the ELF path (one per board)
+#   scripts/firmware.sh build  qemu|stm32l475   -> prints the ELF path (one per board) on stdout
+#                                                  and the image's sizes on stderr
 #   scripts/firmware.sh clippy qemu|stm32l475
 #   scripts/firmware.sh test   qemu             -> on-target tests in QEMU
 #   scripts/firmware.sh size   qemu|stm32l475
@@ -10,7 +11,9 @@
 #   scripts/firmware.sh run    qemu             -> boot in QEMU, defmt log on stdout (Ctrl-C ends;
 #                                                  `chladni emulator` is the one with a link)
 #   scripts/firmware.sh run    stm32l475        -> flash the board with probe-rs, then its defmt
-#                                                  log over RTT (installs probe-rs-tools if missing)
+#                                                  log over RTT (installs probe-rs-tools if missing);
+#                                                  the probe does not catch HardFault or reset, so
+#                                                  the firmware's own handlers run (fail-safe, watchdog)
 #   scripts/firmware.sh bench  qemu             -> per-sample cost of the drive (QEMU -icount)
 #   scripts/firmware.sh bench-link qemu         -> instructions of UploadChunk and RunPlan (-icount)
 #   scripts/firmware.sh build-bin qemu NAME     -> builds firmware/src/bin/NAME, prints its ELF path
@@ -50,6 +53,15 @@ esac
 args=(-p chladni-firmware --target thumbv7em-none-eabihf --profile firmware
       --features "$features" --target-dir target/firmware)
 elf=target/firmware/thumbv7em-none-eabihf/firmware/chladni-firmware
+# One line of an image's sizes: flash = vector table + text + rodata + data, static RAM =
+# data + bss + uninit (the stack has SRAM2 to itself). `sizes` reads fields 4 and 8.
+image_size() {
+  arm-none-eabi-size -A "$1" | awk -v b="$2" '
+    $1 ~ /^\.(vector_table|text|rodata)$/ {flash += $2}
+    $1 ~ /^\.data$/ {flash += $2; ram += $2}
+    $1 ~ /^\.(bss|uninit)$/ {ram += $2}
+    END {printf "firmware %s: flash %d B, static RAM %d B\n", b, flash, ram}'
+}
 case "$cmd" in
   build)
     # Both boards link to the same path; keep one copy per board. Build and copy under one
@@ -60,21 +72,23 @@ case "$cmd" in
       cargo build "${args[@]}" --bin chladni-firmware >&2
       cp "$elf" "target/firmware/chladni-firmware-$board.elf"
     ) 9>target/firmware/.build.lock
+    [ -n "${FIRMWARE_SIZE_QUIET:-}" ] || image_size "target/firmware/chladni-firmware-$board.elf" "$board" >&2
     echo "target/firmware/chladni-firmware-$board.elf" ;;
   clippy) cargo clippy "${args[@]}" --all-targets -- -D warnings ;;
   test) cargo test "${args[@]}" ;;
-  size) elf=$("$0" build "$board") && arm-none-eabi-size -A "$elf" | awk -v b="$board" '
-          $1 ~ /^\.(vector_table|text|rodata)$/ {flash += $2}
-          $1 ~ /^\.data$/ {flash += $2; ram += $2}
-          $1 ~ /^\.(bss|uninit)$/ {ram += $2}
-          END {printf "firmware %s: flash %d B, static RAM %d B\n", b, flash, ram}' ;;
+  size) elf=$(FIRMWARE_SIZE_QUIET=1 "$0" build "$board") && image_size "$elf" "$board" ;;
   run)
     elf=$("$0" build "$board")
     if [ "$board" = qemu ]; then
       QEMU_TIMEOUT=${QEMU_TIMEOUT:-86400} exec scripts/qemu-run.sh "$elf"
     fi
     scripts/install-deps.sh --board
-    exec probe-rs run --chip "${CHLADNI_CHIP:-STM32L475VGTx}" ${CHLADNI_PROBE:+--probe "$CHLADNI_PROBE"} "$elf" ;;
+    # probe-rs 0.32 halts the core at the HardFault and reset vectors by default (vector
+    # catch), before the fail-safe parks the output and with TIM6 frozen by the debug freeze;
+    # --no-catch-hardfault/--no-catch-reset let the firmware's handlers and the watchdog's
+    # reset run as they do without a probe.
+    exec probe-rs run --chip "${CHLADNI_CHIP:-STM32L475VGTx}" ${CHLADNI_PROBE:+--probe "$CHLADNI_PROBE"} \
+      --no-catch-hardfault --no-catch-reset "$elf" ;;
   bench) [ "$board" = qemu ] || { echo "bench runs on the qemu board only" >&2; exit 2; }
          elf=$("$0" build-bin qemu bench_drive) &&
          QEMU_EXTRA="-icount shift=0" scripts/qemu-run.sh "$elf" ;;

@@ -1,7 +1,9 @@
 //! Fail-safe in QEMU: the firmware's `failsafe` image drives the simulated DAC through the real
-//! drive task, then panics or takes a HardFault; the board's handlers must park the output at
-//! mid-scale before anything else, report the parked code and end QEMU with the exit code
-//! that says "fault, output parked" (101 panic, 102 HardFault; 103 would mean NOT parked).
+//! drive task, then panics, takes a HardFault or overflows its stack; the board's handlers
+//! must park the output at mid-scale before anything else, report the parked code and end
+//! QEMU with the exit code that says "fault, output parked" (101 panic, 102 HardFault; 103
+//! would mean NOT parked). After a stack overflow the watchdog must reset the machine and the
+//! second boot read the cause `Watchdog` and find the drive idle (exit 0).
 
 use std::process::Command;
 use std::sync::OnceLock;
@@ -45,6 +47,16 @@ fn run(crash: &str) -> (Option<i32>, String) {
     (out.status.code(), log)
 }
 
+/// Checks that `lines` appear in `log` in this order.
+fn assert_in_order(log: &str, lines: &[&str]) {
+    let mut at = 0;
+    for line in lines {
+        let found =
+            log[at..].find(line).unwrap_or_else(|| panic!("no '{line}' (in order):\n{log}"));
+        at += found + line.len();
+    }
+}
+
 /// The number after `prefix` on the first log line that has it.
 fn code_after(log: &str, prefix: &str) -> Option<u16> {
     let rest = &log[log.find(prefix)? + prefix.len()..];
@@ -75,4 +87,43 @@ fn a_panic_parks_the_output_at_mid_scale() {
 #[test]
 fn a_hard_fault_parks_the_output_at_mid_scale() {
     assert_parks("hardfault", "hard fault at pc", EXIT_HARD_FAULT_PARKED);
+}
+
+/// Real recursion runs the stack off the bottom of SRAM2: the core cannot push its exception
+/// frame, and a HardFault handler that used that stack would lock the core up (QEMU:
+/// "Lockup: can't escalate"), the output still driven. The entry code moves to the fault
+/// stack first; the handler parks, the watchdog resets, the next boot reads `Watchdog`.
+#[test]
+fn a_stack_overflow_parks_the_output_and_the_watchdog_resets() {
+    let (code, log) = run("stack-overflow");
+    let before = code_after(&log, "failsafe: driving, output at code ")
+        .unwrap_or_else(|| panic!("the drive never ran before the crash:\n{log}"));
+    assert!(before.abs_diff(DAC_MID) >= 256, "output {before} was not driven before the crash");
+    assert!(!log.contains("Lockup"), "the core locked up in the fault handler:\n{log}");
+    assert_in_order(
+        &log,
+        &[
+            "failsafe: boot, reset cause PowerOn",
+            "crash by StackOverflow",
+            "hard fault: stack overflow",
+            "fault: output parked at code 2048",
+            "watchdog: not fed for 1000 ms: reset",
+            "failsafe: boot, reset cause Watchdog",
+            "after the reset: state Idle, amplitude 0, output code 2048",
+        ],
+    );
+    let used = code_after(&log, "failsafe: the fault handler used ")
+        .unwrap_or_else(|| panic!("no fault stack figure:\n{log}"));
+    // The handler must leave a margin on its own stack (2048 B): a deeper path would
+    // overflow it into the statics below.
+    assert!((1..=1536).contains(&used), "the fault handler used {used} B of 2048:\n{log}");
+    assert_eq!(
+        code,
+        Some(0),
+        "exit code (0 idle after the reset; 11 not idle, 4 no overflow, 102/103 no reset):\n{log}"
+    );
+    println!(
+        "crash=stack-overflow: output {before} -> parked at {DAC_MID}, reset cause Watchdog, \
+         fault stack {used} B of 2048"
+    );
 }

@@ -120,11 +120,13 @@ mod image {
         let drive = board::start_drive_executor();
         drive.spawn(drive_task(board.drive).expect("drive task: spawn pool exhausted"));
         board::run(|spawner| {
+            // The watchdog first: on the board the IWDG has run since the start of
+            // `board::init` (its boot window); its task sets the running timeout.
+            spawner
+                .spawn(watchdog_task(board.watchdog).expect("watchdog task: spawn pool exhausted"));
             spawner.spawn(link_task(board.link, link).expect("link task: spawn pool exhausted"));
             spawner.spawn(stack_task().expect("stack task: spawn pool exhausted"));
             spawner.spawn(sense_task(board.sensor).expect("sense task: spawn pool exhausted"));
-            spawner
-                .spawn(watchdog_task(board.watchdog).expect("watchdog task: spawn pool exhausted"));
             board::spawn_tasks(spawner, board.tasks);
         })
     }

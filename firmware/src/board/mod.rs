@@ -36,4 +36,5 @@ const fn board_tag(name: &str) -> [u8; BOARD_TAG_LEN] {
     tag
 }
 
+pub mod fault_entry;
 pub mod stack;

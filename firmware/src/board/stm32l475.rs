@@ -90,7 +90,8 @@ pub type DriveOutput = dac::DacOutput;
 #[cfg(feature = "drive-pwm")]
 pub type DriveOutput = pwm::PwmOutput;
 
-/// The watchdog: the IWDG, configured by [`init`], started by the watchdog task.
+/// The watchdog: the IWDG, started by [`init`] first thing with a boot window, set to its
+/// running timeout by the watchdog task.
 pub type Watchdog = watchdog::Watchdog;
 
 pub use watchdog::reset_cause;
@@ -109,7 +110,8 @@ pub struct Board {
     pub sensor: Sensor,
     /// This board's background work, for [`spawn_tasks`].
     pub tasks: BoardTasks,
-    /// The independent watchdog, not started: `app::watchdog::watchdog_task` starts it.
+    /// The independent watchdog, running with its boot window since the start of [`init`];
+    /// `app::watchdog::watchdog_task` sets the running timeout.
     pub watchdog: Watchdog,
 }
 
@@ -135,9 +137,11 @@ bind_interrupts!(struct Irqs {
 /// Brings the board up: clocks, the debug console's banner, USB, flash bank 2, then the drive
 /// output (last, so that nothing blocking runs once its DMA plays).
 pub fn init() -> Board {
-    // The stack first (nothing deep has run yet), then the reset flags, whoever asks for them
-    // later: reading also clears them.
+    // The stack first (nothing deep has run yet), then the watchdog (before anything that can
+    // hang: `embassy_stm32::init` waits for the LSE and the PLLs without a limit), then the
+    // reset flags, whoever asks for them later: reading also clears them.
     super::stack::paint();
+    watchdog::start_for_boot();
     let cause = reset_cause();
     let p = embassy_stm32::init(clocks::config());
     clocks::check();

@@ -268,6 +268,10 @@ pub enum SensorError {
     BadThreshold(u16),
     /// CTRL3_C.SW_RESET never cleared after a software reset.
     ResetStuck,
+    /// An operation on the sensor did not finish within its time limit (the bus hung: a
+    /// device holding SCL or SDA, or a driver waiting for an event that never comes). Set by
+    /// the sense task, which bounds every operation (`task::OP_LIMIT`).
+    Timeout,
 }
 
 impl SensorError {
@@ -280,6 +284,7 @@ impl SensorError {
             SensorError::Bus => "I2C bus error",
             SensorError::BadThreshold(_) => "FIFO threshold out of range",
             SensorError::ResetStuck => "sensor software reset did not complete",
+            SensorError::Timeout => "I2C operation timed out (bus hung)",
         }
     }
 
@@ -289,9 +294,10 @@ impl SensorError {
             SensorError::Nack => SensorFault::Nack,
             SensorError::WrongId(id) => SensorFault::WrongId(id),
             SensorError::Overrun => SensorFault::Overrun,
-            SensorError::Bus | SensorError::BadThreshold(_) | SensorError::ResetStuck => {
-                SensorFault::Bus
-            }
+            SensorError::Bus
+            | SensorError::BadThreshold(_)
+            | SensorError::ResetStuck
+            | SensorError::Timeout => SensorFault::Bus,
         }
     }
 

@@ -357,6 +357,7 @@ fn error_names_are_distinct() {
         SensorError::Bus,
         SensorError::BadThreshold(0),
         SensorError::ResetStuck,
+        SensorError::Timeout,
     ];
     for (i, a) in all.iter().enumerate() {
         assert!(!a.name().is_empty());
@@ -455,4 +456,108 @@ fn the_pacer_gives_the_odr_exactly_over_time() {
         let total: u64 = (0..2000).map(|_| u64::from(pacer.advance(250, odr))).sum();
         assert_eq!(total * 1000, u64::from(odr.millihertz()) * 10, "{odr:?}");
     }
+}
+
+// ---- The sense task on a bus that hangs ----
+
+use core::cell::RefCell;
+
+use chladni_shared::icd::sense::SensorFault;
+use embassy_futures::select::{Either, select};
+use embassy_time::{Duration, Instant, Timer};
+
+use super::task::{self, DataReady, SenseSink};
+use crate::app::watchdog::{Supervisor, Task, TaskSet};
+
+/// Records what the sense task reports.
+#[derive(Default)]
+struct Recorder {
+    faults: RefCell<Vec<SensorFault>>,
+    batches: RefCell<usize>,
+}
+
+impl SenseSink for Recorder {
+    fn set_scale(&self, _: f32, _: u32) {}
+    fn push_batch(&self, _: &[i16]) {
+        *self.batches.borrow_mut() += 1;
+    }
+    fn push_error(&self, fault: SensorFault) {
+        self.faults.borrow_mut().push(fault);
+    }
+}
+
+/// INT1 that is always high: the task reads as often as it can.
+struct AlwaysReady;
+
+impl DataReady for AlwaysReady {
+    async fn wait(&mut self) {}
+}
+
+/// The simulated sensor, whose bus hangs for good (a transfer that never completes) after
+/// `left` transactions.
+struct HangAfter {
+    sim: SimLsm6dsl,
+    left: usize,
+}
+
+impl ErrorType for HangAfter {
+    type Error = super::sim::SimError;
+}
+
+impl I2c<SevenBitAddress> for HangAfter {
+    async fn transaction(
+        &mut self,
+        address: u8,
+        operations: &mut [Operation<'_>],
+    ) -> Result<(), Self::Error> {
+        if self.left == 0 {
+            return core::future::pending().await;
+        }
+        self.left -= 1;
+        self.sim.transaction_sync(address, operations)
+    }
+}
+
+/// Runs the sense task on `bus` until it has reported `faults` faults and the supervisor has
+/// seen it check in that many times since the first fault (the watchdog's question, asked
+/// every 10 ms); fails after 10 s. Returns the recorder.
+fn run_until_faults(bus: HangAfter, faults: usize) -> Recorder {
+    let supervisor = Supervisor::new(TaskSet::of(&[Task::Sense]));
+    let recorder = Recorder::default();
+    let checker = async {
+        let start = Instant::now();
+        let mut check_ins = 0;
+        while recorder.faults.borrow().len() < faults || check_ins < faults {
+            assert!(
+                start.elapsed() < Duration::from_secs(10),
+                "after 10 s: {} fault(s) reported, {check_ins} check-in(s) seen",
+                recorder.faults.borrow().len()
+            );
+            Timer::after_millis(10).await;
+            if supervisor.poll() && !recorder.faults.borrow().is_empty() {
+                check_ins += 1;
+            }
+        }
+    };
+    let mut irq = AlwaysReady;
+    match block_on(select(task::run(&recorder, &supervisor, bus, &mut irq), checker)) {
+        Either::First(never) => never,
+        Either::Second(()) => recorder,
+    }
+}
+
+#[test]
+fn a_bus_that_hangs_at_set_up_is_a_fault_and_the_task_keeps_checking_in() {
+    let recorder = run_until_faults(HangAfter { sim: SimLsm6dsl::new(), left: 0 }, 3);
+    let faults = recorder.faults.borrow();
+    assert!(faults.iter().all(|f| *f == SensorError::Timeout.fault()), "{faults:?}");
+    assert_eq!(*recorder.batches.borrow(), 0);
+}
+
+#[test]
+fn a_bus_that_hangs_mid_read_is_a_fault_and_the_task_keeps_checking_in() {
+    // Set-up takes 7 transactions plus the reset polls; the sim's reset is immediate (one
+    // poll), so 20 leave room for a few reads before the hang.
+    let recorder = run_until_faults(HangAfter { sim: SimLsm6dsl::new(), left: 20 }, 3);
+    assert_eq!(recorder.faults.borrow()[0], SensorError::Timeout.fault());
 }

@@ -102,9 +102,16 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     super::exit(report_output(EXIT_PANIC_PARKED))
 }
 
-#[cortex_m_rt::exception]
-unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+/// The HardFault handler, entered on the fault stack (`board::fault_entry`), so it runs after a
+/// stack overflow too: park, log, then do what the real board does. There the core halts
+/// with the output parked and the IWDG, if started, resets the controller within its
+/// timeout; here [`super::watchdog::run_out`] counts the simulated watchdog's remaining time
+/// down and resets the machine (the next boot reads `Watchdog`). A watchdog that was never
+/// started returns at once, and QEMU exits with the code that says what the output did.
+pub(crate) fn hard_fault(entry: crate::board::fault_entry::FaultEntry) -> ! {
     park_output();
-    defmt::error!("hard fault at pc {=u32:#010x}", frame.pc());
-    super::exit(report_output(EXIT_HARD_FAULT_PARKED))
+    entry.log();
+    let code = report_output(EXIT_HARD_FAULT_PARKED);
+    super::watchdog::run_out();
+    super::exit(code)
 }

@@ -95,6 +95,26 @@ pub fn on_tick() {
     }
 }
 
+/// From a fault handler (interrupts can no longer run): lets the started watchdog's remaining
+/// time run out as the real IWDG does while the core is halted, counting SysTick's wraps by
+/// its COUNTFLAG instead of its interrupt, then resets through [`on_tick`]. Returns at once
+/// if the watchdog was never started.
+pub fn run_out() {
+    /// SYST_CSR; bit 16 is COUNTFLAG (set at each wrap, cleared by the read).
+    const SYST_CSR: *const u32 = 0xE000_E010 as *const u32;
+    if critical_section::with(|cs| COUNTDOWN.borrow(cs).get()).is_none() {
+        return;
+    }
+    defmt::error!("fault: halted; the watchdog resets the controller when it runs out");
+    loop {
+        // SAFETY: SYST_CSR is an always-readable System Control Space register; reading it
+        // only clears COUNTFLAG, which nothing else reads once a fault handler runs.
+        if unsafe { SYST_CSR.read_volatile() } & (1 << 16) != 0 {
+            on_tick();
+        }
+    }
+}
+
 /// Resets the controller on purpose: recorded as [`ResetCause::Software`].
 pub fn software_reset() -> ! {
     reset_with(CODE_SOFTWARE)

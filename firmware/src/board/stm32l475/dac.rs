@@ -6,12 +6,18 @@
 //! `WritableRingBuffer`, which starts full of the mid-scale codes it was given). If the DMA
 //! catches up with the writer (a refill missed its half period) the ring reports an overrun
 //! and resets itself: counted as an underrun.
+//!
+//! **Quiet boot.** embassy-stm32 0.6.0's `DacChannel::new_blocking` resets the DAC (DHR = 0)
+//! and enables the channel in one call, with no hook in between: the output would step from
+//! a floating pin to 0 V, then to mid-scale when the ring's first code arrives, a click into
+//! the amplifier at every reset. So the channel is set up here by register, in an order that
+//! never outputs anything but mid-scale: [`enable_at_mid_scale`].
 
+use chladni_shared::drive::dds::DAC_MID;
 use chladni_shared::drive::runner::BLOCK_LEN;
 use chladni_shared::icd::units::SAMPLE_RATE;
-use embassy_stm32::dac::{self, DacChannel};
+use embassy_stm32::dac;
 use embassy_stm32::dma::{self, TransferOptions, WritableRingBuffer};
-use embassy_stm32::mode::Blocking;
 use embassy_stm32::peripherals;
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::{MasterMode, RoundTo, Timer};
@@ -23,7 +29,9 @@ use crate::app::drive::{SampleOutput, Underrun};
 /// DAC1 channel 1 on PA4, triggered by TIM6 TRGO, fed by circular DMA over two blocks.
 pub struct DacOutput {
     ring: WritableRingBuffer<'static, u32>,
-    _dac: DacChannel<'static, Blocking>,
+    // Held so that nothing else takes the DAC or its pin; they are driven by register.
+    _dac: embassy_stm32::Peri<'static, peripherals::DAC1>,
+    _pin: embassy_stm32::Peri<'static, peripherals::PA4>,
     _timer: Timer<'static, peripherals::TIM6>,
 }
 
@@ -35,21 +43,12 @@ impl DacOutput {
         tim6: embassy_stm32::Peri<'static, peripherals::TIM6>,
     ) -> Self {
         static BUF: StaticCell<[u32; 2 * BLOCK_LEN]> = StaticCell::new();
-        let buf = BUF.init([u32::from(chladni_shared::drive::dds::DAC_MID); 2 * BLOCK_LEN]);
+        let buf = BUF.init([u32::from(DAC_MID); 2 * BLOCK_LEN]);
 
-        // The DAC channel (clock, analog pin); then trigger and DMA request by register, since
-        // the ring buffer owns the DMA channel rather than the DAC driver.
-        let dac_ch = DacChannel::new_blocking(dac1, pa4);
         let trigger = <embassy_stm32::triggers::TIM6_TRGO as dac::ChannelTrigger<
             peripherals::DAC1,
         >>::signal(&embassy_stm32::triggers::TIM6_TRGO);
-        pac::DAC1.cr().modify(|w| {
-            w.set_en(0, false);
-            w.set_tsel(0, trigger);
-            w.set_ten(0, true);
-            w.set_dmaen(0, true);
-        });
-        pac::DAC1.cr().modify(|w| w.set_en(0, true));
+        let code = enable_at_mid_scale(trigger);
 
         let request =
             <peripherals::DMA1_CH3 as dac::Dma<peripherals::DAC1, dac::Ch1>>::request(&dma_ch);
@@ -68,9 +67,44 @@ impl DacOutput {
         timer.set_frequency(Hertz(SAMPLE_RATE), RoundTo::Slower);
         timer.regs_basic().cr2().modify(|w| w.set_mms(MasterMode::UPDATE));
         timer.start();
-        defmt::info!("drive: DAC1 ch1 at {} S/s (TIM6 {} Hz)", SAMPLE_RATE, update_rate(&timer));
-        Self { ring, _dac: dac_ch, _timer: timer }
+        defmt::info!(
+            "drive: DAC1 ch1 at {} S/s (TIM6 {} Hz), enabled at code {=u16}",
+            SAMPLE_RATE,
+            update_rate(&timer),
+            code
+        );
+        Self { ring, _dac: dac1, _pin: pa4, _timer: timer }
     }
+}
+
+/// DAC1 channel 1 (index 0 in the metapac's per-channel fields) and its pin, PA4.
+const CH1: usize = 0;
+const PA4: usize = 4;
+
+/// Clocks and resets DAC1, then enables channel 1 so that the first thing on PA4 is
+/// mid-scale; returns DOR1 as read just before the enable (2048 when all went as planned).
+///
+/// Order (RM0351, DAC): with TEN1 = 0 a DHR12R1 write reaches DOR1 one APB clock later, so
+/// DOR1 holds [`DAC_MID`] before anything else; TSEL1, TEN1 and DMAEN1 may be written only
+/// while EN1 = 0, and with TEN1 = 1 DOR1 changes only at a trigger (TIM6 has not started),
+/// so when EN1 goes to 1 the buffer drives DOR1 = mid-scale, and the ring (full of mid-scale
+/// codes) takes over at the first trigger. Mode: normal, buffer on, external pin (MCR = 0,
+/// its reset value, as embassy's `new_blocking` sets it).
+fn enable_at_mid_scale(trigger: u8) -> u16 {
+    pac::RCC.apb1enr1().modify(|w| w.set_dac1en(true));
+    pac::RCC.apb1rstr1().modify(|w| w.set_dac1rst(true));
+    pac::RCC.apb1rstr1().modify(|w| w.set_dac1rst(false));
+    pac::GPIOA.moder().modify(|w| w.set_moder(PA4, pac::gpio::vals::Moder::ANALOG));
+    pac::DAC1.dhr12r(CH1).write(|w| w.set_dhr(DAC_MID));
+    // DOR1 follows one APB clock after the write; this read is later than that.
+    let code = pac::DAC1.dor(CH1).read().dor();
+    pac::DAC1.cr().modify(|w| {
+        w.set_tsel(CH1, trigger);
+        w.set_ten(CH1, true);
+        w.set_dmaen(CH1, true);
+    });
+    pac::DAC1.cr().modify(|w| w.set_en(CH1, true));
+    code
 }
 
 /// The timer's update rate as the hardware makes it: clock / (PSC + 1) / (ARR + 1), rounded.

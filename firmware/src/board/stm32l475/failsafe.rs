@@ -1,5 +1,7 @@
 //! Fail-safe for the B-L475E-IOT01A: on a panic or a HardFault the drive output is parked at
-//! mid-scale before anything else happens, then the fault is logged and the core stops.
+//! mid-scale before anything else happens, then the fault is logged and the core waits for the
+//! IWDG's reset. The HardFault handler runs on a stack of its own (`board::fault_entry`), so a
+//! stack overflow parks the output too.
 //!
 //! The drive runs without the CPU: TIM6 triggers the DAC and circular DMA keeps feeding it from
 //! the two-block ring. A crash that only stopped the CPU would leave the DMA replaying the last
@@ -13,7 +15,9 @@
 //! crate's handler cannot be linked next to ours (duplicate `panic_impl` lang item), so this
 //! module does what panic-probe does, in a safe order: park, disable interrupts, guard against
 //! recursion, print the message through defmt (panic-probe's `print-defmt`), then `udf` into
-//! HardFault (panic-probe's `hard_fault()`), which probe-rs reports with a backtrace.
+//! HardFault (panic-probe's `hard_fault()`). `scripts/firmware.sh run` starts probe-rs with
+//! `--no-catch-hardfault --no-catch-reset`, so the probe does not halt the core at the
+//! HardFault vector before this handler has parked the output.
 //!
 //! With the PWM drive (feature `drive-pwm`) parking means: stop its DMA and hold 50 % duty,
 //! the PWM's mid-scale, with TIM3 left running (see [`super::pwm::park`]).
@@ -100,12 +104,13 @@ fn report_output() {
     }
 }
 
-/// Stops here for good: the output is parked, which is the safe idle state.
+/// Waits here with the output parked, the safe idle state, until the IWDG (started at boot)
+/// resets the controller, within its 1 s timeout.
 ///
-/// Halt rather than reset: a reset would take the DAC off (PA4 floating), then boot through a
-/// moment where the DAC is enabled at code 0 before the ring's mid-scale codes arrive, i.e. two
-/// steps into the amplifier; and it would erase the RAM a debugger needs to see what happened.
-/// Halted, the DAC holds mid-scale and the link stays silent until someone power-cycles.
+/// No reset of our own: the handler has nothing to gain from one, and waiting keeps the RAM
+/// a debugger wants to read for as long as the watchdog allows (and for good under a
+/// debugger, which freezes the IWDG while the core is halted). The reset then takes the DAC
+/// off (PA4 floats: no drive) and the next boot enables it at mid-scale (`dac.rs`).
 fn halt() -> ! {
     loop {
         cortex_m::asm::wfi();
@@ -121,25 +126,26 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
         defmt::error!("panic: {}", defmt::Display2Format(info));
         report_output();
     }
-    hard_fault()
+    escalate_to_hard_fault()
 }
 
 /// panic-probe's `hard_fault()`: make sure `udf` escalates to HardFault (UsageFault disabled),
 /// so a probe sees the same fault as from any other crash.
-fn hard_fault() -> ! {
+fn escalate_to_hard_fault() -> ! {
     // SAFETY: only clears USGFAULTENA in SHCSR; nothing else depends on UsageFault.
     unsafe { (*cortex_m::peripheral::SCB::PTR).shcsr.modify(|v| v & !(1 << 18)) };
     cortex_m::asm::udf()
 }
 
-// SAFETY (of defining the handler, which cortex-m-rt marks unsafe): it only parks through raw
-// register writes, logs and halts; it never returns into the faulting code.
-#[cortex_m_rt::exception]
-unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+/// The HardFault handler, entered on the fault stack (`board::fault_entry`), so it runs after a
+/// stack overflow too: park, detach, log, halt. The IWDG, started at boot, keeps counting
+/// while the core waits here (it freezes only while a debugger halts the core), so the
+/// controller resets within its timeout and the next boot reads the cause `Watchdog`.
+pub(crate) fn hard_fault(entry: crate::board::fault_entry::FaultEntry) -> ! {
     park_output();
     detach_usb();
     if !PANICKED.load(Ordering::Relaxed) {
-        defmt::error!("hard fault at pc {=u32:#010x}", frame.pc());
+        entry.log();
         report_output();
     }
     halt()

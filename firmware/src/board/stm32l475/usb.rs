@@ -7,24 +7,10 @@
 //! - [`UsbDevice`] is the device side of the USB protocol (enumeration, control requests,
 //!   suspend/resume), which must be polled all the time: [`run`] in a task of its own.
 //!
-//! Stream rules, and why:
-//! - **Reads** return the bytes of one received packet at a time; a caller with a small buffer
-//!   gets the rest of the packet on its next reads. Before the host has configured the device
-//!   (cable out, not enumerated yet) a read *waits* for that instead of failing, so an idle link
-//!   costs nothing. A read that was waiting when the bus went away (unplug, bus reset, host
-//!   deconfigured the device) returns [`UsbLinkError::Disconnected`] once, so the app can drop a
-//!   half-received frame; the next read waits again. Zero-length packets from the host are not
-//!   an end of stream (there is none) and are skipped.
-//! - **Writes** take the whole buffer, in packets of at most [`PACKET_SIZE`] bytes. A write that
-//!   ends with a full packet is followed by a zero-length packet: a bulk IN transfer ends only
-//!   at a short packet, so without it the host's USB stack keeps those bytes (the end of a
-//!   reply) until the next write comes, perhaps never (embassy-usb's CDC class never sends a
-//!   ZLP itself). Each packet waits until the host has taken the one before it; when no program
-//!   has the port open, hosts stop asking for data and a write waits until one does (like a UART
-//!   with flow control); it does not time out here: the app's link gives each frame
-//!   `app::link::WRITE_LIMIT` and drops it after (docs/firmware.md, "A host that stops
-//!   reading"). Writing before the device is configured fails at once with
-//!   [`UsbLinkError::Disconnected`].
+//! The stream's rules (packets, the zero-length-packet rule, what an unplug does without VBUS
+//! sensing) are board-independent, in `app::usb` ([`PacketStream`], tested on the host); this
+//! module adapts embassy-usb's CDC-ACM endpoints to its traits and keeps its [`BusState`]
+//! through an embassy-usb [`Handler`](embassy_usb::Handler) on the device.
 //! - **DTR** ([`UsbLink::host_port_open`]) is reported, never used to gate data: Linux and macOS
 //!   raise it when a program opens the port, but the `serialport` crate leaves it low on
 //!   Windows, so a gate would lock Windows hosts out. Frames already survive a client change:
@@ -33,15 +19,13 @@
 use embassy_stm32::peripherals::{PA11, PA12, USB_OTG_FS};
 use embassy_stm32::{Peri, usb};
 use embassy_usb::class::cdc_acm::{self, CdcAcmClass, Receiver, Sender};
-use embassy_usb::driver::EndpointError;
 use static_cell::StaticCell;
 
 use chladni_shared::icd::link::{USB_PID, USB_PRODUCT, USB_VID};
 
 use super::Irqs;
-
-/// Largest packet of the CDC data endpoints (full speed bulk maximum), bytes.
-pub const PACKET_SIZE: usize = 64;
+use crate::app::usb::{BusState, EndpointError, InEndpoint, OutEndpoint, PacketStream};
+pub use crate::app::usb::{PACKET_SIZE, UsbLinkError};
 
 /// Packet buffer of the OTG driver: one [`PACKET_SIZE`] slot per OUT endpoint, i.e. the
 /// control endpoint 0 and the CDC data OUT endpoint (the driver refuses to allocate an OUT
@@ -61,113 +45,67 @@ pub type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
 /// The USB device: enumeration and control requests. Keep [`run`] running.
 pub type UsbDevice = embassy_usb::UsbDevice<'static, UsbDriver>;
 
-/// Why a read or write on the USB link failed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
-pub enum UsbLinkError {
-    /// The host has not configured the device, or the bus went away during the read.
-    Disconnected,
-    /// A packet longer than [`PACKET_SIZE`] arrived (the endpoint is declared with that size,
-    /// so a host cannot send one).
-    PacketTooLong,
-}
+/// The bus state the device's handler keeps and the link's writes read.
+static BUS: BusState = BusState::new();
 
-impl core::fmt::Display for UsbLinkError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str(match self {
-            Self::Disconnected => "USB host not connected",
-            Self::PacketTooLong => "USB packet longer than the endpoint's maximum",
-        })
+/// embassy-usb's endpoint error in `app::usb`'s terms.
+fn endpoint_error(error: embassy_usb::driver::EndpointError) -> EndpointError {
+    match error {
+        embassy_usb::driver::EndpointError::Disabled => EndpointError::Disabled,
+        embassy_usb::driver::EndpointError::BufferOverflow => EndpointError::BufferOverflow,
     }
 }
 
-impl core::error::Error for UsbLinkError {}
-
-impl embedded_io_async::Error for UsbLinkError {
-    fn kind(&self) -> embedded_io_async::ErrorKind {
-        match self {
-            Self::Disconnected => embedded_io_async::ErrorKind::NotConnected,
-            Self::PacketTooLong => embedded_io_async::ErrorKind::InvalidData,
-        }
+impl InEndpoint for Sender<'static, UsbDriver> {
+    async fn write_packet(&mut self, data: &[u8]) -> Result<(), EndpointError> {
+        Sender::write_packet(self, data).await.map_err(endpoint_error)
     }
 }
 
-impl From<EndpointError> for UsbLinkError {
-    fn from(error: EndpointError) -> Self {
-        match error {
-            EndpointError::Disabled => Self::Disconnected,
-            EndpointError::BufferOverflow => Self::PacketTooLong,
-        }
+impl OutEndpoint for Receiver<'static, UsbDriver> {
+    async fn wait_connection(&mut self) {
+        Receiver::wait_connection(self).await
+    }
+
+    async fn read_packet(&mut self, buf: &mut [u8]) -> Result<usize, EndpointError> {
+        // Cancel-safe: the driver copies a packet out (and re-arms the endpoint) only in the
+        // poll that returns it.
+        Receiver::read_packet(self, buf).await.map_err(endpoint_error)
     }
 }
 
-/// The CDC-ACM data interface as a byte stream (see the module documentation for its rules).
-pub struct UsbLink {
-    sender: Sender<'static, UsbDriver>,
-    receiver: Receiver<'static, UsbDriver>,
-    /// The last packet received; `packet[start..end]` has not been read yet.
-    packet: [u8; PACKET_SIZE],
-    start: usize,
-    end: usize,
-}
+/// The host link: the CDC-ACM data interface as `app::usb`'s byte stream.
+pub type UsbLink = PacketStream<Sender<'static, UsbDriver>, Receiver<'static, UsbDriver>>;
 
 impl UsbLink {
     /// Whether the host holds DTR high, i.e. (on Linux and macOS) a program has the port open.
     /// Informational: see the module documentation for why data never waits for it.
     pub fn host_port_open(&self) -> bool {
-        self.receiver.dtr()
-    }
-
-    /// Waits for the next non-empty packet into `self.packet`.
-    async fn receive(&mut self) -> Result<(), UsbLinkError> {
-        loop {
-            // Returns at once when the host has configured the device.
-            self.receiver.wait_connection().await;
-            // Cancel-safe: the driver copies a packet out (and re-arms the endpoint) only in
-            // the poll that returns it, and `start`/`end` are set in that same poll.
-            let len = self.receiver.read_packet(&mut self.packet).await?;
-            if len > 0 {
-                self.start = 0;
-                self.end = len;
-                return Ok(());
-            }
-        }
+        self.out_endpoint().dtr()
     }
 }
 
-impl embedded_io_async::ErrorType for UsbLink {
-    type Error = UsbLinkError;
-}
+/// Keeps [`BUS`] from the device's events (embassy-usb calls these from [`run`]).
+struct BusHandler;
 
-impl embedded_io_async::Read for UsbLink {
-    async fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
-        if buf.is_empty() {
-            return Ok(0);
+impl embassy_usb::Handler for BusHandler {
+    fn enabled(&mut self, enabled: bool) {
+        if !enabled {
+            BUS.reset();
         }
-        if self.start == self.end {
-            self.receive().await?;
-        }
-        let len = buf.len().min(self.end - self.start);
-        buf[..len].copy_from_slice(&self.packet[self.start..self.start + len]);
-        self.start += len;
-        Ok(len)
-    }
-}
-
-impl embedded_io_async::Write for UsbLink {
-    async fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
-        for packet in buf.chunks(PACKET_SIZE) {
-            self.sender.write_packet(packet).await?;
-        }
-        if !buf.is_empty() && buf.len().is_multiple_of(PACKET_SIZE) {
-            // The last packet was full: end the transfer (see the module documentation).
-            self.sender.write_packet(&[]).await?;
-        }
-        Ok(buf.len())
     }
 
-    /// Every written byte is already with the USB core (sent at the host's next IN token).
-    async fn flush(&mut self) -> Result<(), Self::Error> {
-        Ok(())
+    fn reset(&mut self) {
+        BUS.reset();
+    }
+
+    fn configured(&mut self, configured: bool) {
+        BUS.configured(configured);
+    }
+
+    fn suspended(&mut self, suspended: bool) {
+        BUS.suspended(suspended);
+        defmt::info!("usb: bus {} (an unplug looks the same: no VBUS sensing)", BUS.get());
     }
 }
 
@@ -184,6 +122,7 @@ pub fn new(
     static BOS: StaticCell<[u8; BOS_DESCRIPTOR]> = StaticCell::new();
     static CONTROL: StaticCell<[u8; CONTROL_BUFFER]> = StaticCell::new();
     static CDC_STATE: StaticCell<cdc_acm::State<'static>> = StaticCell::new();
+    static HANDLER: StaticCell<BusHandler> = StaticCell::new();
 
     // No VBUS sensing (embassy's default, and it would need VBUS wired to PA9): the device pulls
     // DP up as soon as the USB task runs, and a host sees it whenever a cable is in. (Strictly,
@@ -208,11 +147,11 @@ pub fn new(
         &mut [], // no Microsoft OS descriptors
         CONTROL.init([0; CONTROL_BUFFER]),
     );
+    builder.handler(HANDLER.init(BusHandler));
     let class =
         CdcAcmClass::new(&mut builder, CDC_STATE.init(cdc_acm::State::new()), PACKET_SIZE as u16);
     let (sender, receiver) = class.split();
-    let link = UsbLink { sender, receiver, packet: [0; PACKET_SIZE], start: 0, end: 0 };
-    (link, builder.build())
+    (PacketStream::new(sender, receiver, &BUS), builder.build())
 }
 
 /// Runs the USB device for ever: answers the host's enumeration and control requests, and

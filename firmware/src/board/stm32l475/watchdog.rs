@@ -1,8 +1,8 @@
 //! The B-L475E-IOT01A's watchdog: the independent watchdog (IWDG) on the LSI, and the reset
 //! cause from RCC_CSR.
 //!
-//! Timeout: [`TIMEOUT_US`] = 1 s at the LSI's nominal 32 kHz (embassy-stm32 picks prescaler
-//! /8 and reload 3999: 4000 ticks of 250 µs). The LSI is an RC oscillator: the STM32L475
+//! Timeout: [`TIMEOUT_MS`] = 1 s at the LSI's nominal 32 kHz (prescaler /8 and reload 3999:
+//! 4000 ticks of 250 µs). The LSI is an RC oscillator: the STM32L475
 //! datasheet gives 31.04–32.96 kHz at 3 V and 30 °C and 29.5–34 kHz over the full voltage and
 //! temperature range, so the real timeout lies between 32 000 / 34 000 s = 941 ms and
 //! 32 000 / 29 500 s = 1085 ms. `app::watchdog::watchdog_task` polls every 250 ms and every
@@ -12,8 +12,18 @@
 //!
 //! The IWDG is frozen while a debugger halts the core (DBGMCU APB1FZR1.DBG_IWDG_STOP), so a
 //! breakpoint does not reset the board under the debugger. Once started it cannot be stopped
-//! (only a reset does): [`Watchdog`] is created by `board::init` but started by the watchdog
-//! task.
+//! (only a reset does).
+//!
+//! **Started first, before anything that can hang.** `board::init` calls [`start_for_boot`]
+//! before `embassy_stm32::init`, which waits without a limit for the LSE crystal (LSERDY; the
+//! datasheet's typical start-up is 2 s) and the PLLs: a dead crystal then gives a reset loop
+//! that the log names (`reset cause Watchdog`), not a silent hang. The boot window is
+//! [`BOOT_TIMEOUT_MS`] (prescaler /32, reload 3999: 4 s at the nominal 32 kHz, 3.76–4.34 s over
+//! the LSI's range), longer than the crystal's start-up. The watchdog task's
+//! [`Watchdog::start`] then sets the 1 s running timeout and pets.
+//!
+//! After a HardFault or panic the core waits with the output parked (`failsafe.rs`) and the
+//! IWDG resets it within the timeout: the next boot reads `Watchdog`.
 //!
 //! A watchdog reset resets the DAC too (PA4 back to analog input, floating: the amplifier sees
 //! no drive), and the firmware boots idle with the drive at zero.
@@ -22,40 +32,70 @@ use core::cell::Cell;
 
 use critical_section::Mutex;
 use embassy_stm32::peripherals;
-use embassy_stm32::wdg::IndependentWatchdog;
 use stm32_metapac as pac;
+use stm32_metapac::iwdg::vals::{Key, Pr};
 
 use crate::app::watchdog::{self, ResetCause, ResetFlags};
 
-/// The IWDG timeout asked for, µs (at the nominal 32 kHz LSI; see the module docs).
-pub const TIMEOUT_US: u32 = 1_000_000;
+/// The running timeout, ms (at the nominal 32 kHz LSI; see the module docs): prescaler /8,
+/// reload 3999, 4000 ticks of 250 µs.
+pub const TIMEOUT_MS: u32 = 1_000;
+const RUN: (Pr, u16) = (Pr::DIVIDE_BY8, 3999);
+
+/// The boot window, ms: prescaler /32, reload 3999, 4000 ticks of 1 ms.
+pub const BOOT_TIMEOUT_MS: u32 = 4_000;
+const BOOT: (Pr, u16) = (Pr::DIVIDE_BY32, 3999);
+
+/// Polls of IWDG_SR while a new prescaler or reload reaches the LSI domain (a few LSI
+/// cycles, ~150 µs; the loop is far longer at 4–80 MHz).
+const UPDATE_POLLS: u32 = 100_000;
 
 /// The cause read at boot, once.
 static CAUSE: Mutex<Cell<Option<ResetCause>>> = Mutex::new(Cell::new(None));
 
-/// The independent watchdog, configured ([`TIMEOUT_US`]) but not started.
+/// Starts the IWDG with the boot window [`BOOT_TIMEOUT_MS`]. Raw registers: it runs before
+/// `embassy_stm32::init` (the START key also switches the LSI on).
+pub(super) fn start_for_boot() {
+    pac::DBGMCU.apb1fzr1().modify(|w| w.set_iwdg(true));
+    pac::IWDG.kr().write(|w| w.set_key(Key::START));
+    configure(BOOT);
+}
+
+/// Sets prescaler and reload, waits until the LSI domain has them, then reloads the counter.
+fn configure((pr, reload): (Pr, u16)) {
+    pac::IWDG.kr().write(|w| w.set_key(Key::ENABLE));
+    pac::IWDG.pr().write(|w| w.set_pr(pr));
+    pac::IWDG.rlr().write(|w| w.set_rl(reload));
+    let mut polls = 0;
+    while polls < UPDATE_POLLS && {
+        let sr = pac::IWDG.sr().read();
+        sr.pvu() || sr.rvu()
+    } {
+        polls += 1;
+    }
+    pac::IWDG.kr().write(|w| w.set_key(Key::RESET));
+}
+
+/// The independent watchdog, running with the boot window since [`start_for_boot`].
 pub struct Watchdog {
-    iwdg: IndependentWatchdog<'static, peripherals::IWDG>,
+    _iwdg: embassy_stm32::Peri<'static, peripherals::IWDG>,
 }
 
 impl Watchdog {
-    /// Configures the IWDG (prescaler, reload) without starting it.
+    /// Takes the IWDG (so that nothing else configures it); it already runs.
     pub(super) fn new(iwdg: embassy_stm32::Peri<'static, peripherals::IWDG>) -> Self {
-        pac::DBGMCU.apb1fzr1().modify(|w| w.set_iwdg(true));
-        Self { iwdg: IndependentWatchdog::new(iwdg, TIMEOUT_US) }
+        Self { _iwdg: iwdg }
     }
 }
 
 impl watchdog::Watchdog for Watchdog {
     fn start(&mut self) {
-        self.iwdg.unleash();
-        // A pet right away: the countdown starts full whatever the reload write left.
-        self.iwdg.pet();
-        defmt::info!("watchdog: IWDG started, timeout {=u32} ms nominal", TIMEOUT_US / 1000);
+        configure(RUN);
+        defmt::info!("watchdog: IWDG timeout {=u32} ms nominal (was the boot window)", TIMEOUT_MS);
     }
 
     fn pet(&mut self) {
-        self.iwdg.pet();
+        pac::IWDG.kr().write(|w| w.set_key(Key::RESET));
     }
 }
 
