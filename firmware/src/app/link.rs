@@ -21,7 +21,9 @@ use chladni_shared::icd::link::{
     Request, Response, RunNumber, StatusReport, SweepPage, Telemetry, TestFault,
 };
 use chladni_shared::icd::plan::Plan;
-use chladni_shared::icd::store::{self, DeviceConfig, PlanPage, PlanSummary, StoreError};
+use chladni_shared::icd::store::{
+    self, DeviceConfig, PlanPage, PlanSummary, StoreError, StoreInfo, StoreState,
+};
 use embassy_futures::select::{Either, select};
 use embassy_time::{Duration, Instant, Timer};
 use embedded_io_async::{Read, Write};
@@ -457,6 +459,22 @@ impl<F: NorFlash> Handler for Link<'_, F> {
         Ok(self.drive.sweep_page(get.from))
     }
 
+    async fn get_store(&mut self, _: Call, _: link::GetStore) -> Result<StoreInfo, Refusal> {
+        Ok(match &mut self.store {
+            Some(store) => store.info().await,
+            None => StoreInfo { state: StoreState::Unavailable, layout: 0, area_bytes: 0 },
+        })
+    }
+
+    async fn format_store(&mut self, _: Call, _: link::FormatStore) -> Result<StoreInfo, Refusal> {
+        let info = self.store()?.format().await?;
+        // The configuration went with the rest: back to the default, as at a first boot.
+        self.config = DeviceConfig::DEFAULT;
+        self.drive.set_limits(self.config.limits);
+        self.drive.set_control(self.config.control);
+        Ok(info)
+    }
+
     async fn inject_fault(&mut self, _: Call, inject: InjectFault) -> Result<(), Refusal> {
         let simulate = self.identity.inject.ok_or(Refusal::Unsupported)?;
         // The drive's sample clock at the injection, for the tests' fault latencies (the
@@ -503,8 +521,13 @@ const CHECK_IN: Duration = Duration::from_millis(100);
 pub async fn serve<F: NorFlash, P: Read + Write>(
     link: &mut Link<'_, F>,
     port: &mut P,
-    supervisor: &Supervisor,
+    supervisor: &'static Supervisor,
 ) -> ! {
+    // The store's flash operations are the link's progress (a request that collects garbage
+    // over several pages checks in at each operation, not only when it is answered).
+    if let Some(store) = &mut link.store {
+        store.set_progress(supervisor, Task::Link);
+    }
     let mut reader = FrameReader::<MAX_FRAME>::new();
     let mut rx = [0u8; 64];
     let mut tx = [0u8; link::ENCODE_BUF];

@@ -18,14 +18,23 @@
 //! configuration fails (it may have landed all the same) it reads the map again before the
 //! next request, and an upload in progress is then dropped.
 //!
+//! The area's first page holds the store's format marker ([`format`]): an area holding
+//! anything else (bank 2 as the board comes from the factory) is never read as a store, and
+//! never erased but by [`PlanStore::format`]. Every write and erase is read back
+//! ([`verify`]): a flash that did not take the data is `StoreError::Verify`, not a plan that
+//! goes missing later.
+//!
 //! Never run a store call under a timeout or `select`: sequential-storage repairs a cancelled
 //! operation later, but the store's index would no longer match the flash.
 
+pub mod chip;
+pub mod format;
 pub mod index;
 pub mod layout;
 #[cfg(any(test, feature = "mock-flash"))]
 pub mod mock_flash;
 mod upload;
+pub mod verify;
 pub mod yielding;
 
 #[cfg(test)]
@@ -37,7 +46,7 @@ use chladni_shared::icd::link::Refusal;
 use chladni_shared::icd::plan::{DeviceLimits, Plan, Step};
 use chladni_shared::icd::store::{
     CHUNK_STEPS, DeviceConfig, MAX_CHUNKS, PLAN_SLOTS, PlanDigest, PlanPage, PlanRef, PlanSummary,
-    SCRATCH_SLOT, StoreError, UploadBegin, UploadChunk, UploadError,
+    SCRATCH_SLOT, StoreError, StoreInfo, StoreState, UploadBegin, UploadChunk, UploadError,
 };
 use embedded_storage_async::nor_flash::NorFlash;
 use sequential_storage::cache::key_pointers::ArrayKeyPointers;
@@ -45,12 +54,15 @@ use sequential_storage::cache::page_states::ArrayPageStates;
 use sequential_storage::cache::{Cache, CacheImpl, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage, Value};
 
+use crate::app::watchdog::{Progress, Task};
+use format::Found;
 use index::{Index, StoredConfig};
 use layout::{BANKS, ChunkItem, Encoded, Geometry, ItemKey, PlanItem};
 use upload::Upload;
+use verify::{Verified, VerifyError};
 
-/// Most pages the store uses (the caches are sized for them): 512 KiB of 2 KiB pages. A larger
-/// range is cut to this.
+/// Most pages the store uses (the caches are sized for them): 512 KiB of 2 KiB pages, the
+/// first of them the marker page. A larger range is cut to this.
 pub const MAX_PAGES: usize = 256;
 
 /// The buffer items are read and written through, bytes: the longest item the layout writes
@@ -67,11 +79,29 @@ const KEYS: usize = 1 + PLAN_SLOTS as usize + BANKS as usize * MAX_CHUNKS;
 /// for 2 KiB more; docs/store.md has the numbers.
 pub type StoreCache = Cache<ArrayPageStates<MAX_PAGES>, Uncached, ArrayKeyPointers<u16, KEYS>, u16>;
 
+/// The cache the store is built with by default.
+fn store_cache() -> StoreCache {
+    Cache::new(ArrayPageStates::new(), Uncached, ArrayKeyPointers::new())
+}
+
 /// The flash a store is built on, when its range is usable.
 enum Backend<F: NorFlash, C: CacheImpl<u16>> {
-    Map(MapStorage<u16, F, C>),
+    Map(MapStorage<u16, Verified<F>, C>),
     /// The range does not fit the flash's pages; every request fails with `Flash`.
     Unusable(F),
+    /// Only inside [`PlanStore::restart_map`], which puts the map back before it returns.
+    Restarting,
+}
+
+/// What the store's area was found to hold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Format {
+    /// Not looked at yet (or it could not be read).
+    Unknown,
+    /// The store's own (marked).
+    Ours,
+    /// Data the store did not write.
+    Foreign,
 }
 
 /// Item buffer, aligned for flash drivers that write from it directly.
@@ -90,29 +120,35 @@ pub struct PlanStore<F: NorFlash, C: CacheImpl<u16> = StoreCache> {
     upload: Option<Upload>,
     /// The index does not describe the flash (not read yet, or a write failed).
     stale: bool,
-    /// Bytes in the range.
+    /// The whole area: the marker page, then the map.
+    area: Range<u32>,
+    format: Format,
+    /// Bytes in the map's range.
     range_len: u32,
     geometry: Geometry,
+    /// Makes an empty cache (a format starts the map over).
+    new_cache: fn() -> C,
 }
 
 impl<F: NorFlash> PlanStore<F> {
-    /// A store in `range` of `flash` (page-aligned, at least two pages; more than
-    /// [`MAX_PAGES`] pages are cut to that). Nothing is read until the first request.
+    /// A store in `range` of `flash` (page-aligned, at least three pages: the marker page and
+    /// two for the map; more than [`MAX_PAGES`] pages are cut to that). Nothing is read until
+    /// the first request.
     pub fn new(flash: F, range: Range<u32>) -> Self {
-        let cache = Cache::new(ArrayPageStates::new(), Uncached, ArrayKeyPointers::new());
-        Self::with_cache(flash, range, cache)
+        Self::with_cache(flash, range, store_cache)
     }
 }
 
 impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
-    /// A store with another sequential-storage cache (e.g. `Cache::new_uncached()`, to
-    /// measure what the cache saves).
-    pub fn with_cache(flash: F, range: Range<u32>, cache: C) -> Self {
+    /// A store with another sequential-storage cache, made by `new_cache` (e.g.
+    /// `Cache::new_uncached`, to measure what the cache saves).
+    pub fn with_cache(flash: F, range: Range<u32>, new_cache: fn() -> C) -> Self {
         let max_len = (MAX_PAGES * F::ERASE_SIZE) as u32;
-        let range = range.start..range.end.min(range.start.saturating_add(max_len));
-        let range_len = range.end.saturating_sub(range.start);
-        let backend = match MapConfig::<F>::try_new(range) {
-            Ok(config) => Backend::Map(MapStorage::new(flash, config, cache)),
+        let area = range.start..range.end.min(range.start.saturating_add(max_len));
+        let map = map_range(&area, F::ERASE_SIZE);
+        let range_len = map.end.saturating_sub(map.start);
+        let backend = match MapConfig::<Verified<F>>::try_new(map) {
+            Ok(config) => Backend::Map(MapStorage::new(Verified::new(flash), config, new_cache())),
             Err(_) => {
                 defmt::error!("plan store: the flash range does not fit the flash's pages");
                 Backend::Unusable(flash)
@@ -125,20 +161,82 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
             index: Index::new(),
             upload: None,
             stale: true,
+            area,
+            format: Format::Unknown,
             range_len,
             geometry: Geometry {
-                overhead: MapStorage::<u16, F, C>::item_overhead_size(),
+                overhead: MapStorage::<u16, Verified<F>, C>::item_overhead_size(),
                 word: F::WRITE_SIZE.max(F::READ_SIZE) as u32,
             },
+            new_cache,
         }
     }
 
     /// The flash back.
     pub fn into_flash(self) -> F {
         match self.backend {
-            Backend::Map(map) => map.destroy().0,
+            Backend::Map(map) => map.destroy().0.into_inner(),
             Backend::Unusable(flash) => flash,
+            Backend::Restarting => unreachable!("restart_map always puts the map back"),
         }
+    }
+
+    /// Reports every flash operation that completes to `progress` as progress of `task` (the
+    /// task the store runs in), so a long request keeps checking in with the watchdog.
+    pub fn set_progress(&mut self, progress: &'static dyn Progress, task: Task) {
+        if let Backend::Map(map) = &mut self.backend {
+            map.flash().set_progress(progress, task);
+        }
+    }
+
+    /// What the store's area holds (looked at now if it was not yet).
+    pub async fn info(&mut self) -> StoreInfo {
+        let state = match self.ensure_open().await {
+            Ok(()) => StoreState::Ready,
+            Err(StoreError::Foreign) => StoreState::Foreign,
+            Err(_) => StoreState::Unavailable,
+        };
+        let area_bytes = match self.backend {
+            Backend::Map(_) => self.area.end - self.area.start,
+            Backend::Unusable(_) | Backend::Restarting => 0,
+        };
+        StoreInfo { state, layout: format::LAYOUT, area_bytes }
+    }
+
+    /// Erases the whole area (every plan, the configuration, or whatever else it held) and
+    /// writes the marker: an empty store. What the area then holds.
+    pub async fn format(&mut self) -> Result<StoreInfo, Refusal> {
+        self.upload = None;
+        self.index.clear();
+        self.stale = true;
+        self.format = Format::Unknown;
+        let area = self.area.clone();
+        let Backend::Map(map) = &mut self.backend else {
+            return Err(Refusal::Store(StoreError::Flash));
+        };
+        defmt::warn!("plan store: formatting (erasing the whole area)");
+        let formatted = format::format(map.flash(), area.clone()).await;
+        // The map's cache described the old contents: start the map over with an empty one.
+        self.restart_map();
+        formatted.map_err(|e| Refusal::Store(flash_error(&e, area.start)))?;
+        Ok(self.info().await)
+    }
+
+    /// Rebuilds the map over the same flash with an empty cache (sequential-storage has no
+    /// call that clears a cache after the flash changed under it).
+    fn restart_map(&mut self) {
+        if !matches!(self.backend, Backend::Map(_)) {
+            return;
+        }
+        let Backend::Map(old) = core::mem::replace(&mut self.backend, Backend::Restarting) else {
+            return;
+        };
+        let (flash, _) = old.destroy();
+        let range = map_range(&self.area, F::ERASE_SIZE);
+        self.backend = match MapConfig::<Verified<F>>::try_new(range) {
+            Ok(config) => Backend::Map(MapStorage::new(flash, config, (self.new_cache)())),
+            Err(_) => Backend::Unusable(flash.into_inner()),
+        };
     }
 
     /// The stored configuration; [`DeviceConfig::DEFAULT`] when there is none, or it cannot
@@ -360,6 +458,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         }
         self.upload = None;
         self.index.clear();
+        self.check_format().await?;
         let Backend::Map(map) = &mut self.backend else {
             return Err(StoreError::Flash);
         };
@@ -374,11 +473,45 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         }
         if let Err(e) = scanned {
             defmt::warn!("plan store: reading the flash failed: {}", describe(&e));
-            return Err(StoreError::Flash);
+            return Err(store_error(&e, self.area.start));
         }
         self.stale = false;
         self.tidy().await;
         Ok(())
+    }
+
+    /// Looks at the marker once (module `format`): the store's own area opens; a blank one is
+    /// marked; anything else is `Foreign` until [`PlanStore::format`].
+    async fn check_format(&mut self) -> Result<(), StoreError> {
+        let area = self.area.clone();
+        let Backend::Map(map) = &mut self.backend else {
+            return Err(StoreError::Flash);
+        };
+        if self.format == Format::Unknown {
+            let flash = map.flash();
+            let found = format::examine(flash, area.clone()).await;
+            self.format = match found {
+                Ok(Found::Marked) => Format::Ours,
+                Ok(Found::Blank) => {
+                    defmt::info!("plan store: blank area, writing the format marker");
+                    let start = area.start;
+                    format::mark(flash, area).await.map_err(|e| flash_error(&e, start))?;
+                    Format::Ours
+                }
+                Ok(Found::Foreign) => {
+                    defmt::warn!(
+                        "plan store: the area holds data the store did not write; \
+                         nothing is stored until it is formatted"
+                    );
+                    Format::Foreign
+                }
+                Err(e) => return Err(flash_error(&e, area.start)),
+            };
+        }
+        match self.format {
+            Format::Foreign => Err(StoreError::Foreign),
+            _ => Ok(()),
+        }
     }
 
     /// Clears strays after a change, logging (not returning) a failure: the change itself
@@ -422,7 +555,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         value: &V,
     ) -> Result<(), StoreError> {
         let stored = self.put(key, value).await;
-        if stored == Err(StoreError::Flash) {
+        if matches!(stored, Err(StoreError::Flash | StoreError::Verify { .. })) {
             self.stale = true;
         }
         stored
@@ -433,9 +566,10 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         let Backend::Map(map) = &mut self.backend else {
             return Err(StoreError::Flash);
         };
+        let area_start = self.area.start;
         map.fetch_item::<&[u8]>(&mut self.buf.0, &key.raw()).await.map_err(|e| {
             defmt::warn!("plan store: reading failed: {}", describe(&e));
-            StoreError::Flash
+            store_error(&e, area_start)
         })
     }
 }
@@ -462,14 +596,40 @@ async fn put<'v, F: NorFlash, C: CacheImpl<u16>, V: Value<'v>>(
     let Backend::Map(map) = backend else {
         return Err(StoreError::Flash);
     };
+    let area_start = map.flash_range().start.saturating_sub(F::ERASE_SIZE as u32);
     match map.store_item(buf, &key.raw(), value).await {
         Ok(()) => Ok(()),
         // Nothing was written: the map had no room.
         Err(sequential_storage::Error::FullStorage) => Err(StoreError::Full),
         Err(e) => {
             defmt::warn!("plan store: writing failed: {}", describe(&e));
-            Err(StoreError::Flash)
+            Err(store_error(&e, area_start))
         }
+    }
+}
+
+/// The map's range in the store's `area`: every page after the marker page.
+fn map_range(area: &Range<u32>, page: usize) -> Range<u32> {
+    area.start.saturating_add(page as u32)..area.end
+}
+
+/// The store error for a failed flash operation: a read-back mismatch is `Verify` (its offset
+/// in the area, which starts at `area_start`), anything else `Flash`.
+fn flash_error<E>(e: &VerifyError<E>, area_start: u32) -> StoreError {
+    match e {
+        VerifyError::Mismatch { offset } => {
+            defmt::warn!("plan store: the flash reads back different at {=u32:#x}", offset);
+            StoreError::Verify { offset: offset.saturating_sub(area_start) }
+        }
+        VerifyError::Flash(_) => StoreError::Flash,
+    }
+}
+
+/// The store error for a failed sequential-storage call.
+fn store_error<E>(e: &sequential_storage::Error<VerifyError<E>>, area_start: u32) -> StoreError {
+    match e {
+        sequential_storage::Error::Storage { value, .. } => flash_error(value, area_start),
+        _ => StoreError::Flash,
     }
 }
 
