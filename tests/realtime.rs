@@ -47,9 +47,7 @@ const CHECK_IN_PERIOD_US: u64 = 250_000;
 /// Link N us"), µs.
 fn longest_link_gap(log: &str) -> Option<u64> {
     let key = "watchdog: longest check-in gap of Link ";
-    log.lines()
-        .filter_map(|l| l.split_once(key)?.1.split_whitespace().next()?.parse().ok())
-        .max()
+    log.lines().filter_map(|l| l.split_once(key)?.1.split_whitespace().next()?.parse().ok()).max()
 }
 
 /// Telemetry samples until `done` holds for one (all of them returned).
