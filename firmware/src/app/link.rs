@@ -299,6 +299,14 @@ impl<'a, F: NorFlash> Link<'a, F> {
         Ok(())
     }
 
+    /// Writes a chunk the store accepted before writing it (`PlanStore::chunk_deferred`); its
+    /// failure is answered to the upload's next request.
+    pub async fn flush_store(&mut self) {
+        if let Some(store) = &mut self.store {
+            let _ = store.flush().await;
+        }
+    }
+
     /// When the next telemetry sample is due, if a stream runs.
     pub fn next_sample_at(&self) -> Option<Instant> {
         self.stream.map(|s| s.next)
@@ -406,7 +414,8 @@ impl<F: NorFlash> Handler for Link<'_, F> {
 
     async fn upload_chunk(&mut self, _: Call, chunk: store::UploadChunk) -> Result<u16, Refusal> {
         let limits = self.config.limits;
-        self.store()?.chunk(chunk, &limits).await
+        // Written after the answer is sent (`Link::flush_store`), while the next chunk comes.
+        self.store()?.chunk_deferred(chunk, &limits).await
     }
 
     async fn upload_commit(
@@ -558,6 +567,9 @@ pub async fn serve<F: NorFlash, P: Read + Write>(
             let Some(frame) = reader.push(byte) else { continue };
             link.respond_into(frame, Instant::now(), &mut out).await;
             send(port, &out, &mut tx).await;
+            // An upload chunk answered before it was written: written now, while the host
+            // sends the next one (the flash programs for ~3 ms a chunk on the chip).
+            link.flush_store().await;
             // A chunk may hold several frames, each reply up to WRITE_LIMIT late: each one
             // served is progress, so the watchdog hears of it.
             supervisor.check_in(Task::Link);

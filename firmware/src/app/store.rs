@@ -111,6 +111,18 @@ struct ItemBuffer([u8; ITEM_BUFFER]);
 /// A chunk's value as encoded once for storing, sizing and the plan CRC.
 struct ChunkBuffer([u8; layout::MAX_VALUE]);
 
+/// A checked chunk, encoded in the chunk buffer.
+#[derive(Debug, Clone, Copy)]
+struct Staged {
+    bank: u8,
+    index: u8,
+    /// Bytes of its encoding.
+    len: usize,
+    /// Its steps, and their duration in all, ms.
+    steps: u16,
+    ms: u64,
+}
+
 /// The plan store. See the module documentation.
 pub struct PlanStore<F: NorFlash, C: CacheImpl<u16> = StoreCache> {
     backend: Backend<F, C>,
@@ -128,6 +140,10 @@ pub struct PlanStore<F: NorFlash, C: CacheImpl<u16> = StoreCache> {
     geometry: Geometry,
     /// Makes an empty cache (a format starts the map over).
     new_cache: fn() -> C,
+    /// A chunk accepted by [`PlanStore::chunk_deferred`] and not yet written.
+    pending: Option<Staged>,
+    /// Why a deferred chunk write failed, for the upload's next request.
+    failed: Option<StoreError>,
 }
 
 impl<F: NorFlash> PlanStore<F> {
@@ -169,6 +185,8 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
                 word: F::WRITE_SIZE.max(F::READ_SIZE) as u32,
             },
             new_cache,
+            pending: None,
+            failed: None,
         }
     }
 
@@ -207,6 +225,8 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
     /// writes the marker: an empty store. What the area then holds.
     pub async fn format(&mut self) -> Result<StoreInfo, Refusal> {
         self.upload = None;
+        self.pending = None;
+        self.failed = None;
         self.index.clear();
         self.stale = true;
         self.format = Format::Unknown;
@@ -268,7 +288,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
     /// Checks and stores `config`; the configuration now stored.
     pub async fn set_config(&mut self, config: DeviceConfig) -> Result<DeviceConfig, Refusal> {
         config.validate().map_err(Refusal::Config)?;
-        self.ensure_open().await.map_err(Refusal::Store)?;
+        self.open().await.map_err(Refusal::Store)?;
         let size = self.geometry.size_of(&config);
         self.put_switch(ItemKey::Config, &Encoded(&config)).await.map_err(Refusal::Store)?;
         self.index.set_config(config, size as u16);
@@ -281,7 +301,9 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         begin: UploadBegin,
         limits: &DeviceLimits,
     ) -> Result<u8, Refusal> {
-        self.ensure_open().await.map_err(Refusal::Store)?;
+        self.open().await.map_err(Refusal::Store)?;
+        // A failed deferred chunk ended the upload this one replaces.
+        self.failed = None;
         if let Some(slot) = begin.slot.filter(|&s| s >= PLAN_SLOTS) {
             return Err(Refusal::Upload(UploadError::BadSlot { slot }));
         }
@@ -322,35 +344,107 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         chunk: UploadChunk,
         limits: &DeviceLimits,
     ) -> Result<u16, Refusal> {
-        self.ensure_open().await.map_err(Refusal::Store)?;
+        let staged = self.stage(chunk, limits).await?;
+        let stored = self.write_staged(&staged).await;
+        // On an error the upload stays where it was; the chunk may be sent again.
+        stored.map_err(Refusal::Store)?;
+        Ok(self.accept_staged(&staged))
+    }
+
+    /// [`PlanStore::chunk`], answered before the chunk is written: the chunk is checked and
+    /// counted now, and written by [`PlanStore::flush`] (which the link calls once the answer
+    /// is sent, so the flash programs while the next chunk's bytes arrive) or first thing by
+    /// the next request. A write that fails then ends the upload, and the next `chunk` or
+    /// `commit` is refused with its error (the client begins again). The switch is still the
+    /// commit's header write, after every chunk was written: a power cut before it keeps the
+    /// slot's old plan, whatever was acknowledged.
+    pub async fn chunk_deferred(
+        &mut self,
+        chunk: UploadChunk,
+        limits: &DeviceLimits,
+    ) -> Result<u16, Refusal> {
+        let staged = self.stage(chunk, limits).await?;
+        let received = self.accept_staged(&staged);
+        self.pending = Some(staged);
+        Ok(received)
+    }
+
+    /// Writes the chunk [`PlanStore::chunk_deferred`] accepted, if one waits. On an error the
+    /// upload ends, and the error is kept for its next `chunk` or `commit`.
+    pub async fn flush(&mut self) -> Result<(), StoreError> {
+        let Some(staged) = self.pending.take() else { return Ok(()) };
+        let stored = self.write_staged(&staged).await;
+        if let Err(e) = &stored {
+            defmt::warn!("plan store: a chunk written after its answer failed; upload ended");
+            self.upload = None;
+            self.failed = Some(e.clone());
+        }
+        stored
+    }
+
+    /// Opens the store, writes a deferred chunk, and checks the next chunk against the upload
+    /// and `limits`; encodes it into the chunk buffer, once (the same bytes are stored, sized
+    /// and added to the plan's CRC).
+    async fn stage(
+        &mut self,
+        chunk: UploadChunk,
+        limits: &DeviceLimits,
+    ) -> Result<Staged, Refusal> {
+        self.settle().await.map_err(Refusal::Store)?;
         let upload = self.upload.as_ref().ok_or(Refusal::Upload(UploadError::NotStarted))?;
         let index = upload.check(&chunk, limits).map_err(Refusal::Upload)?;
-        let bank = upload.bank;
-        // Encoded once: the same bytes are stored, sized and added to the plan's CRC.
+        let steps = chunk.steps.len() as u16;
+        let ms = chunk.steps.iter().map(|s| s.duration_ms as u64).sum();
         let item: ChunkItem = Some(chunk.steps);
         // (The buffer holds the longest chunk: `layout::MAX_VALUE`.)
         let encoded = postcard::to_slice(&item, &mut self.chunk.0);
         let len = encoded.map_err(|_| Refusal::Store(StoreError::Flash))?.len();
-        let encoded = &self.chunk.0[..len];
-        let size = self.geometry.item_size(len);
-        let key = ItemKey::Chunk { bank, index };
+        Ok(Staged { bank: upload.bank, index, len, steps, ms })
+    }
+
+    /// Writes the staged chunk from the chunk buffer.
+    async fn write_staged(&mut self, staged: &Staged) -> Result<(), StoreError> {
+        let encoded = &self.chunk.0[..staged.len];
+        let key = ItemKey::Chunk { bank: staged.bank, index: staged.index };
         let stored = put(&mut self.backend, &mut self.buf.0, key, &encoded).await;
         if stored != Err(StoreError::Full) {
             // Written, or maybe written: counted, and cleared by a sweep if the upload is
-            // abandoned. On an error the upload stays where it was; the chunk may be sent again.
-            self.index.set_chunk(bank, index, true, size as u16);
+            // abandoned.
+            let size = self.geometry.item_size(staged.len) as u16;
+            self.index.set_chunk(staged.bank, staged.index, true, size);
         }
-        stored.map_err(Refusal::Store)?;
-        let steps = item.as_deref().unwrap_or_default();
+        stored
+    }
+
+    /// Counts the staged chunk (in the chunk buffer) into the upload; steps received so far.
+    fn accept_staged(&mut self, staged: &Staged) -> u16 {
+        let Some(upload) = self.upload.as_mut() else { return 0 };
         // The step bytes follow the option tag and the one-byte length (as `append_chunk`).
-        let step_bytes = encoded.get(2..).unwrap_or_default();
-        // The upload is still there: only `ensure_open` and `commit` drop it.
-        Ok(self.upload.as_mut().map_or(0, |u| u.accept(steps, step_bytes)))
+        let step_bytes = self.chunk.0.get(2..staged.len).unwrap_or_default();
+        upload.accept(staged.steps, staged.ms, step_bytes)
+    }
+
+    /// Opens the store and writes a deferred chunk (a failure is kept for the upload's next
+    /// request).
+    async fn open(&mut self) -> Result<(), StoreError> {
+        self.ensure_open().await?;
+        let _ = self.flush().await;
+        Ok(())
+    }
+
+    /// [`PlanStore::open`], then the error of a deferred chunk write, once: what the upload's
+    /// next request (`chunk`, `commit`) answers.
+    async fn settle(&mut self) -> Result<(), StoreError> {
+        self.open().await?;
+        match self.failed.take() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
     }
 
     /// Checks the upload whole and stores it: the plan stored.
     pub async fn commit(&mut self, limits: &DeviceLimits) -> Result<PlanSummary, Refusal> {
-        self.ensure_open().await.map_err(Refusal::Store)?;
+        self.settle().await.map_err(Refusal::Store)?;
         let upload = self.upload.as_ref().ok_or(Refusal::Upload(UploadError::NotStarted))?;
         upload.check_complete().map_err(Refusal::Upload)?;
         let Some(upload) = self.upload.take() else {
@@ -379,7 +473,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
 
     /// One page of the plan list, from `from_slot` on.
     pub async fn list(&mut self, from_slot: u8) -> Result<PlanPage, Refusal> {
-        self.ensure_open().await.map_err(Refusal::Store)?;
+        self.open().await.map_err(Refusal::Store)?;
         Ok(self.index.page(from_slot, self.free_bytes()))
     }
 
@@ -393,7 +487,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
 
     /// Deletes a plan; what was deleted.
     pub async fn delete(&mut self, plan: &PlanRef) -> Result<PlanSummary, Refusal> {
-        self.ensure_open().await.map_err(Refusal::Store)?;
+        self.open().await.map_err(Refusal::Store)?;
         let slot = self.resolve(plan)?;
         let summary = self.index.summary(slot).ok_or(not_found(plan))?;
         let item: PlanItem = None;
@@ -407,7 +501,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
     /// no steps.
     pub async fn load(&mut self, plan: &PlanRef, out: &mut Plan) -> Result<PlanSummary, Refusal> {
         out.steps.clear();
-        self.ensure_open().await.map_err(Refusal::Store)?;
+        self.open().await.map_err(Refusal::Store)?;
         let slot = self.resolve(plan)?;
         let result = self.read_plan(slot, out).await;
         if result.is_err() {
@@ -457,6 +551,8 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
             return Ok(());
         }
         self.upload = None;
+        // A deferred chunk of the upload dropped here is not written.
+        self.pending = None;
         self.index.clear();
         self.check_format().await?;
         let Backend::Map(map) = &mut self.backend else {
