@@ -296,6 +296,24 @@ mod tests {
     }
 
     #[test]
+    fn the_longest_gap_between_check_ins_is_kept_per_task() {
+        let s = Supervisor::new(ALL);
+        let at = |ms| Instant::from_millis(ms);
+        assert_eq!(s.longest_gap(Task::Link), Duration::from_ticks(0), "none before two");
+        s.note_gap(Task::Link, at(1_000));
+        s.note_gap(Task::Link, at(1_100));
+        s.note_gap(Task::Drive, at(1_105));
+        s.note_gap(Task::Link, at(1_130));
+        s.note_gap(Task::Drive, at(1_110));
+        assert_eq!(s.longest_gap(Task::Link), Duration::from_millis(100));
+        assert_eq!(s.longest_gap(Task::Drive), Duration::from_millis(5));
+        assert_eq!(s.longest_gap(Task::Sense), Duration::from_ticks(0));
+        // Progress reported for a task is its check-in.
+        Progress::progress(&s, Task::Sense);
+        assert_eq!(s.missing(), TaskSet::of(&[Task::Link, Task::Drive]));
+    }
+
+    #[test]
     fn the_reset_cause_takes_the_most_specific_flag() {
         let f =
             |watchdog, software, brown_out, pin| ResetFlags { watchdog, software, brown_out, pin };
