@@ -187,3 +187,35 @@ fn a_power_cut_in_the_middle_of_an_upload_keeps_the_old_plan_whole() {
     client.run(PlanRef::Slot(0), None).expect("the old plan loads");
     client.stop().unwrap();
 }
+
+/// Bank 2 holding another program's data (the factory demo's leftovers, here pseudo-random
+/// bytes in pages 1–3 of the flash file): the controller names it foreign, refuses to store,
+/// leaves every byte alone, and stores again only after an explicit format.
+#[test]
+fn foreign_data_in_the_store_is_named_refused_and_erased_only_by_a_format() {
+    use chladni_shared::icd::link::{FormatStore, GetStore};
+    use chladni_shared::icd::store::{StoreError, StoreState};
+    let name = "store-foreign";
+    if chladni_e2e::real_port().is_some() {
+        println!("skipped on the real board: it would format the board's store");
+        return;
+    }
+    let path = chladni_e2e::flash_path(name);
+    let mut bytes = vec![0xffu8; 512 * 1024];
+    bytes[2048..4 * 2048].copy_from_slice(&pseudo_random_bytes(42, 3 * 2048));
+    std::fs::write(&path, &bytes).expect("write the flash file");
+    let controller = Controller::start(name);
+    let mut client = connect(&controller, "e2e foreign store");
+    let info = client.call(GetStore).expect("store info");
+    assert_eq!(info.state, StoreState::Foreign, "{info:?}");
+    match client.upload(&plan("p", &steps(5, 100_000, 10), 1), None, |_, _| {}) {
+        Err(DeviceError::Refused(Refusal::Store(StoreError::Foreign))) => {}
+        other => panic!("expected Store(Foreign), got {other:?}"),
+    }
+    assert_eq!(std::fs::read(&path).unwrap(), bytes, "the foreign data was changed");
+    let formatted = client.call(FormatStore).expect("format");
+    assert_eq!(formatted.state, StoreState::Ready, "{formatted:?}");
+    let stored = client.upload(&plan("p", &steps(5, 100_000, 10), 1), None, |_, _| {});
+    assert_eq!(stored.expect("upload after the format").slot, 0);
+    assert_eq!(client.call(GetStore).expect("store info").state, StoreState::Ready);
+}

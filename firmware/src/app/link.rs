@@ -21,7 +21,9 @@ use chladni_shared::icd::link::{
     Request, Response, RunNumber, StatusReport, SweepPage, Telemetry, TestFault,
 };
 use chladni_shared::icd::plan::Plan;
-use chladni_shared::icd::store::{self, DeviceConfig, PlanPage, PlanSummary, StoreError};
+use chladni_shared::icd::store::{
+    self, DeviceConfig, PlanPage, PlanSummary, StoreError, StoreInfo, StoreState,
+};
 use embassy_futures::select::{Either, select};
 use embassy_time::{Duration, Instant, Timer};
 use embedded_io_async::{Read, Write};
@@ -297,6 +299,14 @@ impl<'a, F: NorFlash> Link<'a, F> {
         Ok(())
     }
 
+    /// Writes a chunk the store accepted before writing it (`PlanStore::chunk_deferred`); its
+    /// failure is answered to the upload's next request.
+    pub async fn flush_store(&mut self) {
+        if let Some(store) = &mut self.store {
+            let _ = store.flush().await;
+        }
+    }
+
     /// When the next telemetry sample is due, if a stream runs.
     pub fn next_sample_at(&self) -> Option<Instant> {
         self.stream.map(|s| s.next)
@@ -404,7 +414,8 @@ impl<F: NorFlash> Handler for Link<'_, F> {
 
     async fn upload_chunk(&mut self, _: Call, chunk: store::UploadChunk) -> Result<u16, Refusal> {
         let limits = self.config.limits;
-        self.store()?.chunk(chunk, &limits).await
+        // Written after the answer is sent (`Link::flush_store`), while the next chunk comes.
+        self.store()?.chunk_deferred(chunk, &limits).await
     }
 
     async fn upload_commit(
@@ -457,6 +468,22 @@ impl<F: NorFlash> Handler for Link<'_, F> {
         Ok(self.drive.sweep_page(get.from))
     }
 
+    async fn get_store(&mut self, _: Call, _: link::GetStore) -> Result<StoreInfo, Refusal> {
+        Ok(match &mut self.store {
+            Some(store) => store.info().await,
+            None => StoreInfo { state: StoreState::Unavailable, layout: 0, area_bytes: 0 },
+        })
+    }
+
+    async fn format_store(&mut self, _: Call, _: link::FormatStore) -> Result<StoreInfo, Refusal> {
+        let info = self.store()?.format().await?;
+        // The configuration went with the rest: back to the default, as at a first boot.
+        self.config = DeviceConfig::DEFAULT;
+        self.drive.set_limits(self.config.limits);
+        self.drive.set_control(self.config.control);
+        Ok(info)
+    }
+
     async fn inject_fault(&mut self, _: Call, inject: InjectFault) -> Result<(), Refusal> {
         let simulate = self.identity.inject.ok_or(Refusal::Unsupported)?;
         // The drive's sample clock at the injection, for the tests' fault latencies (the
@@ -503,8 +530,13 @@ const CHECK_IN: Duration = Duration::from_millis(100);
 pub async fn serve<F: NorFlash, P: Read + Write>(
     link: &mut Link<'_, F>,
     port: &mut P,
-    supervisor: &Supervisor,
+    supervisor: &'static Supervisor,
 ) -> ! {
+    // The store's flash operations are the link's progress (a request that collects garbage
+    // over several pages checks in at each operation, not only when it is answered).
+    if let Some(store) = &mut link.store {
+        store.set_progress(supervisor, Task::Link);
+    }
     let mut reader = FrameReader::<MAX_FRAME>::new();
     let mut rx = [0u8; 64];
     let mut tx = [0u8; link::ENCODE_BUF];
@@ -535,6 +567,9 @@ pub async fn serve<F: NorFlash, P: Read + Write>(
             let Some(frame) = reader.push(byte) else { continue };
             link.respond_into(frame, Instant::now(), &mut out).await;
             send(port, &out, &mut tx).await;
+            // An upload chunk answered before it was written: written now, while the host
+            // sends the next one (the flash programs for ~3 ms a chunk on the chip).
+            link.flush_store().await;
             // A chunk may hold several frames, each reply up to WRITE_LIMIT late: each one
             // served is progress, so the watchdog hears of it.
             supervisor.check_in(Task::Link);

@@ -18,14 +18,23 @@
 //! configuration fails (it may have landed all the same) it reads the map again before the
 //! next request, and an upload in progress is then dropped.
 //!
+//! The area's first page holds the store's format marker ([`format`]): an area holding
+//! anything else (bank 2 as the board comes from the factory) is never read as a store, and
+//! never erased but by [`PlanStore::format`]. Every write and erase is read back
+//! ([`verify`]): a flash that did not take the data is `StoreError::Verify`, not a plan that
+//! goes missing later.
+//!
 //! Never run a store call under a timeout or `select`: sequential-storage repairs a cancelled
 //! operation later, but the store's index would no longer match the flash.
 
+pub mod chip;
+pub mod format;
 pub mod index;
 pub mod layout;
 #[cfg(any(test, feature = "mock-flash"))]
 pub mod mock_flash;
 mod upload;
+pub mod verify;
 pub mod yielding;
 
 #[cfg(test)]
@@ -37,7 +46,7 @@ use chladni_shared::icd::link::Refusal;
 use chladni_shared::icd::plan::{DeviceLimits, Plan, Step};
 use chladni_shared::icd::store::{
     CHUNK_STEPS, DeviceConfig, MAX_CHUNKS, PLAN_SLOTS, PlanDigest, PlanPage, PlanRef, PlanSummary,
-    SCRATCH_SLOT, StoreError, UploadBegin, UploadChunk, UploadError,
+    SCRATCH_SLOT, StoreError, StoreInfo, StoreState, UploadBegin, UploadChunk, UploadError,
 };
 use embedded_storage_async::nor_flash::NorFlash;
 use sequential_storage::cache::key_pointers::ArrayKeyPointers;
@@ -45,12 +54,15 @@ use sequential_storage::cache::page_states::ArrayPageStates;
 use sequential_storage::cache::{Cache, CacheImpl, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage, Value};
 
+use crate::app::watchdog::{Progress, Task};
+use format::Found;
 use index::{Index, StoredConfig};
 use layout::{BANKS, ChunkItem, Encoded, Geometry, ItemKey, PlanItem};
 use upload::Upload;
+use verify::{Verified, VerifyError};
 
-/// Most pages the store uses (the caches are sized for them): 512 KiB of 2 KiB pages. A larger
-/// range is cut to this.
+/// Most pages the store uses (the caches are sized for them): 512 KiB of 2 KiB pages, the
+/// first of them the marker page. A larger range is cut to this.
 pub const MAX_PAGES: usize = 256;
 
 /// The buffer items are read and written through, bytes: the longest item the layout writes
@@ -67,11 +79,29 @@ const KEYS: usize = 1 + PLAN_SLOTS as usize + BANKS as usize * MAX_CHUNKS;
 /// for 2 KiB more; docs/store.md has the numbers.
 pub type StoreCache = Cache<ArrayPageStates<MAX_PAGES>, Uncached, ArrayKeyPointers<u16, KEYS>, u16>;
 
+/// The cache the store is built with by default.
+fn store_cache() -> StoreCache {
+    Cache::new(ArrayPageStates::new(), Uncached, ArrayKeyPointers::new())
+}
+
 /// The flash a store is built on, when its range is usable.
 enum Backend<F: NorFlash, C: CacheImpl<u16>> {
-    Map(MapStorage<u16, F, C>),
+    Map(MapStorage<u16, Verified<F>, C>),
     /// The range does not fit the flash's pages; every request fails with `Flash`.
     Unusable(F),
+    /// Only inside [`PlanStore::restart_map`], which puts the map back before it returns.
+    Restarting,
+}
+
+/// What the store's area was found to hold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Format {
+    /// Not looked at yet (or it could not be read).
+    Unknown,
+    /// The store's own (marked).
+    Ours,
+    /// Data the store did not write.
+    Foreign,
 }
 
 /// Item buffer, aligned for flash drivers that write from it directly.
@@ -80,6 +110,18 @@ struct ItemBuffer([u8; ITEM_BUFFER]);
 
 /// A chunk's value as encoded once for storing, sizing and the plan CRC.
 struct ChunkBuffer([u8; layout::MAX_VALUE]);
+
+/// A checked chunk, encoded in the chunk buffer.
+#[derive(Debug, Clone, Copy)]
+struct Staged {
+    bank: u8,
+    index: u8,
+    /// Bytes of its encoding.
+    len: usize,
+    /// Its steps, and their duration in all, ms.
+    steps: u16,
+    ms: u64,
+}
 
 /// The plan store. See the module documentation.
 pub struct PlanStore<F: NorFlash, C: CacheImpl<u16> = StoreCache> {
@@ -90,29 +132,39 @@ pub struct PlanStore<F: NorFlash, C: CacheImpl<u16> = StoreCache> {
     upload: Option<Upload>,
     /// The index does not describe the flash (not read yet, or a write failed).
     stale: bool,
-    /// Bytes in the range.
+    /// The whole area: the marker page, then the map.
+    area: Range<u32>,
+    format: Format,
+    /// Bytes in the map's range.
     range_len: u32,
     geometry: Geometry,
+    /// Makes an empty cache (a format starts the map over).
+    new_cache: fn() -> C,
+    /// A chunk accepted by [`PlanStore::chunk_deferred`] and not yet written.
+    pending: Option<Staged>,
+    /// Why a deferred chunk write failed, for the upload's next request.
+    failed: Option<StoreError>,
 }
 
 impl<F: NorFlash> PlanStore<F> {
-    /// A store in `range` of `flash` (page-aligned, at least two pages; more than
-    /// [`MAX_PAGES`] pages are cut to that). Nothing is read until the first request.
+    /// A store in `range` of `flash` (page-aligned, at least three pages: the marker page and
+    /// two for the map; more than [`MAX_PAGES`] pages are cut to that). Nothing is read until
+    /// the first request.
     pub fn new(flash: F, range: Range<u32>) -> Self {
-        let cache = Cache::new(ArrayPageStates::new(), Uncached, ArrayKeyPointers::new());
-        Self::with_cache(flash, range, cache)
+        Self::with_cache(flash, range, store_cache)
     }
 }
 
 impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
-    /// A store with another sequential-storage cache (e.g. `Cache::new_uncached()`, to
-    /// measure what the cache saves).
-    pub fn with_cache(flash: F, range: Range<u32>, cache: C) -> Self {
+    /// A store with another sequential-storage cache, made by `new_cache` (e.g.
+    /// `Cache::new_uncached`, to measure what the cache saves).
+    pub fn with_cache(flash: F, range: Range<u32>, new_cache: fn() -> C) -> Self {
         let max_len = (MAX_PAGES * F::ERASE_SIZE) as u32;
-        let range = range.start..range.end.min(range.start.saturating_add(max_len));
-        let range_len = range.end.saturating_sub(range.start);
-        let backend = match MapConfig::<F>::try_new(range) {
-            Ok(config) => Backend::Map(MapStorage::new(flash, config, cache)),
+        let area = range.start..range.end.min(range.start.saturating_add(max_len));
+        let map = map_range(&area, F::ERASE_SIZE);
+        let range_len = map.end.saturating_sub(map.start);
+        let backend = match MapConfig::<Verified<F>>::try_new(map) {
+            Ok(config) => Backend::Map(MapStorage::new(Verified::new(flash), config, new_cache())),
             Err(_) => {
                 defmt::error!("plan store: the flash range does not fit the flash's pages");
                 Backend::Unusable(flash)
@@ -125,20 +177,86 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
             index: Index::new(),
             upload: None,
             stale: true,
+            area,
+            format: Format::Unknown,
             range_len,
             geometry: Geometry {
-                overhead: MapStorage::<u16, F, C>::item_overhead_size(),
+                overhead: MapStorage::<u16, Verified<F>, C>::item_overhead_size(),
                 word: F::WRITE_SIZE.max(F::READ_SIZE) as u32,
             },
+            new_cache,
+            pending: None,
+            failed: None,
         }
     }
 
     /// The flash back.
     pub fn into_flash(self) -> F {
         match self.backend {
-            Backend::Map(map) => map.destroy().0,
+            Backend::Map(map) => map.destroy().0.into_inner(),
             Backend::Unusable(flash) => flash,
+            Backend::Restarting => unreachable!("restart_map always puts the map back"),
         }
+    }
+
+    /// Reports every flash operation that completes to `progress` as progress of `task` (the
+    /// task the store runs in), so a long request keeps checking in with the watchdog.
+    pub fn set_progress(&mut self, progress: &'static dyn Progress, task: Task) {
+        if let Backend::Map(map) = &mut self.backend {
+            map.flash().set_progress(progress, task);
+        }
+    }
+
+    /// What the store's area holds (looked at now if it was not yet).
+    pub async fn info(&mut self) -> StoreInfo {
+        let state = match self.ensure_open().await {
+            Ok(()) => StoreState::Ready,
+            Err(StoreError::Foreign) => StoreState::Foreign,
+            Err(_) => StoreState::Unavailable,
+        };
+        let area_bytes = match self.backend {
+            Backend::Map(_) => self.area.end - self.area.start,
+            Backend::Unusable(_) | Backend::Restarting => 0,
+        };
+        StoreInfo { state, layout: format::LAYOUT, area_bytes }
+    }
+
+    /// Erases the whole area (every plan, the configuration, or whatever else it held) and
+    /// writes the marker: an empty store. What the area then holds.
+    pub async fn format(&mut self) -> Result<StoreInfo, Refusal> {
+        self.upload = None;
+        self.pending = None;
+        self.failed = None;
+        self.index.clear();
+        self.stale = true;
+        self.format = Format::Unknown;
+        let area = self.area.clone();
+        let Backend::Map(map) = &mut self.backend else {
+            return Err(Refusal::Store(StoreError::Flash));
+        };
+        defmt::warn!("plan store: formatting (erasing the whole area)");
+        let formatted = format::format(map.flash(), area.clone()).await;
+        // The map's cache described the old contents: start the map over with an empty one.
+        self.restart_map();
+        formatted.map_err(|e| Refusal::Store(flash_error(&e, area.start)))?;
+        Ok(self.info().await)
+    }
+
+    /// Rebuilds the map over the same flash with an empty cache (sequential-storage has no
+    /// call that clears a cache after the flash changed under it).
+    fn restart_map(&mut self) {
+        if !matches!(self.backend, Backend::Map(_)) {
+            return;
+        }
+        let Backend::Map(old) = core::mem::replace(&mut self.backend, Backend::Restarting) else {
+            return;
+        };
+        let (flash, _) = old.destroy();
+        let range = map_range(&self.area, F::ERASE_SIZE);
+        self.backend = match MapConfig::<Verified<F>>::try_new(range) {
+            Ok(config) => Backend::Map(MapStorage::new(flash, config, (self.new_cache)())),
+            Err(_) => Backend::Unusable(flash.into_inner()),
+        };
     }
 
     /// The stored configuration; [`DeviceConfig::DEFAULT`] when there is none, or it cannot
@@ -170,7 +288,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
     /// Checks and stores `config`; the configuration now stored.
     pub async fn set_config(&mut self, config: DeviceConfig) -> Result<DeviceConfig, Refusal> {
         config.validate().map_err(Refusal::Config)?;
-        self.ensure_open().await.map_err(Refusal::Store)?;
+        self.open().await.map_err(Refusal::Store)?;
         let size = self.geometry.size_of(&config);
         self.put_switch(ItemKey::Config, &Encoded(&config)).await.map_err(Refusal::Store)?;
         self.index.set_config(config, size as u16);
@@ -183,7 +301,9 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         begin: UploadBegin,
         limits: &DeviceLimits,
     ) -> Result<u8, Refusal> {
-        self.ensure_open().await.map_err(Refusal::Store)?;
+        self.open().await.map_err(Refusal::Store)?;
+        // A failed deferred chunk ended the upload this one replaces.
+        self.failed = None;
         if let Some(slot) = begin.slot.filter(|&s| s >= PLAN_SLOTS) {
             return Err(Refusal::Upload(UploadError::BadSlot { slot }));
         }
@@ -224,35 +344,107 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         chunk: UploadChunk,
         limits: &DeviceLimits,
     ) -> Result<u16, Refusal> {
-        self.ensure_open().await.map_err(Refusal::Store)?;
+        let staged = self.stage(chunk, limits).await?;
+        let stored = self.write_staged(&staged).await;
+        // On an error the upload stays where it was; the chunk may be sent again.
+        stored.map_err(Refusal::Store)?;
+        Ok(self.accept_staged(&staged))
+    }
+
+    /// [`PlanStore::chunk`], answered before the chunk is written: the chunk is checked and
+    /// counted now, and written by [`PlanStore::flush`] (which the link calls once the answer
+    /// is sent, so the flash programs while the next chunk's bytes arrive) or first thing by
+    /// the next request. A write that fails then ends the upload, and the next `chunk` or
+    /// `commit` is refused with its error (the client begins again). The switch is still the
+    /// commit's header write, after every chunk was written: a power cut before it keeps the
+    /// slot's old plan, whatever was acknowledged.
+    pub async fn chunk_deferred(
+        &mut self,
+        chunk: UploadChunk,
+        limits: &DeviceLimits,
+    ) -> Result<u16, Refusal> {
+        let staged = self.stage(chunk, limits).await?;
+        let received = self.accept_staged(&staged);
+        self.pending = Some(staged);
+        Ok(received)
+    }
+
+    /// Writes the chunk [`PlanStore::chunk_deferred`] accepted, if one waits. On an error the
+    /// upload ends, and the error is kept for its next `chunk` or `commit`.
+    pub async fn flush(&mut self) -> Result<(), StoreError> {
+        let Some(staged) = self.pending.take() else { return Ok(()) };
+        let stored = self.write_staged(&staged).await;
+        if let Err(e) = &stored {
+            defmt::warn!("plan store: a chunk written after its answer failed; upload ended");
+            self.upload = None;
+            self.failed = Some(e.clone());
+        }
+        stored
+    }
+
+    /// Opens the store, writes a deferred chunk, and checks the next chunk against the upload
+    /// and `limits`; encodes it into the chunk buffer, once (the same bytes are stored, sized
+    /// and added to the plan's CRC).
+    async fn stage(
+        &mut self,
+        chunk: UploadChunk,
+        limits: &DeviceLimits,
+    ) -> Result<Staged, Refusal> {
+        self.settle().await.map_err(Refusal::Store)?;
         let upload = self.upload.as_ref().ok_or(Refusal::Upload(UploadError::NotStarted))?;
         let index = upload.check(&chunk, limits).map_err(Refusal::Upload)?;
-        let bank = upload.bank;
-        // Encoded once: the same bytes are stored, sized and added to the plan's CRC.
+        let steps = chunk.steps.len() as u16;
+        let ms = chunk.steps.iter().map(|s| s.duration_ms as u64).sum();
         let item: ChunkItem = Some(chunk.steps);
         // (The buffer holds the longest chunk: `layout::MAX_VALUE`.)
         let encoded = postcard::to_slice(&item, &mut self.chunk.0);
         let len = encoded.map_err(|_| Refusal::Store(StoreError::Flash))?.len();
-        let encoded = &self.chunk.0[..len];
-        let size = self.geometry.item_size(len);
-        let key = ItemKey::Chunk { bank, index };
+        Ok(Staged { bank: upload.bank, index, len, steps, ms })
+    }
+
+    /// Writes the staged chunk from the chunk buffer.
+    async fn write_staged(&mut self, staged: &Staged) -> Result<(), StoreError> {
+        let encoded = &self.chunk.0[..staged.len];
+        let key = ItemKey::Chunk { bank: staged.bank, index: staged.index };
         let stored = put(&mut self.backend, &mut self.buf.0, key, &encoded).await;
         if stored != Err(StoreError::Full) {
             // Written, or maybe written: counted, and cleared by a sweep if the upload is
-            // abandoned. On an error the upload stays where it was; the chunk may be sent again.
-            self.index.set_chunk(bank, index, true, size as u16);
+            // abandoned.
+            let size = self.geometry.item_size(staged.len) as u16;
+            self.index.set_chunk(staged.bank, staged.index, true, size);
         }
-        stored.map_err(Refusal::Store)?;
-        let steps = item.as_deref().unwrap_or_default();
+        stored
+    }
+
+    /// Counts the staged chunk (in the chunk buffer) into the upload; steps received so far.
+    fn accept_staged(&mut self, staged: &Staged) -> u16 {
+        let Some(upload) = self.upload.as_mut() else { return 0 };
         // The step bytes follow the option tag and the one-byte length (as `append_chunk`).
-        let step_bytes = encoded.get(2..).unwrap_or_default();
-        // The upload is still there: only `ensure_open` and `commit` drop it.
-        Ok(self.upload.as_mut().map_or(0, |u| u.accept(steps, step_bytes)))
+        let step_bytes = self.chunk.0.get(2..staged.len).unwrap_or_default();
+        upload.accept(staged.steps, staged.ms, step_bytes)
+    }
+
+    /// Opens the store and writes a deferred chunk (a failure is kept for the upload's next
+    /// request).
+    async fn open(&mut self) -> Result<(), StoreError> {
+        self.ensure_open().await?;
+        let _ = self.flush().await;
+        Ok(())
+    }
+
+    /// [`PlanStore::open`], then the error of a deferred chunk write, once: what the upload's
+    /// next request (`chunk`, `commit`) answers.
+    async fn settle(&mut self) -> Result<(), StoreError> {
+        self.open().await?;
+        match self.failed.take() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
     }
 
     /// Checks the upload whole and stores it: the plan stored.
     pub async fn commit(&mut self, limits: &DeviceLimits) -> Result<PlanSummary, Refusal> {
-        self.ensure_open().await.map_err(Refusal::Store)?;
+        self.settle().await.map_err(Refusal::Store)?;
         let upload = self.upload.as_ref().ok_or(Refusal::Upload(UploadError::NotStarted))?;
         upload.check_complete().map_err(Refusal::Upload)?;
         let Some(upload) = self.upload.take() else {
@@ -281,7 +473,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
 
     /// One page of the plan list, from `from_slot` on.
     pub async fn list(&mut self, from_slot: u8) -> Result<PlanPage, Refusal> {
-        self.ensure_open().await.map_err(Refusal::Store)?;
+        self.open().await.map_err(Refusal::Store)?;
         Ok(self.index.page(from_slot, self.free_bytes()))
     }
 
@@ -295,7 +487,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
 
     /// Deletes a plan; what was deleted.
     pub async fn delete(&mut self, plan: &PlanRef) -> Result<PlanSummary, Refusal> {
-        self.ensure_open().await.map_err(Refusal::Store)?;
+        self.open().await.map_err(Refusal::Store)?;
         let slot = self.resolve(plan)?;
         let summary = self.index.summary(slot).ok_or(not_found(plan))?;
         let item: PlanItem = None;
@@ -309,7 +501,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
     /// no steps.
     pub async fn load(&mut self, plan: &PlanRef, out: &mut Plan) -> Result<PlanSummary, Refusal> {
         out.steps.clear();
-        self.ensure_open().await.map_err(Refusal::Store)?;
+        self.open().await.map_err(Refusal::Store)?;
         let slot = self.resolve(plan)?;
         let result = self.read_plan(slot, out).await;
         if result.is_err() {
@@ -359,7 +551,10 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
             return Ok(());
         }
         self.upload = None;
+        // A deferred chunk of the upload dropped here is not written.
+        self.pending = None;
         self.index.clear();
+        self.check_format().await?;
         let Backend::Map(map) = &mut self.backend else {
             return Err(StoreError::Flash);
         };
@@ -374,11 +569,45 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         }
         if let Err(e) = scanned {
             defmt::warn!("plan store: reading the flash failed: {}", describe(&e));
-            return Err(StoreError::Flash);
+            return Err(store_error(&e, self.area.start));
         }
         self.stale = false;
         self.tidy().await;
         Ok(())
+    }
+
+    /// Looks at the marker once (module `format`): the store's own area opens; a blank one is
+    /// marked; anything else is `Foreign` until [`PlanStore::format`].
+    async fn check_format(&mut self) -> Result<(), StoreError> {
+        let area = self.area.clone();
+        let Backend::Map(map) = &mut self.backend else {
+            return Err(StoreError::Flash);
+        };
+        if self.format == Format::Unknown {
+            let flash = map.flash();
+            let found = format::examine(flash, area.clone()).await;
+            self.format = match found {
+                Ok(Found::Marked) => Format::Ours,
+                Ok(Found::Blank) => {
+                    defmt::info!("plan store: blank area, writing the format marker");
+                    let start = area.start;
+                    format::mark(flash, area).await.map_err(|e| flash_error(&e, start))?;
+                    Format::Ours
+                }
+                Ok(Found::Foreign) => {
+                    defmt::warn!(
+                        "plan store: the area holds data the store did not write; \
+                         nothing is stored until it is formatted"
+                    );
+                    Format::Foreign
+                }
+                Err(e) => return Err(flash_error(&e, area.start)),
+            };
+        }
+        match self.format {
+            Format::Foreign => Err(StoreError::Foreign),
+            _ => Ok(()),
+        }
     }
 
     /// Clears strays after a change, logging (not returning) a failure: the change itself
@@ -422,7 +651,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         value: &V,
     ) -> Result<(), StoreError> {
         let stored = self.put(key, value).await;
-        if stored == Err(StoreError::Flash) {
+        if matches!(stored, Err(StoreError::Flash | StoreError::Verify { .. })) {
             self.stale = true;
         }
         stored
@@ -433,9 +662,10 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         let Backend::Map(map) = &mut self.backend else {
             return Err(StoreError::Flash);
         };
+        let area_start = self.area.start;
         map.fetch_item::<&[u8]>(&mut self.buf.0, &key.raw()).await.map_err(|e| {
             defmt::warn!("plan store: reading failed: {}", describe(&e));
-            StoreError::Flash
+            store_error(&e, area_start)
         })
     }
 }
@@ -462,14 +692,40 @@ async fn put<'v, F: NorFlash, C: CacheImpl<u16>, V: Value<'v>>(
     let Backend::Map(map) = backend else {
         return Err(StoreError::Flash);
     };
+    let area_start = map.flash_range().start.saturating_sub(F::ERASE_SIZE as u32);
     match map.store_item(buf, &key.raw(), value).await {
         Ok(()) => Ok(()),
         // Nothing was written: the map had no room.
         Err(sequential_storage::Error::FullStorage) => Err(StoreError::Full),
         Err(e) => {
             defmt::warn!("plan store: writing failed: {}", describe(&e));
-            Err(StoreError::Flash)
+            Err(store_error(&e, area_start))
         }
+    }
+}
+
+/// The map's range in the store's `area`: every page after the marker page.
+fn map_range(area: &Range<u32>, page: usize) -> Range<u32> {
+    area.start.saturating_add(page as u32)..area.end
+}
+
+/// The store error for a failed flash operation: a read-back mismatch is `Verify` (its offset
+/// in the area, which starts at `area_start`), anything else `Flash`.
+fn flash_error<E>(e: &VerifyError<E>, area_start: u32) -> StoreError {
+    match e {
+        VerifyError::Mismatch { offset } => {
+            defmt::warn!("plan store: the flash reads back different at {=u32:#x}", offset);
+            StoreError::Verify { offset: offset.saturating_sub(area_start) }
+        }
+        VerifyError::Flash(_) => StoreError::Flash,
+    }
+}
+
+/// The store error for a failed sequential-storage call.
+fn store_error<E>(e: &sequential_storage::Error<VerifyError<E>>, area_start: u32) -> StoreError {
+    match e {
+        sequential_storage::Error::Storage { value, .. } => flash_error(value, area_start),
+        _ => StoreError::Flash,
     }
 }
 

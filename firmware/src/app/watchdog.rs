@@ -18,7 +18,7 @@ use core::cell::Cell;
 
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use embassy_time::{Duration, Ticker};
+use embassy_time::{Duration, Instant, Ticker};
 
 /// A supervised task: one bit of a [`TaskSet`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
@@ -62,20 +62,70 @@ impl TaskSet {
     }
 }
 
+impl Task {
+    /// The task's place in per-task tables (its bit's position).
+    const fn slot(self) -> usize {
+        (self as u8).trailing_zeros() as usize
+    }
+}
+
+/// Told that work done on behalf of a task made progress: a long operation inside a task (the
+/// store's flash work inside the link task) reports each step, so the task checks in while it
+/// works rather than only between requests.
+pub trait Progress: Sync {
+    /// `task` made progress.
+    fn progress(&self, task: Task);
+}
+
+impl Progress for Supervisor {
+    fn progress(&self, task: Task) {
+        self.check_in(task);
+    }
+}
+
+/// When each task last checked in and the longest gap between two of its check-ins, µs.
+#[derive(Debug, Clone, Copy)]
+struct Gaps {
+    last: [Option<u64>; 3],
+    longest: [u64; 3],
+}
+
 /// Who must check in before the dog is fed, and who has since the last feed.
 ///
 /// Shared by every task through a `&'static` (a `static SUPERVISOR: Supervisor = ...`): the
 /// marks sit behind a critical-section mutex, so [`Supervisor::check_in`] may be called from
-/// any task or interrupt.
+/// any task or interrupt. It also measures the longest gap between two check-ins of each task
+/// ([`Supervisor::longest_gap`]): the margin the watchdog's timeout has in practice.
 pub struct Supervisor {
     registered: TaskSet,
     marks: Mutex<CriticalSectionRawMutex, Cell<u8>>,
+    gaps: Mutex<CriticalSectionRawMutex, Cell<Gaps>>,
 }
 
 impl Supervisor {
     /// A supervisor of the `registered` tasks, none checked in yet.
     pub const fn new(registered: TaskSet) -> Self {
-        Self { registered, marks: Mutex::new(Cell::new(0)) }
+        let gaps = Gaps { last: [None; 3], longest: [0; 3] };
+        Self { registered, marks: Mutex::new(Cell::new(0)), gaps: Mutex::new(Cell::new(gaps)) }
+    }
+
+    /// The longest time between two check-ins of `task` since boot (zero before its second).
+    pub fn longest_gap(&self, task: Task) -> Duration {
+        Duration::from_micros(self.gaps.lock(Cell::get).longest[task.slot()])
+    }
+
+    /// Notes a check-in of `task` at `now` for the gap measurement.
+    fn note_gap(&self, task: Task, now: Instant) {
+        let now = now.as_micros();
+        self.gaps.lock(|g| {
+            let mut gaps = g.get();
+            let i = task.slot();
+            if let Some(last) = gaps.last[i] {
+                gaps.longest[i] = gaps.longest[i].max(now.saturating_sub(last));
+            }
+            gaps.last[i] = Some(now);
+            g.set(gaps);
+        });
     }
 
     /// The tasks that must check in.
@@ -87,6 +137,9 @@ impl Supervisor {
     pub fn check_in(&self, task: Task) {
         let bit = task as u8 & self.registered.0;
         self.marks.lock(|m| m.set(m.get() | bit));
+        if bit != 0 {
+            self.note_gap(task, Instant::now());
+        }
     }
 
     /// Whether to feed the dog now: true only if every registered task checked in since the
@@ -127,8 +180,10 @@ pub async fn watchdog_task(
     dog.start();
     let mut ticker = Ticker::every(period);
     let mut starving = false;
+    let mut logged = [Duration::from_ticks(0); 3];
     loop {
         ticker.next().await;
+        log_gaps(supervisor, &mut logged);
         if supervisor.poll() {
             dog.pet();
             starving = false;
@@ -136,6 +191,20 @@ pub async fn watchdog_task(
             // Once per stall: the log must not flood while the countdown runs out.
             defmt::warn!("watchdog: not fed, tasks missing {=u8:03b}", supervisor.missing().bits());
             starving = true;
+        }
+    }
+}
+
+/// Logs a task's longest check-in gap when it grew by more than a millisecond since last
+/// logged (rarely, once the longest request has been seen): the number the tests and
+/// docs/store.md read.
+fn log_gaps(supervisor: &Supervisor, logged: &mut [Duration; 3]) {
+    for task in [Task::Link, Task::Drive, Task::Sense] {
+        let gap = supervisor.longest_gap(task);
+        let seen = &mut logged[task.slot()];
+        if gap.as_micros() > seen.as_micros() + 1_000 {
+            *seen = gap;
+            defmt::info!("watchdog: longest check-in gap of {} {=u64} us", task, gap.as_micros());
         }
     }
 }
@@ -224,6 +293,24 @@ mod tests {
         assert!(s.poll());
         // An empty set is always satisfied: the dog is fed on every poll.
         assert!(Supervisor::new(TaskSet::EMPTY).poll());
+    }
+
+    #[test]
+    fn the_longest_gap_between_check_ins_is_kept_per_task() {
+        let s = Supervisor::new(ALL);
+        let at = |ms| Instant::from_millis(ms);
+        assert_eq!(s.longest_gap(Task::Link), Duration::from_ticks(0), "none before two");
+        s.note_gap(Task::Link, at(1_000));
+        s.note_gap(Task::Link, at(1_100));
+        s.note_gap(Task::Drive, at(1_105));
+        s.note_gap(Task::Link, at(1_130));
+        s.note_gap(Task::Drive, at(1_110));
+        assert_eq!(s.longest_gap(Task::Link), Duration::from_millis(100));
+        assert_eq!(s.longest_gap(Task::Drive), Duration::from_millis(5));
+        assert_eq!(s.longest_gap(Task::Sense), Duration::from_ticks(0));
+        // Progress reported for a task is its check-in.
+        Progress::progress(&s, Task::Sense);
+        assert_eq!(s.missing(), TaskSet::of(&[Task::Link, Task::Drive]));
     }
 
     #[test]

@@ -453,7 +453,28 @@ impl DeviceClient {
     pub fn delete(&mut self, plan: PlanRef) -> Result<PlanSummary, DeviceError> {
         self.call(DeletePlan { plan })
     }
+
+    /// What the controller's plan store holds (its own format, data it did not write, or no
+    /// flash).
+    pub fn store_info(&mut self) -> Result<chladni_shared::icd::store::StoreInfo, DeviceError> {
+        self.call(chladni_shared::icd::link::GetStore)
+    }
+
+    /// Erases the controller's whole plan store (every plan and the configuration, or the data
+    /// it did not write) and formats it. Waits up to [`FORMAT_TIMEOUT`] for the answer: the
+    /// chip erases a 2 KiB page in 22–25 ms, 256 of them in 6 s.
+    pub fn format_store(&mut self) -> Result<chladni_shared::icd::store::StoreInfo, DeviceError> {
+        let timeout = self.link.timeout;
+        self.link.timeout = timeout.max(FORMAT_TIMEOUT);
+        let formatted = self.call(chladni_shared::icd::link::FormatStore);
+        self.link.timeout = timeout;
+        formatted
+    }
 }
+
+/// Longest a store format may take to answer (every page of the 512 KiB bank erased at the
+/// datasheet's 24.47 ms, with margin for a loaded emulator).
+pub const FORMAT_TIMEOUT: Duration = Duration::from_secs(30);
 
 impl DeviceClient {
     /// Uploads `plan` (begin, chunks of [`CHUNK_STEPS`] steps, commit) into `slot`, or the slot

@@ -9,7 +9,7 @@
 use chladni_shared::icd::link::{DeviceInfo, RunNumber, StatusReport, Telemetry};
 use chladni_shared::icd::plan::Level;
 use chladni_shared::icd::sense::Fault;
-use chladni_shared::icd::store::PlanSummary;
+use chladni_shared::icd::store::{PlanSummary, StoreInfo, StoreState};
 use chladni_shared::icd::units::{MilliDeg, MilliHz, MmPerS2, Q15, s_from_samples};
 use serde::Serialize;
 use serialport::{SerialPortInfo, SerialPortType};
@@ -200,6 +200,50 @@ impl From<&DeviceInfo> for InfoJson {
             build_id: format!("{:08x}", info.build_id),
             firmware_version: info.firmware_version.to_string(),
             protocol_version: info.protocol_version,
+        }
+    }
+}
+
+/// The plan store's state (`store --json`; `info` prints its text): `state` is `ready`,
+/// `foreign` (holds data the controller did not write: `chladni device store --format`) or
+/// `unavailable` (no flash).
+#[derive(Debug, Clone, Serialize)]
+pub struct StoreJson {
+    pub area_bytes: u32,
+    pub layout: u16,
+    pub state: &'static str,
+}
+
+impl StoreJson {
+    /// The state's name.
+    pub fn state_name(state: StoreState) -> &'static str {
+        match state {
+            StoreState::Ready => "ready",
+            StoreState::Foreign => "foreign",
+            StoreState::Unavailable => "unavailable",
+        }
+    }
+
+    /// The store line for people.
+    pub fn text(&self) -> String {
+        match self.state {
+            "foreign" => format!(
+                "foreign: {} KiB of flash hold data this firmware did not write; nothing is stored \
+                 until `chladni device store --format` erases it",
+                self.area_bytes / 1024
+            ),
+            "ready" => format!("ready ({} KiB, layout {})", self.area_bytes / 1024, self.layout),
+            other => other.to_string(),
+        }
+    }
+}
+
+impl From<&StoreInfo> for StoreJson {
+    fn from(info: &StoreInfo) -> Self {
+        StoreJson {
+            area_bytes: info.area_bytes,
+            layout: info.layout,
+            state: StoreJson::state_name(info.state),
         }
     }
 }

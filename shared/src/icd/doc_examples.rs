@@ -62,7 +62,7 @@ const SESSION: u32 = 0x1234_5678;
 fn the_ping_frame_is_the_one_on_the_page() {
     let shown = example("ping");
     let ping = Envelope {
-        version: 5,
+        version: 6,
         session: SESSION,
         id: 1,
         body: Request::Ping(Ping { nonce: 0x0102_0304 }),
@@ -73,7 +73,7 @@ fn the_ping_frame_is_the_one_on_the_page() {
     assert_eq!(shown["wire"], wire(&ping));
     assert_eq!(decoded(&shown["wire"]), Ok(ping));
     // "The answer … happens to be the same bytes."
-    let pong = Envelope { version: 5, session: SESSION, id: 1, body: Response::Ping(0x0102_0304) };
+    let pong = Envelope { version: 6, session: SESSION, id: 1, body: Response::Ping(0x0102_0304) };
     assert_eq!(shown["wire"], wire(&pong));
 }
 
@@ -81,7 +81,7 @@ fn the_ping_frame_is_the_one_on_the_page() {
 fn the_malformed_answer_and_the_short_frame_are_the_ones_on_the_page() {
     let shown = example("malformed");
     let answer = Envelope {
-        version: 5,
+        version: 6,
         session: SESSION,
         id: 1,
         body: Response::Error(LinkError::Malformed),
@@ -123,7 +123,7 @@ fn signed_integers_are_zigzag_varints_as_the_table_says() {
 #[test]
 fn a_33_byte_plan_name_is_malformed_under_the_frames_own_id() {
     // UploadBegin (request 8) with a 33-byte name, built by hand: the type cannot hold it.
-    let mut bytes = postcard(&Envelope { version: 5u16, session: SESSION, id: 9u32, body: 8u8 });
+    let mut bytes = postcard(&Envelope { version: 6u16, session: SESSION, id: 9u32, body: 8u8 });
     bytes.push(0); // slot: None
     bytes.push(33);
     bytes.extend([b'a'; 33]);

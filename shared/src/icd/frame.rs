@@ -17,7 +17,7 @@ use crc::{CRC_32_ISO_HDLC, Crc};
 use serde::{Deserialize, Serialize};
 
 /// Version of this protocol; bumped on any incompatible change of a message or of framing.
-pub const PROTOCOL_VERSION: u16 = 5;
+pub const PROTOCOL_VERSION: u16 = 6;
 
 /// Largest COBS-encoded frame (without delimiters) either side accepts, in bytes.
 pub const MAX_FRAME: usize = 1024;

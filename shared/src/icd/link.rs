@@ -29,8 +29,8 @@ pub use crate::icd::frame::{
 pub use crate::icd::plan::{Level, Plan, PlanError, SetpointError};
 pub use crate::icd::sense::{Fault, FaultCause, Measurement, ResetCause, SensorFault};
 use crate::icd::store::{
-    ConfigError, DeviceConfig, PlanName, PlanPage, PlanRef, PlanSummary, StoreError, UploadBegin,
-    UploadChunk, UploadError,
+    ConfigError, DeviceConfig, PlanName, PlanPage, PlanRef, PlanSummary, StoreError, StoreInfo,
+    UploadBegin, UploadChunk, UploadError,
 };
 
 /// Longest client name a session may give in [`Request::Hello`].
@@ -402,6 +402,17 @@ pub struct GetConfig;
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SetConfig(pub DeviceConfig);
 
+/// Asks what the plan store's flash area holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct GetStore;
+
+/// Erases the whole plan store (every plan and the configuration, or whatever else the area
+/// held) and formats it for this firmware's store.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FormatStore;
+
 /// The number the controller gives a drive command (`Drive`, `RunPlan`, `Stop`) when it
 /// accepts it; [`StatusReport::run`] says which one is in effect.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
@@ -449,6 +460,10 @@ endpoints! {
     GetSweep(GetSweep) => SweepPage, Anyone, fn get_sweep;
     /// Simulates a fault (QEMU only).
     InjectFault(InjectFault) => (), Owner, fn inject_fault;
+    /// What the plan store's flash area holds.
+    GetStore(GetStore) => StoreInfo, Anyone, fn get_store;
+    /// Erases the plan store's area and writes its format marker → the store as it now is.
+    FormatStore(FormatStore) => StoreInfo, Owner, fn format_store;
 }
 
 /// Why a request that was read was not carried out.
@@ -812,8 +827,8 @@ mod tests {
         assert_eq!(
             wire,
             [
-                0x00, 0x11, 0x05, 0xf8, 0xac, 0xd1, 0x91, 0x01, 0x01, 0x01, 0x84, 0x86, 0x88, 0x08,
-                0x92, 0x11, 0x0d, 0xa9, 0x00
+                0x00, 0x11, 0x06, 0xf8, 0xac, 0xd1, 0x91, 0x01, 0x01, 0x01, 0x84, 0x86, 0x88, 0x08,
+                0x62, 0xc3, 0x93, 0xde, 0x00
             ]
         );
         // Variant numbers are the table's order: a client in another language relies on them.
@@ -833,14 +848,16 @@ mod tests {
             Request::ClearFault(ClearFault),
             Request::GetSweep(GetSweep { from: 0 }),
             Request::InjectFault(InjectFault(TestFault::Heal)),
+            Request::GetStore(GetStore),
+            Request::FormatStore(FormatStore),
         ];
         let numbers: std::vec::Vec<u8> =
             requests.iter().map(|r| postcard::to_stdvec(r).unwrap()[0]).collect();
-        assert_eq!(numbers, [0, 1, 2, 3, 4, 5, 6, 7, 10, 11, 13, 14, 16, 18, 19]);
+        assert_eq!(numbers, [0, 1, 2, 3, 4, 5, 6, 7, 10, 11, 13, 14, 16, 18, 19, 20, 21]);
         let error = postcard::to_stdvec(&Response::Error(LinkError::BadCrc)).unwrap();
         let refused =
             postcard::to_stdvec(&Response::Refused(Refusal::TelemetryRate { rate_hz: 0 }));
-        assert_eq!((error[0], refused.unwrap()[0]), (20, 21));
+        assert_eq!((error[0], refused.unwrap()[0]), (22, 23));
         let level = postcard::to_stdvec(&Level::Accel(1)).unwrap();
         assert_eq!(level, [1, 1]);
     }

@@ -442,6 +442,41 @@ pub enum StoreError {
     },
     /// The flash itself failed (or is absent: QEMU started without a flash file).
     Flash,
+    /// A program or erase read back different from what it should have left: the flash did
+    /// not take the data (a worn or failing part, or a programming error the driver did not
+    /// report). What was asked is not stored.
+    Verify {
+        /// Offset in the store's area of the first byte that differs.
+        offset: u32,
+    },
+    /// The store's area holds data this firmware's store did not write (another program's,
+    /// the factory demo's, an older layout): nothing is stored or read until an explicit
+    /// `FormatStore` erases it.
+    Foreign,
+}
+
+/// What the plan store's flash area holds (the answer to `GetStore` and `FormatStore`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StoreState {
+    /// The store's own format (its marker is there): plans can be stored.
+    Ready,
+    /// Data the store did not write; see [`StoreError::Foreign`].
+    Foreign,
+    /// No flash (an emulator without a flash file), or it could not be read.
+    Unavailable,
+}
+
+/// The plan store's state and layout.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StoreInfo {
+    /// What the area holds.
+    pub state: StoreState,
+    /// The store layout this firmware writes (its format marker's version).
+    pub layout: u16,
+    /// Bytes of flash the store's area spans (0 without flash).
+    pub area_bytes: u32,
 }
 
 impl core::fmt::Display for StoreError {
@@ -456,6 +491,14 @@ impl core::fmt::Display for StoreError {
             StoreError::Flash => write!(
                 f,
                 "the controller's flash failed or is absent (an emulator keeps plans only with --flash-file)"
+            ),
+            StoreError::Verify { offset } => write!(
+                f,
+                "the controller's flash did not take a write (read back different at offset {offset:#x} of the plan store): nothing was stored"
+            ),
+            StoreError::Foreign => write!(
+                f,
+                "the controller's plan store holds data it did not write: `chladni device store --format` erases it"
             ),
         }
     }

@@ -31,8 +31,8 @@ use crate::icd::link::*;
 use crate::icd::plan::{DeviceLimits, Level, Plan, PlanError, SetpointError, Step};
 use crate::icd::sense::{ControlConfig, Fault, FaultCause, Measurement, ResetCause, SensorFault};
 use crate::icd::store::{
-    ConfigError, ControlField, DeviceConfig, PlanPage, PlanRef, PlanSummary, StoreError,
-    UploadBegin, UploadChunk, UploadError,
+    ConfigError, ControlField, DeviceConfig, PlanPage, PlanRef, PlanSummary, StoreError, StoreInfo,
+    StoreState, UploadBegin, UploadChunk, UploadError,
 };
 
 /// The pinned digests, as `version N` then one `label digest` line per message.
@@ -164,6 +164,8 @@ fn requests() -> Vec<Request> {
         }),
         Request::GetSweep(GetSweep { from: 5_014 }),
         Request::InjectFault(InjectFault(TestFault::SensorWrongId)),
+        Request::GetStore(GetStore),
+        Request::FormatStore(FormatStore),
     ]
 }
 
@@ -207,6 +209,16 @@ fn answers() -> Vec<Response> {
             .collect(),
         }),
         Response::InjectFault(()),
+        Response::GetStore(StoreInfo {
+            state: StoreState::Foreign,
+            layout: 6_017,
+            area_bytes: 1_006_018,
+        }),
+        Response::FormatStore(StoreInfo {
+            state: StoreState::Unavailable,
+            layout: 6_019,
+            area_bytes: 1_006_020,
+        }),
         Response::Telemetry(Telemetry { seq: 6_015, left: 6_016, status: status() }),
     ]
 }
@@ -241,6 +253,8 @@ fn failures() -> Vec<Response> {
         Refusal::Store(StoreError::NotFound(PlanRef::Name(s("gone")))),
         Refusal::Store(StoreError::Corrupt { slot: 15 }),
         Refusal::Store(StoreError::Flash),
+        Refusal::Store(StoreError::Verify { offset: 1_007_019 }),
+        Refusal::Store(StoreError::Foreign),
         Refusal::Config(ConfigError::Control { field: ControlField::CheckMs, value: 7_015 }),
         Refusal::TelemetryRate { rate_hz: 7_016 },
         Refusal::Sweep(SweepError::Range { from_mhz: 7_017, to_mhz: 7_018 }),

@@ -38,15 +38,26 @@
 //! (see docs/store.md).
 //!
 //! A glitch ([`MockFlash::glitch_after`]) is a write or erase call that fails and changes
-//! nothing, with the power staying on, like a transient programming error.
+//! nothing, with the power staying on, like a transient programming error. A dropped write
+//! ([`MockFlash::drop_write_after`]) or erase ([`MockFlash::drop_erase_after`]) reports
+//! success and changes nothing: what a driver that loses the chip's error flags returns for a
+//! refused program (embassy-stm32 0.6 on the L4), which only reading back can catch.
+//!
+//! Time is simulated, never slept: each program and erase adds the chip's time
+//! ([`super::chip`]: 82 µs a double word, 22 ms a page) to [`FlashStats::busy_us`], and a
+//! [`MockFlash::clock`] handle reads the total, so a test can tell how long a request would
+//! keep the flash busy (the fuzz targets run this model millions of times).
 //!
 //! Every operation is counted ([`FlashStats`]) so tests can report what an upload costs.
 
 use std::cell::RefCell;
 use std::rc::Rc;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::vec;
 use std::vec::Vec;
 
+use super::chip;
 use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
@@ -89,6 +100,8 @@ pub struct FlashStats {
     pub bytes_written: u64,
     /// Pages erased.
     pub erases: u64,
+    /// Simulated time the chip was busy programming and erasing, µs ([`super::chip`]).
+    pub busy_us: u64,
 }
 
 impl FlashStats {
@@ -105,6 +118,7 @@ impl FlashStats {
             writes: self.writes - earlier.writes,
             bytes_written: self.bytes_written - earlier.bytes_written,
             erases: self.erases - earlier.erases,
+            busy_us: self.busy_us - earlier.busy_us,
         }
     }
 }
@@ -113,8 +127,13 @@ impl core::fmt::Display for FlashStats {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         write!(
             f,
-            "{} reads ({} B), {} writes ({} B), {} page erases",
-            self.reads, self.bytes_read, self.writes, self.bytes_written, self.erases
+            "{} reads ({} B), {} writes ({} B), {} page erases, {:.1} ms busy",
+            self.reads,
+            self.bytes_read,
+            self.writes,
+            self.bytes_written,
+            self.erases,
+            self.busy_us as f64 / 1e3
         )
     }
 }
@@ -170,9 +189,30 @@ pub struct MockFlash {
     cut: Option<Cut>,
     /// Writes or erases until the glitch.
     glitch: Option<u64>,
+    /// Writes until the one silently dropped.
+    drop_write: Option<u64>,
+    /// Erases until the one silently dropped.
+    drop_erase: Option<u64>,
+    /// Simulated time since the flash was made, µs (kept across reboots).
+    clock: Arc<AtomicU64>,
     off: bool,
     /// The first program the rule refused: its address.
     violation: Option<u32>,
+}
+
+/// Counts down an armed one-shot fault; true (and disarmed) when it is its turn.
+fn take_turn(armed: &mut Option<u64>) -> bool {
+    match armed {
+        Some(0) => {
+            *armed = None;
+            true
+        }
+        Some(n) => {
+            *n -= 1;
+            false
+        }
+        None => false,
+    }
 }
 
 /// A word of noise from `seed`: which bits a torn or garbled word gets wrong.
@@ -197,9 +237,36 @@ impl MockFlash {
             stats: FlashStats::default(),
             cut: None,
             glitch: None,
+            drop_write: None,
+            drop_erase: None,
+            clock: Arc::new(AtomicU64::new(0)),
             off: false,
             violation: None,
         }
+    }
+
+    /// The simulated clock, µs: advanced by every program and erase, never by reads (a read
+    /// takes nanoseconds on the chip). The handle stays valid while the store owns the flash.
+    pub fn clock(&self) -> Arc<AtomicU64> {
+        self.clock.clone()
+    }
+
+    /// Arms a dropped write: `ops` more write calls complete, the next one reports success and
+    /// changes nothing.
+    pub fn drop_write_after(&mut self, ops: u64) {
+        self.drop_write = Some(ops);
+    }
+
+    /// Arms a dropped erase: `ops` more erase calls complete, the next one reports success and
+    /// changes nothing.
+    pub fn drop_erase_after(&mut self, ops: u64) {
+        self.drop_erase = Some(ops);
+    }
+
+    /// Counts the chip's busy time.
+    fn busy(&mut self, us: u64) {
+        self.stats.busy_us += us;
+        self.clock.fetch_add(us, Ordering::Relaxed);
     }
 
     /// The operations counted so far.
@@ -236,6 +303,8 @@ impl MockFlash {
         self.stats = FlashStats::default();
         self.cut = None;
         self.glitch = None;
+        self.drop_write = None;
+        self.drop_erase = None;
         self.off = false;
     }
 
@@ -358,6 +427,13 @@ impl MockFlash {
         }
         let start = self.check(from, (to - from) as usize, PAGE_SIZE)?;
         let pages = (to - from) as usize / PAGE_SIZE;
+        if self.off {
+            return Err(MockFlashError::PowerCut);
+        }
+        if take_turn(&mut self.drop_erase) {
+            self.busy(chip::erase_us(pages));
+            return Ok(());
+        }
         let words = pages * (PAGE_SIZE / WORD_SIZE);
         let cut = self.begin(match self.cuts {
             Cuts::PerCall => words,
@@ -369,7 +445,9 @@ impl MockFlash {
             Cuts::PerWord => (done * (PAGE_SIZE / WORD_SIZE) + seed as usize % 256, seed),
         });
         let done = cut.map_or(words, |(done, _)| done.min(words));
-        self.stats.erases += done.div_ceil(PAGE_SIZE / WORD_SIZE) as u64;
+        let erased_pages = done.div_ceil(PAGE_SIZE / WORD_SIZE);
+        self.stats.erases += erased_pages as u64;
+        self.busy(chip::erase_us(erased_pages));
         (0..done).for_each(|w| self.erase_word(start + w * WORD_SIZE));
         match cut {
             None => Ok(()),
@@ -385,9 +463,18 @@ impl MockFlash {
     fn write_now(&mut self, offset: u32, bytes: &[u8]) -> Result<(), MockFlashError> {
         let start = self.check(offset, bytes.len(), WORD_SIZE)?;
         let words = bytes.len() / WORD_SIZE;
+        if self.off {
+            return Err(MockFlashError::PowerCut);
+        }
+        if take_turn(&mut self.drop_write) {
+            self.stats.writes += 1;
+            self.busy(chip::program_us(bytes.len()));
+            return Ok(());
+        }
         let cut = self.begin(words)?;
         self.stats.writes += 1;
         let landed = cut.map_or(words, |(done, _)| done);
+        self.busy(chip::program_us(landed * WORD_SIZE));
         for (i, word) in bytes.chunks_exact(WORD_SIZE).take(landed).enumerate() {
             self.program_word(start + i * WORD_SIZE, word)?;
         }

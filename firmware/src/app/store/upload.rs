@@ -1,7 +1,7 @@
 //! The upload in progress: what was announced, what has arrived, and the checks on each chunk
 //! and on the commit. Pure logic: the store writes the chunks and the header.
 
-use chladni_shared::icd::plan::{DeviceLimits, Step};
+use chladni_shared::icd::plan::DeviceLimits;
 use chladni_shared::icd::store::{
     CHUNK_STEPS, PlanDigest, PlanName, UploadBegin, UploadChunk, UploadError,
 };
@@ -68,14 +68,12 @@ impl Upload {
         Ok(chunk.index as u8)
     }
 
-    /// Takes in a checked chunk's steps once they are stored, with their postcard bytes (what
-    /// the plan CRC covers, as stored: not encoded again); steps received so far.
-    pub fn accept(&mut self, steps: &[Step], bytes: &[u8]) -> u16 {
+    /// Takes in a checked chunk of `count` steps lasting `ms` in all, with their postcard bytes
+    /// (what the plan CRC covers, as stored: not encoded again); steps received so far.
+    pub fn accept(&mut self, count: u16, ms: u64, bytes: &[u8]) -> u16 {
         self.digest.step_bytes(bytes);
-        for step in steps {
-            self.once_ms += step.duration_ms as u64;
-        }
-        self.received += steps.len() as u16;
+        self.once_ms += ms;
+        self.received += count;
         self.received
     }
 

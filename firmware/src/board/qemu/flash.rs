@@ -9,10 +9,16 @@
 //! The file's path reaches the firmware on the semihosting command line as `flash=PATH`.
 //!
 //! The plan store takes an async NorFlash: the async traits below run the blocking file
-//! operations to completion (a semihosting call is a few microseconds of host I/O, so nothing
-//! is gained by yielding, and a store operation is never cancelled halfway).
+//! operation to completion (a semihosting call is a few microseconds of host I/O), then wait
+//! out the time the real chip would be busy ([`crate::app::store::chip`]: 82 µs a double
+//! word, 22 ms a page erase) on a timer, as embassy-stm32's async flash waits for the end of
+//! operation interrupt: other tasks run meanwhile, and the emulated firmware sees the chip's
+//! timing. The time driver ticks in milliseconds, so the waits are owed in microseconds and
+//! paid in whole ticks: over a request the total matches the chip's.
 
 use cortex_m_semihosting::{nr, syscall};
+
+use crate::app::store::chip;
 use embedded_storage::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash, check_erase, check_read,
     check_write,
@@ -59,6 +65,8 @@ impl NorFlashError for FileFlashError {
 /// The flash bank, kept in a host file.
 pub struct FileFlash {
     fd: usize,
+    /// Chip time not yet waited out, µs.
+    owed_us: u64,
 }
 
 impl FileFlash {
@@ -82,7 +90,7 @@ impl FileFlash {
             unsafe { syscall!(CLOSE, fd) };
             return Err(FileFlashError::Io);
         }
-        Ok(Self { fd })
+        Ok(Self { fd, owed_us: 0 })
     }
 
     fn seek(&mut self, offset: u32) -> Result<(), FileFlashError> {
@@ -188,10 +196,28 @@ impl embedded_storage_async::nor_flash::NorFlash for FileFlash {
     const ERASE_SIZE: usize = <Self as NorFlash>::ERASE_SIZE;
 
     async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-        NorFlash::erase(self, from, to)
+        NorFlash::erase(self, from, to)?;
+        self.busy(chip::erase_us((to - from) as usize / PAGE_SIZE)).await;
+        Ok(())
     }
 
     async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-        NorFlash::write(self, offset, bytes)
+        NorFlash::write(self, offset, bytes)?;
+        self.busy(chip::program_us(bytes.len())).await;
+        Ok(())
+    }
+}
+
+impl FileFlash {
+    /// Waits out `us` of chip time, in whole time-driver ticks (the rest is owed to the next
+    /// operation).
+    async fn busy(&mut self, us: u64) {
+        self.owed_us += us;
+        let tick_us = 1_000_000 / embassy_time::TICK_HZ;
+        let ticks = self.owed_us / tick_us;
+        if ticks > 0 {
+            self.owed_us -= ticks * tick_us;
+            embassy_time::Timer::after_ticks(ticks).await;
+        }
     }
 }

@@ -16,6 +16,12 @@
 //!   cuts: it reads such words like any other garbage and rejects them by CRC. So the NMI handler
 //!   ([`super::failsafe`]) asks [`absorb_ecc_error`] first: an error in bank 2 is cleared and
 //!   counted, and the read goes on with the bits as read; any other NMI parks the drive.
+//!
+//! What it does not do: report a refused program. embassy-stm32 0.6's flash interrupt clears
+//! every error flag (PROGERR, PGSERR, …) before its `wait_ready` reads the status, so a program
+//! the chip refused comes back `Ok(())`. The plan store reads back every write and erase
+//! (`app::store::verify`) and refuses the request with `Store(Verify)` when the flash
+//! disagrees, so such an error is caught there, on every board, rather than here.
 
 use core::sync::atomic::{AtomicU32, Ordering};
 

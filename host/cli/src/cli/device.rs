@@ -26,6 +26,7 @@ use clap::{Args, Subcommand};
 use super::InputError;
 use super::parse::{drive_accel, drive_amplitude, drive_freq};
 use chladni_device::config_keys::{ConfigKey, ConfigValueError, config_key, config_refusal};
+use chladni_device::json::StoreJson;
 use render::{DeletedJson, PlanJson, print_json};
 use values::{plan_name, plan_target, slot};
 
@@ -55,7 +56,7 @@ pub enum DeviceCommand {
         #[arg(long)]
         json: bool,
     },
-    /// Firmware version, board, protocol version and build id.
+    /// Firmware version, board, protocol version, build id, and what the plan store holds.
     Info {
         #[command(flatten)]
         port: PortArg,
@@ -71,6 +72,19 @@ pub enum DeviceCommand {
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=10_000))]
         count: u32,
         /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// What the plan store's flash holds; `--format` erases it (every plan and the
+    /// configuration, or data the controller did not write) and formats it.
+    Store {
+        #[command(flatten)]
+        port: PortArg,
+        /// Erase the whole store and format it (the only way to reuse flash that holds data
+        /// the controller did not write).
+        #[arg(long)]
+        format: bool,
+        /// Print JSON: {"area_bytes","layout","state"}.
         #[arg(long)]
         json: bool,
     },
@@ -280,7 +294,8 @@ impl DeviceCommand {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
         match self {
             DeviceCommand::List { json } => ports::list(*json),
-            DeviceCommand::Info { port, json } => render::info(port.open("info")?.info(), *json),
+            DeviceCommand::Info { port, json } => info(port, *json),
+            DeviceCommand::Store { port, format, json } => store(port, *format, *json),
             DeviceCommand::Ping { port, count, json } => ping(port, *count, *json),
             DeviceCommand::Plans { port, json } => {
                 let (plans, free) = port.open("plans")?.list_plans()?;
@@ -351,6 +366,34 @@ fn drive(port: &PortArg, freq: u32, level: Level, json: bool) -> anyhow::Result<
 
 /// `run-file`: the plan checked here first (bad input exits 2 before any connection), then
 /// uploaded to the scratch slot and run from there.
+/// `info`: the identity from the session's `Hello`; for people, also the plan store's state
+/// (the JSON keeps its shape: `store --json` has the store's).
+fn info(port: &PortArg, json: bool) -> anyhow::Result<ExitCode> {
+    let mut client = port.open("info")?;
+    if json {
+        return render::info(client.info(), true);
+    }
+    let store = StoreJson::from(&client.store_info()?);
+    render::info(client.info(), false)?;
+    println!("store      {}", store.text());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `store [--format]`.
+fn store(port: &PortArg, format: bool, json: bool) -> anyhow::Result<ExitCode> {
+    let mut client = port.open("store")?;
+    let info = if format { client.format_store()? } else { client.store_info()? };
+    let store = StoreJson::from(&info);
+    if json {
+        print_json(&store)?;
+    } else if format {
+        println!("formatted: {}", store.text());
+    } else {
+        println!("{}", store.text());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
 fn run_file(port: &PortArg, path: &Path, wait: &WaitArgs) -> anyhow::Result<ExitCode> {
     let plan = read_plan(path)?;
     let mut client = port.open("run-file")?;

@@ -3,6 +3,7 @@
 //! ([`capacity`]).
 
 mod capacity;
+mod format;
 mod power_cut;
 mod rules;
 
@@ -17,6 +18,7 @@ use embassy_futures::block_on;
 
 use super::PlanStore;
 use super::mock_flash::{MockFlash, PAGE_SIZE};
+use chladni_shared::icd::store::SCRATCH_SLOT;
 
 const LIMITS: DeviceLimits = DeviceLimits::DEFAULT;
 
