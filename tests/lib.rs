@@ -1,7 +1,9 @@
-//! Helpers shared by the end-to-end tests: the controller under test, which is the firmware
-//! in QEMU (started the same way `chladni emulator` does, with a time limit and a log file per
-//! test) or, when `CHLADNI_PORT` is set, a real board on that port (a serial device path or
-//! `tcp://HOST:PORT`): hardware in the loop, run by `scripts/hitl.sh`.
+//! The one test support of the end-to-end tests and of the host's integration tests: the
+//! controller under test, which is the firmware in QEMU (started the same way `chladni
+//! emulator` does, with a time limit and a log file per test: kept in target/e2e-logs for the
+//! end-to-end tests, in the temp folder for the host's, [`emulator`]) or, when `CHLADNI_PORT`
+//! is set, a real board on that port (a serial device path or `tcp://HOST:PORT`): hardware in
+//! the loop, run by `scripts/hitl.sh`; plans to put on it.
 
 use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
@@ -10,7 +12,8 @@ use std::time::Duration;
 use chladni_device::client::{DeviceClient, DeviceError};
 use chladni_device::emulator::{EmulatedSpeed, Emulator, EmulatorConfig};
 use chladni_shared::icd::link::{Board, StatusReport};
-use chladni_shared::icd::plan::{Plan, Step};
+use chladni_shared::icd::plan::{Level, Plan, Step};
+use chladni_shared::icd::store::PlanSummary;
 
 /// The environment variable that points the tests at a real controller.
 pub const PORT_VAR: &str = "CHLADNI_PORT";
@@ -120,18 +123,53 @@ pub fn start_emulator(name: &str) -> Emulator {
 
 /// [`start_emulator`] with the core at a fixed emulated speed (`chladni emulator --mips`).
 pub fn start_emulator_at(name: &str, speed: Option<EmulatedSpeed>) -> Emulator {
-    let log = log_path(name);
-    let config = EmulatorConfig {
-        log_file: Some(log.clone()),
+    start(&EmulatorConfig {
+        log_file: Some(log_path(name)),
         time_limit: Some(EMULATOR_TIME_LIMIT),
         flash_file: Some(flash_path(name)),
         speed,
         ..Default::default()
-    };
-    match Emulator::start(&config) {
-        Ok(emulator) => emulator,
-        Err(e) => panic!("emulator for {name} did not start: {e}\nlog:\n{}", read_log(&log)),
-    }
+    })
+}
+
+/// Time limit of a host integration test's emulator unless the test says otherwise.
+pub const TIME_LIMIT: Duration = Duration::from_secs(300);
+
+/// A throw-away controller for host integration test `name`: scratch flash and log in the temp
+/// folder ([`EmulatorConfig::scratch`]), QEMU killed after [`TIME_LIMIT`].
+pub fn emulator(name: &str) -> Emulator {
+    emulator_for(name, TIME_LIMIT)
+}
+
+/// [`emulator`] killed after `limit`.
+pub fn emulator_for(name: &str, limit: Duration) -> Emulator {
+    start(&EmulatorConfig::scratch(name, limit))
+}
+
+/// Starts `config`; panics with the end of its log when the controller does not come up.
+pub fn start(config: &EmulatorConfig) -> Emulator {
+    Emulator::start(config).unwrap_or_else(|e| {
+        let log = config.log_file.as_deref().map(read_log).unwrap_or_default();
+        let tail = &log[log.len().saturating_sub(4_000)..];
+        panic!("the emulator did not start: {e}\nlog tail:\n{tail}")
+    })
+}
+
+/// An open-loop plan `name`, run once: one step at `drive` (Q15) per frequency in `freq_mhz`,
+/// each `duration_ms` long with a 50 ms ramp.
+pub fn open_loop_plan(name: &str, freq_mhz: &[u32], drive: u16, duration_ms: u32) -> Plan {
+    let steps: Vec<Step> = freq_mhz
+        .iter()
+        .map(|&freq_mhz| Step { freq_mhz, level: Level::Drive(drive), duration_ms, ramp_ms: 50 })
+        .collect();
+    plan(name, &steps, 1)
+}
+
+/// Uploads `plan` into `slot` over a session of its own, released when this returns (so
+/// another session, a cell's for one, may run it).
+pub fn upload(emu: &Emulator, plan: &Plan, slot: u8) -> PlanSummary {
+    let mut client = emu.connect("test upload").expect("connect to the emulator");
+    client.upload(plan, Some(slot), |_, _| {}).expect("upload the plan")
 }
 
 /// The log so far (empty if none).

@@ -5,6 +5,7 @@
 
 pub mod cli;
 pub mod elf;
-pub mod emu;
 pub mod examples;
+/// The emulated controller and plans for it: the end-to-end tests' support, shared.
+pub use chladni_e2e as emu;
 pub mod photos;
