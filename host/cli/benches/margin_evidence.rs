@@ -24,7 +24,8 @@ use std::time::Instant;
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::{Edge, Mode, Node, PlateModel};
 use chladni_core::motion::body::Body;
-use chladni_core::planner::margin::{self, MarginSource, boundary_spread};
+use chladni_core::planner::margin::{self, boundary_spread};
+use chladni_core::planner::mode_margin::MarginSource;
 use chladni_core::planner::{self, Backend, DynSettings, MapCache, StepMap, sampled_map};
 
 /// The plates measured: the solver's own modes of the three example plates and the hand-made

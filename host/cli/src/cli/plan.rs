@@ -182,9 +182,9 @@ impl PlanArgs {
     }
 
     /// The feed-region search's settings: `--max-steps` or the default depth.
-    fn feed_search(&self) -> feed::FeedSearch {
-        let depth = self.max_steps.map_or(feed::DEPTH, |n| n as usize);
-        feed::FeedSearch { depth, ..Default::default() }
+    fn feed_search(&self) -> planner::FeedSearch {
+        let depth = self.max_steps.map_or(planner::FeedSearch::DEFAULT_DEPTH, |n| n as usize);
+        planner::FeedSearch { depth, ..Default::default() }
     }
 
     /// `--max-steps` bounds the feed-region search only: without `--feed` it is refused.
@@ -452,7 +452,7 @@ pub(super) fn margin_arg(s: &str) -> Result<MarginArg, String> {
 /// The margin of each step, in words (after the step lines), unless every step kept the
 /// default of maps without evidence (straight nodes: nothing to add).
 fn print_margins(syn: &Synthesis) {
-    use chladni_core::planner::margin::MarginSource;
+    use chladni_core::planner::mode_margin::MarginSource;
     if syn.steps.iter().all(|s| s.margin.source == MarginSource::Default) {
         return;
     }

@@ -5,13 +5,14 @@
 
 use std::process::Command;
 
+use chladni_core::model::feed_region::FeedRegion;
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::{Node, PlateModel};
 use chladni_core::model::pose::Pose;
 use chladni_core::motion::body::Body;
 use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::steps::simulate_plan;
-use chladni_core::planner::feed::{FeedRegion, FeedSearch};
+use chladni_core::planner::FeedSearch;
 use chladni_core::planner::{self, PlanFailure, PlanOptions, cdist};
 
 use crate::support;

@@ -6,7 +6,7 @@
 use chladni_core::motion::body::Body;
 use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::montecarlo::{self, Setup};
-use chladni_core::planner::margin::{MIN_MARGIN_DEG, MarginSource};
+use chladni_core::planner::mode_margin::{MIN_MARGIN_DEG, MarginSource};
 use chladni_core::planner::{self, PlanOptions, Problem};
 
 use crate::support;

@@ -42,8 +42,8 @@ use std::sync::{Mutex, OnceLock};
 
 use rayon::prelude::*;
 
+use super::edges::PlateEdge;
 use super::maps::map_thetas;
-use super::whole::PlateEdge;
 use crate::model::part::Part;
 use crate::model::plate::{Mode, Node, PlateModel};
 use crate::model::pose::Pose;

@@ -37,7 +37,8 @@ use crate::progress::Progress;
 use rayon::prelude::*;
 
 use super::capture::{clamped_rims, touches};
-use super::whole::PlateEdge;
+use super::edges::PlateEdge;
+use super::options::FeedSearch;
 use super::{PlanFailure, PlanOptions, Synthesis, cdist, plan_period};
 use crate::model::part::Part;
 use crate::model::plate::{PlateModel, on_plate};
@@ -54,39 +55,8 @@ mod twins;
 use candidates::confirm;
 use twins::twins;
 
-/// The feed-region search's default most steps (`plan --max-steps`). Levels past the
-/// fourth borrow runs, which keeps a 6-step search of an ordinary part within about
-/// a minute, and the search is level by level, so every plan of 4 steps or fewer is the one a
-/// bound of 4 finds (docs/plan.md, "The step bound").
-pub const DEPTH: usize = 6;
-
 /// The largest `--max-steps`: sequences grow as (modes − 1)^depth.
 pub const MAX_DEPTH: usize = 8;
-
-/// Feed-region search settings.
-#[derive(Debug, Clone, Copy)]
-pub struct FeedSearch {
-    /// Most steps (`plan --max-steps`).
-    pub depth: usize,
-    /// Start positions per side of the feed region (n × n grid; 1: its centre).
-    pub points: usize,
-    /// Start orientations per position.
-    pub starts: usize,
-    /// Every tracked pose must end within this of one orientation (deg, mod the period).
-    pub tol_deg: f64,
-    /// Most sequences of the shortest length confirmed.
-    pub candidates: usize,
-    /// Refinement rounds: when every candidate of a depth fails the check, the checked starts
-    /// that ended off are added to the tracked starts and the search runs again (runs stay
-    /// memoised), at most this many times.
-    pub refine: usize,
-}
-
-impl Default for FeedSearch {
-    fn default() -> Self {
-        FeedSearch { depth: DEPTH, points: 3, starts: 24, tol_deg: 2.0, candidates: 8, refine: 2 }
-    }
-}
 
 /// What the confirmation of a feed-region plan measured.
 #[derive(Debug, Clone, PartialEq)]

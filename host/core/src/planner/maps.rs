@@ -15,7 +15,8 @@ use chladni_shared::icd::units::deg_from_bam;
 
 use super::cluster::{CLUSTER_DEG, Clusters};
 use super::dynamic;
-use super::margin::ModeMargin;
+use super::edges::{on_plate_edge, rim_line};
+use super::mode_margin::ModeMargin;
 use super::options::Backend;
 use super::symmetry::body_symmetry_order;
 use crate::analysis::reference::{RefField, Reference};
@@ -145,23 +146,6 @@ fn nearest_sample(s: &[(f64, Vec<f64>)], theta: f64) -> Option<&[f64]> {
     s.iter()
         .min_by(|a, b| cdist(a.0, theta, 360.0).total_cmp(&cdist(b.0, theta, 360.0)))
         .map(|b| b.1.as_slice())
-}
-
-/// Does a straight node lie where a part of radius `radius` cannot rest across it: the node
-/// line misses the plate inset by the radius (a node along or beyond an edge, as a clamped
-/// edge is)? Then the field pushes the part into the rim, not onto the node, and the static
-/// alignment function (balance on the node, then rotate) does not apply: the planner maps
-/// such a mode by simulation with the rim ([`sampled_map`]), where the wall's reaction turns
-/// the part to a stable edge (push alignment).
-pub fn rim_line(radius: f64, mode: &Mode, plate: &PlateModel) -> bool {
-    let Node::Line { angle_deg, offset_mm } = mode.node else { return false };
-    let [w, h] = plate.size_mm;
-    let r = radius.min(w / 2.0).min(h / 2.0);
-    let (s, c) = angle_deg.to_radians().sin_cos();
-    let ctr = plate.center();
-    let xi = |p: [f64; 2]| -s * (p[0] - ctr[0]) + c * (p[1] - ctr[1]) - offset_mm;
-    let d = [[r, r], [w - r, r], [w - r, h - r], [r, h - r]].map(xi);
-    d.iter().all(|&x| x > 0.0) || d.iter().all(|&x| x < 0.0)
 }
 
 /// Why a straight-node map could not be made.
@@ -490,14 +474,6 @@ pub(super) fn map_thetas(n: usize) -> Vec<f64> {
 /// the plate edge or off it instead of on an interior node (see [`sampled_map`])?
 pub(crate) fn outside_reach(body: &Body, mode: &Mode, plate: &PlateModel, q: Pose) -> bool {
     matches!(mode.node, Node::Grid(_)) && on_plate_edge(body, plate, q)
-}
-
-/// Does a part that ended at `q` sit on the plate's edge (centroid within its radius of
-/// it) rather than on an interior node?
-pub(crate) fn on_plate_edge(body: &Body, plate: &PlateModel, q: Pose) -> bool {
-    let [w, h] = plate.size_mm;
-    let edge = body.radius;
-    q.x < edge || q.y < edge || q.x > w - edge || q.y > h - edge
 }
 
 /// The f64 reference analysis of `part` under a straight-node mode's field law and gains.

@@ -2,8 +2,8 @@
 
 use super::deadline::Deadline;
 use super::dynamic::{DynSettings, MapKind};
-use super::feed;
 use super::search::Minimize;
+use crate::model::feed_region::FeedRegion;
 
 /// Which model computes straight-node maps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -34,11 +34,11 @@ pub struct PlanOptions {
     pub durations: bool,
     /// Most sets the search visits.
     pub max_states: usize,
-    /// Where parts are dropped: plan by tracking poses from there ([`feed`]) instead of
+    /// Where parts are dropped: plan by tracking poses from there ([`super::feed`]) instead of
     /// over orientation sets.
-    pub feed: Option<feed::FeedRegion>,
+    pub feed: Option<FeedRegion>,
     /// Settings of the feed-region search.
-    pub feed_search: feed::FeedSearch,
+    pub feed_search: FeedSearch,
     /// Straight-node maps: the static alignment function ([`MapKind::Static`]), measured by
     /// simulating the approach from both sides ([`MapKind::Dynamic`]), or static first and
     /// dynamic when that gives no plan ([`MapKind::Auto`], default).
@@ -73,7 +73,7 @@ impl Default for PlanOptions {
             durations: true,
             max_states: 200_000,
             feed: None,
-            feed_search: feed::FeedSearch::default(),
+            feed_search: FeedSearch::default(),
             maps: MapKind::default(),
             dyn_maps: DynSettings::default(),
             minimize: Minimize::Steps,
@@ -83,6 +83,46 @@ impl Default for PlanOptions {
             goal_pos_mm: None,
             deadline: None,
             refine_rounds: 0,
+        }
+    }
+}
+
+/// Feed-region search settings.
+#[derive(Debug, Clone, Copy)]
+pub struct FeedSearch {
+    /// Most steps (`plan --max-steps`).
+    pub depth: usize,
+    /// Start positions per side of the feed region (n × n grid; 1: its centre).
+    pub points: usize,
+    /// Start orientations per position.
+    pub starts: usize,
+    /// Every tracked pose must end within this of one orientation (deg, mod the period).
+    pub tol_deg: f64,
+    /// Most sequences of the shortest length confirmed.
+    pub candidates: usize,
+    /// Refinement rounds: when every candidate of a depth fails the check, the checked starts
+    /// that ended off are added to the tracked starts and the search runs again (runs stay
+    /// memoised), at most this many times.
+    pub refine: usize,
+}
+
+impl FeedSearch {
+    /// The feed-region search's default most steps (`plan --max-steps`). Levels past the
+    /// fourth borrow runs, which keeps a 6-step search of an ordinary part within about
+    /// a minute, and the search is level by level, so every plan of 4 steps or fewer is the one a
+    /// bound of 4 finds (docs/plan.md, "The step bound").
+    pub const DEFAULT_DEPTH: usize = 6;
+}
+
+impl Default for FeedSearch {
+    fn default() -> Self {
+        FeedSearch {
+            depth: FeedSearch::DEFAULT_DEPTH,
+            points: 3,
+            starts: 24,
+            tol_deg: 2.0,
+            candidates: 8,
+            refine: 2,
         }
     }
 }

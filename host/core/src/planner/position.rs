@@ -68,7 +68,7 @@ pub fn reachable_region(
             pts = whole.clone();
             continue;
         };
-        if super::maps::rim_line(radius, mode, plate) {
+        if super::edges::rim_line(radius, mode, plate) {
             pts = whole.clone();
             continue;
         }

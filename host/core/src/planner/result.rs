@@ -3,7 +3,7 @@
 use super::feed;
 use super::goal::PartPlan;
 use super::input::plan_name;
-use super::margin::ModeMargin;
+use super::mode_margin::ModeMargin;
 use super::settle::Settle;
 use crate::model::plan_file::{PartPrediction, PlanFile, StepJson, r4};
 use crate::model::plate::PlateModel;

@@ -44,12 +44,12 @@ fn gcd(a: u32, b: u32) -> u32 {
 pub fn plan_period(part: &Part, plate: &PlateModel) -> f64 {
     let m_part = symmetry_order(part);
     // A node along an edge pushes the part into one wall: θ and θ + 180° rest on different
-    // edges there ([`super::maps::rim_line`]).
+    // edges there ([`super::edges::rim_line`]).
     let radius = Body::new(part).radius;
     let all_sym = plate
         .modes
         .iter()
-        .all(|m| m.is_symmetric_line() && !super::maps::rim_line(radius, m, plate));
+        .all(|m| m.is_symmetric_line() && !super::edges::rim_line(radius, m, plate));
     let m = if all_sym { m_part * 2 / gcd(m_part, 2) } else { m_part };
     360.0 / m as f64
 }

@@ -19,7 +19,8 @@ use crate::model::angle::wrap_deg;
 use crate::motion::body::PLANNER_BODY_SAMPLES;
 use rayon::prelude::*;
 
-use super::maps::{on_plate_edge, sampled_map_from};
+use super::edges::{PlateEdge, on_plate_edge};
+use super::maps::sampled_map_from;
 use super::{PlanFailure, PlanOptions, Problem, Synthesis, deadline};
 use crate::model::angle::cdist;
 use crate::model::part::Part;
@@ -101,30 +102,6 @@ pub enum DropEnd {
     Interior,
     /// Off the plate (open edge).
     Lost,
-}
-
-/// One of the plate's four edges.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum PlateEdge {
-    /// x = 0.
-    Left,
-    /// x = W.
-    Right,
-    /// y = 0.
-    Bottom,
-    /// y = H.
-    Top,
-}
-
-impl PlateEdge {
-    fn name(self) -> &'static str {
-        match self {
-            PlateEdge::Left => "left (x = 0)",
-            PlateEdge::Right => "right (x = W)",
-            PlateEdge::Bottom => "bottom (y = 0)",
-            PlateEdge::Top => "top (y = H)",
-        }
-    }
 }
 
 /// What a plan's drops over the whole plate gave.

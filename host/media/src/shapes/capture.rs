@@ -58,7 +58,7 @@ pub fn with_zone(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use chladni_core::planner::whole::PlateEdge;
+    use chladni_core::planner::edges::PlateEdge;
 
     #[test]
     fn the_zone_json_names_its_bands_the_plate_outside_and_the_counts() {
