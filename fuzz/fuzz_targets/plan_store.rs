@@ -114,12 +114,12 @@ async fn run(data: &[u8]) {
         assert_eq!(violation, None, "a program the L4 refuses (PROGERR) at this address");
         if cut || op % 6 == 5 {
             // What the store acknowledged is in the model; what failed with the power is in
-            // flight.
-            let acknowledged = h.model.clone();
+            // flight. (The reboot builds the model anew: moved, not copied with every plan.)
+            let acknowledged = std::mem::take(&mut h.model);
             h.reboot(acknowledged, in_flight).await;
         }
     }
-    let model = h.model.clone();
+    let model = std::mem::take(&mut h.model);
     h.reboot(model, InFlight::Nothing).await;
 }
 
