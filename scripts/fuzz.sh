@@ -85,6 +85,14 @@ build() {
   cargo "+$FUZZ_NIGHTLY" fuzz build "${build_args[@]}" "$@"
 }
 
+# A target's binary as `build` leaves it (cargo-fuzz builds for the host, release profile).
+# The runs start it directly: `cargo fuzz run` would call cargo twice more per target.
+binary() {
+  local host
+  host=$(rustup run "$FUZZ_NIGHTLY" rustc -vV | sed -n 's/^host: //p')
+  echo "fuzz/target/$host/release/$1"
+}
+
 # One target; libFuzzer's output to the terminal (or not, with quiet=1) and to its log.
 # Defaults first, so the caller's libFuzzer arguments override them.
 fuzz_one() {
@@ -97,7 +105,10 @@ fuzz_one() {
   mkdir -p "fuzz/corpus/$target"
   local corpora=("fuzz/corpus/$target")
   if [ -d "fuzz/regressions/$target" ]; then corpora+=("fuzz/regressions/$target"); fi
-  local run=(cargo "+$FUZZ_NIGHTLY" fuzz run "${build_args[@]}" "$target" "${corpora[@]}" --
+  mkdir -p "fuzz/artifacts/$target"
+  # (ASAN_OPTIONS with what `cargo fuzz run` adds to it.)
+  local run=(env ASAN_OPTIONS="${ASAN_OPTIONS:+$ASAN_OPTIONS:}detect_odr_violation=0"
+    "$(binary "$target")" -artifact_prefix="fuzz/artifacts/$target/" "${corpora[@]}"
     -print_final_stats=1 -timeout=10 -max_len="$(max_len "$target")" "$@")
   if [ "$quiet" = 1 ]; then
     "${run[@]}" >"$log" 2>&1 || rc=$?
