@@ -61,13 +61,36 @@ seeds() {
 
 # No `--cfg fuzzing`: sequential-storage 8 prints its page-state cache to stderr under it,
 # which floods the log and slows the store's targets several times over.
+# No defmt logging either (the workspace's .cargo/config.toml asks for `info`): on the host it
+# encodes every line into a buffer that nothing reads, a cost on every refused request.
+export DEFMT_LOG=off
 build_args=(--debug-assertions --no-cfg-fuzzing --sanitizer "${FUZZ_SANITIZER:-address}")
 # More `cargo fuzz build` options, e.g. FUZZ_BUILD_FLAGS=--no-trace-compares.
 read -r -a extra <<<"${FUZZ_BUILD_FLAGS:-}"
 build_args+=("${extra[@]}")
 
+# libFuzzer's input cap per target, bytes: longer inputs only repeat what shorter ones do, at
+# a cost that grows with their length (each harness also reads at most so many steps; its doc
+# comment says how many). A -max_len given to `run` overrides it.
+max_len() {
+  case $1 in
+    request_handler) echo 1024 ;;
+    plan_store) echo 256 ;;
+    part_analysis) echo 640 ;;
+    *) echo 4096 ;;
+  esac
+}
+
 build() {
   cargo "+$FUZZ_NIGHTLY" fuzz build "${build_args[@]}" "$@"
+}
+
+# A target's binary as `build` leaves it (cargo-fuzz builds for the host, release profile).
+# The runs start it directly: `cargo fuzz run` would call cargo twice more per target.
+binary() {
+  local host
+  host=$(rustup run "$FUZZ_NIGHTLY" rustc -vV | sed -n 's/^host: //p')
+  echo "fuzz/target/$host/release/$1"
 }
 
 # One target; libFuzzer's output to the terminal (or not, with quiet=1) and to its log.
@@ -82,8 +105,11 @@ fuzz_one() {
   mkdir -p "fuzz/corpus/$target"
   local corpora=("fuzz/corpus/$target")
   if [ -d "fuzz/regressions/$target" ]; then corpora+=("fuzz/regressions/$target"); fi
-  local run=(cargo "+$FUZZ_NIGHTLY" fuzz run "${build_args[@]}" "$target" "${corpora[@]}" --
-    -print_final_stats=1 -timeout=10 "$@")
+  mkdir -p "fuzz/artifacts/$target"
+  # (ASAN_OPTIONS with what `cargo fuzz run` adds to it.)
+  local run=(env ASAN_OPTIONS="${ASAN_OPTIONS:+$ASAN_OPTIONS:}detect_odr_violation=0"
+    "$(binary "$target")" -artifact_prefix="fuzz/artifacts/$target/" "${corpora[@]}"
+    -print_final_stats=1 -timeout=10 -max_len="$(max_len "$target")" "$@")
   if [ "$quiet" = 1 ]; then
     "${run[@]}" >"$log" 2>&1 || rc=$?
   else

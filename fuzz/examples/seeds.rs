@@ -191,10 +191,13 @@ fn part_analysis() -> Vec<(String, Vec<u8>)> {
             }
             seeds.push((format!("rect-law{law}-ratio{ratio}"), rect));
             let mut star = head;
+            // Valid part, scale byte, 8 vertices, their 16 bytes; a 5-vertex hole, its 10;
+            // the start angle for `align`, and the determinism check asked for.
             star.extend([1, 29, 5]);
             star.extend((0..16).map(|i| (i * 37 % 256) as u8));
             star.push(5);
             star.extend((0..10).map(|i| (i * 91 % 256) as u8));
+            star.extend([0, 0, 0, 0x40, 1]);
             seeds.push((format!("star-law{law}-ratio{ratio}"), star));
         }
     }

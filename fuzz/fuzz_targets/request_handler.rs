@@ -20,14 +20,19 @@
 //! - 2–4: a sample request from one of three sessions, possibly edited before its CRC;
 //! - 5: the clock moves on (ownership lapses after `OWNER_LEASE_MS`);
 //! - 6: the drive plays some blocks (queued commands take effect);
-//! - 7: a telemetry sample is asked for.
+//! - 7: a telemetry sample is asked for;
+//! - 8: one byte repeated onto the link (a length, then the byte): overlong frames and long
+//!   runs from three bytes of input.
+//!
+//! At most [`MAX_STEPS`] steps are read (scripts/fuzz.sh also caps the input at 1 KiB): a
+//! longer program mostly repeats what short ones do, at a cost that grows with its length.
 #![no_main]
 
 use chladni_firmware::app::drive::{DriveCore, DriveShared};
 use chladni_firmware::app::link::{Identity, Link};
 use chladni_firmware::app::store::PlanStore;
 use chladni_fuzz::flash::{PAGE_SIZE, fuzz_flash};
-use chladni_fuzz::{Choices, envelope, frame_around, message, mutate, sample_requests};
+use chladni_fuzz::{Choices, SAMPLE_REQUESTS, envelope, frame_around, message, mutate};
 use chladni_shared::drive::runner::BLOCK_LEN;
 use chladni_shared::icd::frame::{
     ENCODE_BUF, Envelope, FrameReader, LinkError, MAX_FRAME, PROTOCOL_VERSION, decode, encode,
@@ -37,8 +42,12 @@ use embassy_time::{Duration, Instant};
 use libfuzzer_sys::fuzz_target;
 
 /// Pages of the RAM flash the store gets (the QEMU board's bank is larger; a small one fills
-/// up, which the fuzzer should see too).
-const STORE_PAGES: usize = 8;
+/// up, which the fuzzer should see too). Four hold a few plans and one page kept erased for
+/// garbage collection; every execution erases and scans them, so more would only cost.
+const STORE_PAGES: usize = 4;
+
+/// Steps read from one input, at most (the bytes after them are ignored).
+const MAX_STEPS: usize = 64;
 
 /// The sessions of the sample requests (two clients and a third that comes and goes).
 const SESSIONS: [u32; 3] = [0x1111_1111, 0x2222_2222, 0x3333_3333];
@@ -61,10 +70,13 @@ async fn run(data: &[u8]) {
     let mut reader = FrameReader::<MAX_FRAME>::new();
     let mut now = Instant::from_millis(1_000);
     let mut stream: Stream = None;
-    let samples = sample_requests();
+    let samples = &*SAMPLE_REQUESTS;
     let mut c = Choices::new(data);
-    while !c.is_empty() {
-        let bytes = match c.u8() % 8 {
+    for _ in 0..MAX_STEPS {
+        if c.is_empty() {
+            break;
+        }
+        let bytes = match c.u8() % 9 {
             0 => {
                 let n = c.u16() as usize % 2048;
                 c.take(n).to_vec()
@@ -92,10 +104,14 @@ async fn run(data: &[u8]) {
                 }
                 continue;
             }
-            _ => {
+            7 => {
                 let sample = link.sample(now);
                 check_sample(sample, &mut stream);
                 continue;
+            }
+            _ => {
+                let n = c.u16() as usize % 2048;
+                vec![c.u8(); n]
             }
         };
         for byte in bytes {
