@@ -3,7 +3,8 @@
 
 use std::path::Path;
 
-use chladni_core::analysis::reference::{Law, RefField, RefRest, Reference};
+use chladni_core::analysis::reference::{RefField, RefRest, Reference};
+use chladni_core::model::field::Law;
 use chladni_core::model::part::Part;
 use chladni_shared::analysis::field::{Field, FieldKind};
 use chladni_shared::analysis::fx::Fx;

@@ -5,6 +5,7 @@
 
 use crate::support;
 
+use chladni_core::model::angle::cdist;
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::PlateModel;
 use chladni_core::model::pose::Pose;
@@ -12,7 +13,7 @@ use chladni_core::motion::body::Body;
 use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::steps::simulate_plan;
 use chladni_core::planner::{
-    self, Backend, DynSettings, MapCache, MapKind, PlanOptions, Problem, cdist, plan_period,
+    self, Backend, DynSettings, MapCache, MapKind, PlanOptions, Problem, plan_period,
 };
 use support::examples::{part, plate_text};
 

@@ -2,13 +2,14 @@
 //! face in simulation (library and `chladni plan/simulate --both-faces`), a part with a mirror
 //! axis needs one face.
 
+use chladni_core::model::angle::cdist;
 use chladni_core::model::part::Part;
 use chladni_core::model::part::mirror;
 use chladni_core::motion::body::Body;
 use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::montecarlo::{self, Setup};
 use chladni_core::motion::steps::plan_steps;
-use chladni_core::planner::{self, Backend, PlanOptions, cdist};
+use chladni_core::planner::{self, Backend, PlanOptions};
 
 use crate::support;
 use support::cli::{chladni, tmp};

@@ -5,6 +5,7 @@
 
 use std::process::Command;
 
+use chladni_core::model::angle::cdist;
 use chladni_core::model::feed_region::FeedRegion;
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::{Node, PlateModel};
@@ -13,7 +14,7 @@ use chladni_core::motion::body::Body;
 use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::steps::simulate_plan;
 use chladni_core::planner::FeedSearch;
-use chladni_core::planner::{self, PlanFailure, PlanOptions, cdist};
+use chladni_core::planner::{self, PlanFailure, PlanOptions};
 
 use crate::support;
 use support::cli::{chladni, ex, json};

@@ -3,6 +3,7 @@
 
 use crate::support;
 
+use chladni_core::model::angle::cdist;
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::PlateModel;
 use chladni_core::model::pose::Pose;
@@ -11,7 +12,7 @@ use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::steps::SimStep;
 use chladni_core::motion::steps::simulate_plan;
 use chladni_core::planner::position::{self, diameter, reachable_region};
-use chladni_core::planner::{self, Minimize, PlanFailure, PlanOptions, Synthesis, cdist};
+use chladni_core::planner::{self, Minimize, PlanFailure, PlanOptions, Synthesis};
 use support::examples::{part, plate, plate_text};
 
 /// A straight-node mode entry.

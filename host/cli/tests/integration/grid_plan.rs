@@ -6,13 +6,14 @@
 
 use std::process::Command;
 
+use chladni_core::model::angle::cdist;
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::{Node, PlateModel};
 use chladni_core::model::pose::Pose;
 use chladni_core::motion::body::Body;
 use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::steps::simulate_plan;
-use chladni_core::planner::{self, PlanOptions, Problem, cdist};
+use chladni_core::planner::{self, PlanOptions, Problem};
 
 use crate::support;
 use support::examples::root;

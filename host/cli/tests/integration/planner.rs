@@ -4,6 +4,8 @@
 
 use crate::support;
 
+use chladni_core::model::angle::cdist;
+use chladni_core::model::grid::Grid;
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::{Node, PlateModel};
 use chladni_core::model::pose::Pose;
@@ -12,9 +14,8 @@ use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::steps::SimStep;
 use chladni_core::motion::steps::simulate_plan;
 use chladni_core::planner::{
-    self, Backend, MapKind, PlanFailure, PlanOptions, Problem, cdist, symmetry_order,
+    self, Backend, MapKind, PlanFailure, PlanOptions, Problem, symmetry_order,
 };
-use chladni_core::plate::solver::Grid;
 use support::examples::{part, plate, plate_text};
 
 fn polygon(n: usize, r: f64) -> Part {

@@ -145,7 +145,7 @@ fn clamps_move_the_nodes_and_a_clamped_point_is_a_node() {
     }
     assert!(ga.at(8, 6).abs() > 0.05, "the free mode moves there: {}", ga.at(8, 6));
     // The node lines differ: the clamped mode's pass through the clamp.
-    let near = |g: &solver::Grid| {
+    let near = |g: &chladni_core::model::grid::Grid| {
         node_lines(g)
             .iter()
             .flat_map(|l| l.iter())

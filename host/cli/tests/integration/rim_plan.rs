@@ -7,12 +7,13 @@
 
 use crate::support;
 
+use chladni_core::model::angle::cdist;
 use chladni_core::model::plate::{Edge, PlateModel};
 use chladni_core::model::pose::Pose;
 use chladni_core::motion::body::Body;
 use chladni_core::motion::field::FieldModel;
 use chladni_core::motion::steps::simulate_plan;
-use chladni_core::planner::{self, PlanFailure, PlanOptions, Problem, cdist, rim_line};
+use chladni_core::planner::{self, PlanFailure, PlanOptions, Problem, rim_line};
 use support::examples::{part, root};
 
 fn rim_plate(edge: Edge) -> PlateModel {

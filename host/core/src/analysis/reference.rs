@@ -6,7 +6,7 @@
 //! check the fixed-point code (agreement within 0.05° on stable orientations).
 
 use crate::model::angle::wrap_deg;
-pub use crate::model::field::Law;
+use crate::model::field::Law;
 use crate::model::part::Part;
 
 /// A straight-node field with a gain per side.

@@ -6,6 +6,18 @@ pub fn wrap_deg(deg: f64) -> f64 {
     deg.rem_euclid(360.0)
 }
 
+/// The circular mean of `angles` (deg) modulo `period` (deg), in [0, period): each angle taken
+/// to 360° · θ / period on the circle, averaged as unit vectors, taken back; 0 when there are
+/// none (or their mean vector has length 0).
+pub fn circular_mean(angles: impl IntoIterator<Item = f64>, period: f64) -> f64 {
+    let s = std::f64::consts::TAU / period;
+    let (c, n) = angles.into_iter().fold((0.0, 0.0), |(c, n), deg| {
+        let a = deg * s;
+        (c + a.cos(), n + a.sin())
+    });
+    (n.atan2(c) / s).rem_euclid(period)
+}
+
 /// Circular distance between `a` and `b` on a circle of circumference `p` (in [0, p/2]).
 pub fn cdist(a: f64, b: f64, p: f64) -> f64 {
     let d = (a - b).rem_euclid(p);

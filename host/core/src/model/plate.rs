@@ -23,9 +23,9 @@
 //! lines; names joined by " + "); any other pair is refused ([`ModelError::SameFrequency`]),
 //! since the planner would otherwise plan "60 Hz → 60 Hz" steps the plate cannot tell apart.
 
+use crate::model::field::Law;
 use std::path::Path;
 
-pub use crate::model::field::Law;
 use crate::model::field::LawError;
 use crate::model::grid::Grid;
 use crate::model::plan_file::check_drive_freq;

@@ -18,7 +18,8 @@
 //! Units: mm, rad.
 
 use crate::analysis::reference::GL;
-use crate::model::plate::{Law, Mode, Node, PlateModel};
+use crate::model::field::Law;
+use crate::model::plate::{Mode, Node, PlateModel};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 

@@ -2,6 +2,7 @@
 //! feed region), each run through the plan's steps; the success rate against the plan's
 //! predicted orientation, the orientation and position errors and the final spread.
 
+use crate::model::angle::circular_mean;
 use crate::progress::Progress;
 use serde::Serialize;
 
@@ -180,7 +181,10 @@ pub fn statistics(trials: &Trials, plan: &PlanFile, tol_deg: f64) -> Stats {
         orientation_error_deg: None,
         position_error_mm: None,
         mean_position_mm: [0.0; 2],
-        mean_orientation_deg: circular_mean_deg(finals, plan.period_deg.unwrap_or(360.0)),
+        mean_orientation_deg: circular_mean(
+            finals.iter().map(|q| q.theta.to_degrees()),
+            plan.period_deg.unwrap_or(360.0),
+        ),
         position_spread_mm: 0.0,
         misses: Vec::new(),
         lost: trials.lost.iter().filter(|&&l| l).count(),
@@ -209,18 +213,6 @@ pub fn statistics(trials: &Trials, plan: &PlanFile, tol_deg: f64) -> Stats {
     stats.position_spread_mm =
         (finals.iter().map(|q| (q.x - mx).powi(2) + (q.y - my).powi(2)).sum::<f64>() / n).sqrt();
     stats
-}
-
-/// The circular mean of the orientations of `poses` modulo `period_deg` (degrees, in
-/// [0, period)): each θ mapped to the angle 360° · θ / period on the circle, averaged as unit
-/// vectors, mapped back; 0 for no poses (or a mean vector of length 0).
-fn circular_mean_deg(poses: &[Pose], period_deg: f64) -> f64 {
-    let k = 360.0 / period_deg;
-    let (s, c) = poses.iter().fold((0.0, 0.0), |(s, c), q| {
-        let (a, b) = (k * q.theta).sin_cos();
-        (s + a, c + b)
-    });
-    (s.atan2(c).to_degrees() / k).rem_euclid(period_deg)
 }
 
 /// Rounds to 1e-6 (the report's resolution).

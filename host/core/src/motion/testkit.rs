@@ -1,8 +1,9 @@
 //! Shared fixtures of the motion module's unit tests: a mode from TOML text, a plate around
 //! it, a rectangle and a holed part.
 
+use crate::model::field::Law;
 use crate::model::part::Part;
-use crate::model::plate::{Law, Mode, PlateModel, parse_mode};
+use crate::model::plate::{Mode, PlateModel, parse_mode};
 use crate::motion::body::Body;
 use crate::motion::field::FieldModel;
 

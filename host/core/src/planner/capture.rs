@@ -37,7 +37,6 @@
 
 use chladni_shared::icd::units::s_from_ms;
 use std::collections::HashMap;
-use std::hash::{Hash, Hasher};
 use std::sync::{Mutex, OnceLock};
 
 use rayon::prelude::*;
@@ -267,7 +266,7 @@ pub fn touches(rims: &[PlateEdge], body: &Body, plate: &PlateModel, q: Pose) -> 
 /// The capture zone of `plate` for `part` (None: no clamped rim, or no drop is captured even
 /// where the part touches the rim). Cached per plate and part.
 pub fn zone(plate: &PlateModel, part: &Part) -> Option<CaptureZone> {
-    static CACHE: OnceLock<Mutex<HashMap<u64, Option<CaptureZone>>>> = OnceLock::new();
+    static CACHE: OnceLock<Mutex<HashMap<Vec<u64>, Option<CaptureZone>>>> = OnceLock::new();
     let key = plate_key(plate, part);
     let cache = CACHE.get_or_init(Default::default);
     if let Some(z) = cache.lock().ok().and_then(|c| c.get(&key).cloned()) {
@@ -302,25 +301,25 @@ pub fn zone_for_parts(plate: &PlateModel, parts: &[Part]) -> Option<CaptureZone>
     Some(all)
 }
 
-/// A hash of everything the zone depends on: the part's geometry and the plate.
-fn plate_key(plate: &PlateModel, part: &Part) -> u64 {
-    let mut h = std::collections::hash_map::DefaultHasher::new();
-    let bits = |h: &mut std::collections::hash_map::DefaultHasher, v: f64| v.to_bits().hash(h);
-    for p in part.outline.iter().chain(part.holes.iter().flatten()) {
-        p.iter().for_each(|&v| bits(&mut h, v));
+/// Everything the zone depends on, as the bits of its numbers (the whole key, so two parts or
+/// plates never share a zone): the part's geometry, with each ring's length, and the plate.
+fn plate_key(plate: &PlateModel, part: &Part) -> Vec<u64> {
+    let mut key = Vec::new();
+    for ring in std::iter::once(&part.outline).chain(&part.holes) {
+        key.push(ring.len() as u64);
+        key.extend(ring.iter().flatten().map(|v| v.to_bits()));
     }
-    plate.size_mm.iter().for_each(|&v| bits(&mut h, v));
-    format!("{:?}{}", plate.edge, plate.friction).hash(&mut h);
+    key.extend(plate.size_mm.iter().map(|v| v.to_bits()));
+    key.extend(format!("{:?}", plate.edge).bytes().map(u64::from));
+    key.push(plate.friction.to_bits());
     for m in &plate.modes {
-        [m.speed_mm_s, m.gain_left, m.gain_right, m.amplitude]
-            .iter()
-            .for_each(|&v| bits(&mut h, v));
+        key.extend([m.speed_mm_s, m.gain_left, m.gain_right, m.amplitude].map(f64::to_bits));
         if let Node::Grid(g) = &m.node {
-            (g.nx, g.ny).hash(&mut h);
-            g.values.iter().for_each(|&v| bits(&mut h, v));
+            key.extend([g.nx as u64, g.ny as u64]);
+            key.extend(g.values.iter().map(|v| v.to_bits()));
         }
     }
-    h.finish()
+    key
 }
 
 /// [`zone`], uncached.

@@ -27,14 +27,14 @@
 use crate::model::angle::wrap_deg;
 use crate::motion::body::PLANNER_BODY_SAMPLES;
 use std::collections::HashMap;
-use std::hash::{DefaultHasher, Hash, Hasher};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, OnceLock};
 
 use rayon::prelude::*;
 
 use super::cluster::{CLUSTER_DEG, Clusters};
-use super::{Backend, MapError, StepMap, cdist, line_map};
+use super::{Backend, MapError, StepMap, line_map};
+use crate::model::angle::cdist;
 use crate::model::field::Law;
 use crate::model::part::Part;
 use crate::model::plate::{Mode, Node, PlateModel};
@@ -127,10 +127,11 @@ impl Outcomes {
     }
 }
 
-/// In-memory cache of dynamic maps (see the module doc for the key).
+/// In-memory cache of dynamic maps, keyed by every bit that decides one (`cache_key`: the
+/// whole key, so two different inputs never share a map).
 #[derive(Debug, Default)]
 pub struct MapCache {
-    maps: Mutex<HashMap<u64, StepMap>>,
+    maps: Mutex<HashMap<Vec<u64>, StepMap>>,
     hits: AtomicUsize,
     misses: AtomicUsize,
 }
@@ -181,8 +182,8 @@ impl MapCache {
     }
 }
 
-/// Hash of everything that decides a dynamic map: the part's vertices, the mode's law, gains
-/// and node, the plate size, the period and the settings.
+/// Everything that decides a dynamic map, as the bits of its numbers: the part's vertices, the
+/// mode's law, gains and node, the plate size, the period and the settings.
 fn cache_key(
     part: &Part,
     mode: &Mode,
@@ -190,9 +191,9 @@ fn cache_key(
     period: f64,
     backend: Backend,
     set: DynSettings,
-) -> u64 {
-    let mut h = DefaultHasher::new();
-    let mut f = |x: f64| x.to_bits().hash(&mut h);
+) -> Vec<u64> {
+    let mut key = Vec::new();
+    let mut f = |x: f64| key.push(x.to_bits());
     for r in part.rings() {
         f(r.len() as f64);
         r.iter().for_each(|p| {
@@ -221,7 +222,7 @@ fn cache_key(
     f(set.orientations as f64);
     f(f64::from(set.refine));
     f(if backend == Backend::Fixed { 0.0 } else { 1.0 });
-    h.finish()
+    key
 }
 
 /// Start points on the normal through the plate centre's foot on the node, on both sides:

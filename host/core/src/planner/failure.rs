@@ -113,6 +113,19 @@ fn list_deg(v: &[f64]) -> String {
 }
 
 impl Problem {
+    /// Why `search` (of this problem alone, or with it first) reached no plan: [`Self::explain`]
+    /// of the first part's sets the search reached.
+    pub(crate) fn explain_reach(
+        &self,
+        search: &super::search::Search<'_>,
+        reach: &super::search::Reach,
+        opt: &PlanOptions,
+    ) -> String {
+        let nodes: Vec<(Vec<usize>, usize, usize)> =
+            reach.nodes.iter().map(|n| (n.0[0].clone(), n.1, n.2)).collect();
+        self.explain(&nodes, &search.unis[0].vals, opt)
+    }
+
     /// Why the search over `nodes` (sets of ids into `uni`) found no plan: the smallest set
     /// left, and what each mode does to it.
     pub(crate) fn explain(

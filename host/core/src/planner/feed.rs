@@ -30,6 +30,7 @@
 //! checks every part against its own prediction. A search that brings one part there but not
 //! another fails naming the part left apart ([`PlanFailure::PartsApart`]).
 
+use crate::model::angle::circular_mean;
 use crate::motion::body::PLANNER_BODY_SAMPLES;
 use std::collections::{HashMap, HashSet};
 
@@ -39,7 +40,8 @@ use rayon::prelude::*;
 use super::capture::{clamped_rims, touches};
 use super::edges::PlateEdge;
 use super::options::FeedSearch;
-use super::{PlanFailure, PlanOptions, Synthesis, cdist, plan_period};
+use super::{PlanFailure, PlanOptions, Synthesis, plan_period};
+use crate::model::angle::cdist;
 use crate::model::part::Part;
 use crate::model::plate::{PlateModel, on_plate};
 use crate::model::pose::Pose;
@@ -384,14 +386,7 @@ fn worst_spread(poses: &[Tagged], periods: &[f64]) -> f64 {
 /// Circular mean (mod `period`) of the orientations of `poses` (deg) and the largest distance
 /// of one of them from it.
 fn spread(poses: &[Pose], period: f64) -> (f64, f64) {
-    let s = std::f64::consts::TAU / period;
-    let (mut c, mut n) = (0.0, 0.0);
-    for q in poses {
-        let a = q.theta.to_degrees() * s;
-        c += a.cos();
-        n += a.sin();
-    }
-    let mean = (n.atan2(c) / s).rem_euclid(period);
+    let mean = circular_mean(poses.iter().map(|q| q.theta.to_degrees()), period);
     let dev = poses.iter().map(|q| cdist(q.theta.to_degrees(), mean, period)).fold(0.0, f64::max);
     (mean, dev)
 }

@@ -22,9 +22,10 @@ use super::position::{self, POSITION_TOL_MM};
 use super::search::{Minimize, Path, Reach, Search, State, Target};
 use super::whole::OnPlate;
 use super::{
-    PlanFailure, PlanOptions, PlannedStep, Problem, Settle, Synthesis, cdist, confirm_any,
-    deadline, settle_time, slowest_settled, start_points, step_duration_ms,
+    PlanFailure, PlanOptions, PlannedStep, Problem, Settle, Synthesis, confirm_any, deadline,
+    settle_time, slowest_settled, start_points, step_duration_ms,
 };
+use crate::model::angle::cdist;
 
 /// One part of a plan for several parts: its predictions.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -464,18 +465,14 @@ fn no_plan(
     opt: &PlanOptions,
 ) -> PlanFailure {
     if parts.len() == 1 {
-        let nodes: Vec<(Vec<usize>, usize, usize)> =
-            reach.nodes.iter().map(|n| (n.0[0].clone(), n.1, n.2)).collect();
-        let why = problems[0].explain(&nodes, &search.unis[0].vals, opt);
+        let why = problems[0].explain_reach(search, reach, opt);
         return PlanFailure::NoPlan(why + &reach.bound_note(opt));
     }
     for (i, problem) in problems.iter().enumerate() {
         let alone = Search::new(&[*problem], opt, &[]);
         let r = alone.reach();
         if r.shortest.is_none() {
-            let nodes: Vec<(Vec<usize>, usize, usize)> =
-                r.nodes.iter().map(|n| (n.0[0].clone(), n.1, n.2)).collect();
-            let why = problem.explain(&nodes, &alone.unis[0].vals, opt);
+            let why = problem.explain_reach(&alone, &r, opt);
             return PlanFailure::NoPlan(format!("part {}: {why}", parts[i].name));
         }
     }

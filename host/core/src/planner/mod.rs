@@ -82,7 +82,6 @@ pub use search::Minimize;
 
 pub use dynamic::{DynSettings, MapCache, MapKind};
 
-pub use crate::model::angle::cdist;
 pub use confirm::confirm;
 pub(crate) use confirm::confirm_any;
 pub use deadline::Deadline;
@@ -166,9 +165,7 @@ impl Problem {
         let reach = s.reach();
         reach.in_time(opt)?;
         let Some(steps) = reach.shortest else {
-            let nodes: Vec<(Vec<usize>, usize, usize)> =
-                reach.nodes.iter().map(|n| (n.0[0].clone(), n.1, n.2)).collect();
-            let why = self.explain(&nodes, &s.unis[0].vals, opt) + &reach.bound_note(opt);
+            let why = self.explain_reach(&s, &reach, opt) + &reach.bound_note(opt);
             return Err(PlanFailure::NoPlan(why));
         };
         let path = s

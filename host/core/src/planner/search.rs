@@ -19,7 +19,8 @@
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap, VecDeque};
 
-use super::{PlanFailure, PlanOptions, Problem, StepMap, cdist, deadline};
+use super::{PlanFailure, PlanOptions, Problem, StepMap, deadline};
+use crate::model::angle::cdist;
 
 /// What the plan should be shortest in.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

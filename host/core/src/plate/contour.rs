@@ -3,7 +3,7 @@
 
 use std::collections::HashMap;
 
-use super::solver::Grid;
+use crate::model::grid::Grid;
 
 /// A node line: a polyline in plate coordinates (mm); closed if first == last.
 pub type Polyline = Vec<[f64; 2]>;

@@ -11,7 +11,7 @@
 use std::collections::{HashMap, VecDeque};
 
 use super::contour::{Polyline, segment_foot};
-use super::solver::Grid;
+use crate::model::grid::Grid;
 
 /// φ on a grid, and how its sign was found.
 #[derive(Debug, Clone)]

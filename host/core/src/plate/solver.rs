@@ -13,9 +13,9 @@
 //! The problem is solved in non-dimensional form (`a = W`, `D = ρh = 1`), whose eigenvalues are
 //! the frequency parameters `λ² = ω² a⁴ ρh / D`.
 
+use crate::model::grid::Grid;
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 
-pub use crate::model::grid::Grid;
 use crate::model::plate_file::{Boundary, Plate};
 
 /// Polynomial degree count per direction used by default (`N × N` trial functions).

@@ -6,9 +6,9 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
 
+use chladni_core::model::grid::Grid;
 use chladni_core::model::plate_file::{Boundary, Plate};
 use chladni_core::plate::contour::Polyline;
-use chladni_core::plate::solver::Grid;
 
 use super::{Figure, PlotError, text, write_chart};
 

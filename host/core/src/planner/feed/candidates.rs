@@ -4,9 +4,9 @@
 //! [`super`], step 3).
 
 use super::{
-    FeedCheck, FeedRegion, Node, Tagged, Tracker, cdist, of_part, orientations, part_orientations,
-    spreads,
+    FeedCheck, FeedRegion, Node, Tagged, Tracker, of_part, orientations, part_orientations, spreads,
 };
+use crate::model::angle::cdist;
 use crate::planner::position::tracked_position;
 use crate::progress::Progress;
 use chladni_shared::icd::units::s_from_ms;

@@ -14,8 +14,9 @@
 //! step takes it off, so what parts the pair must act before the part gets there.
 
 use super::{Search, Tagged, of_part, orientations, spread};
+use crate::model::angle::cdist;
 use crate::model::pose::Pose;
-use crate::planner::{cdist, symmetry_note};
+use crate::planner::symmetry_note;
 
 /// How far from 180° apart (deg) the two ends may be for a mode to keep the pair: the
 /// simulation's 5° tolerance (`simulate --tol-deg`), far from the 2° within which a sequence
