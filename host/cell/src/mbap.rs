@@ -6,7 +6,7 @@
 //! with a value other than 0x0000/0xFF00, an unknown MEI type) where the Modbus application
 //! protocol answers an exception, and it has no timeouts. Here every well-framed request gets
 //! an answer: 0x01 for a function or MEI type the map does not have, 0x03 for a bad quantity,
-//! byte count or value, then the register map's own answers ([`Registers::handle`]). Only a
+//! byte count or value, then the register map's own answers ([`RegisterMap::handle`], the cell's `modbus::Registers`). Only a
 //! broken frame (protocol id not 0, a length outside 2..=260) or a timeout closes the
 //! connection. The request and answer types stay tokio-modbus's.
 
@@ -18,8 +18,22 @@ use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
 use tokio::net::TcpStream;
 use tokio_modbus::{ExceptionCode, Request, Response};
 
-use super::modbus::{MAX_WRITE, Registers};
 use super::ratelog;
+
+/// Most registers one FC16 write may carry (the Modbus application protocol's limit).
+pub const MAX_WRITE: u16 = 123;
+
+/// What the framing serves: a register map that answers decoded requests (the cell's
+/// [`crate::modbus::Registers`]). The framing knows nothing of what the registers mean.
+pub trait RegisterMap: Send + Sync {
+    /// The map's answer to `request`.
+    fn handle(
+        &self,
+        request: Request<'_>,
+    ) -> impl std::future::Future<Output = Result<Response, ExceptionCode>> + Send;
+    /// What the last command did, for the write log.
+    fn last_result(&self) -> String;
+}
 
 /// The MBAP length field's largest value taken: the spec's is 254 (the unit id and a PDU of 253
 /// bytes), but a client that sends an FC16 of 124 registers (255) gets the spec's exception for
@@ -152,7 +166,7 @@ fn describe(request: &Request<'_>) -> String {
 pub async fn connection(
     mut stream: TcpStream,
     peer: SocketAddr,
-    registers: Registers,
+    registers: impl RegisterMap,
     idle: Duration,
 ) {
     let client = peer.ip().to_string();
@@ -207,7 +221,7 @@ pub async fn connection(
 
 async fn answer(
     pdu: &[u8],
-    registers: &Registers,
+    registers: &impl RegisterMap,
     peer: &SocketAddr,
     log: &impl Fn(&'static str, String),
 ) -> Vec<u8> {
@@ -237,8 +251,8 @@ async fn answer(
                     Ok(_) => ("write", "ok".to_owned()),
                     Err(e) => ("write-refused", format!("exception {:#04x} ({e:?})", u8::from(*e))),
                 };
-                let result = registers.holding().result;
-                log(cause, format!("modbus {peer}: {request} → {outcome}, result {result:?}"));
+                let result = registers.last_result();
+                log(cause, format!("modbus {peer}: {request} → {outcome}, result {result}"));
             }
             encode(function, &answer)
         }

@@ -28,7 +28,7 @@ use tokio::net::TcpListener;
 use tokio::sync::Semaphore;
 use tokio_modbus::{ExceptionCode, Request, Response};
 
-use super::mbap;
+use super::mbap::{self, MAX_WRITE};
 use super::net::{self, Cidr};
 use super::owner::{Cell, CellError, CellStatus};
 use super::ratelog;
@@ -98,8 +98,6 @@ pub const NONE: u16 = 0xFFFF;
 pub const FAULT_LINK_DOWN: u16 = 100;
 /// Most registers one read may ask for (Modbus application protocol, FC03/FC04).
 const MAX_READ: u16 = 125;
-/// Most registers one FC16 write may carry.
-pub(crate) const MAX_WRITE: u16 = 123;
 
 /// The commands of the command register.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -363,6 +361,16 @@ pub struct Registers {
     cell: Cell,
     holding: Arc<Mutex<Holding>>,
     verifier: Verifier,
+}
+
+impl mbap::RegisterMap for Registers {
+    async fn handle(&self, request: Request<'_>) -> Result<Response, ExceptionCode> {
+        Registers::handle(self, request).await
+    }
+
+    fn last_result(&self) -> String {
+        format!("{:?}", self.holding().result)
+    }
 }
 
 impl Registers {
