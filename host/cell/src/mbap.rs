@@ -7,8 +7,8 @@
 //! protocol answers an exception, and it has no timeouts. Here every well-framed request gets
 //! an answer: 0x01 for a function or MEI type the map does not have, 0x03 for a bad quantity,
 //! byte count or value, then the register map's own answers ([`RegisterMap::handle`], the
-//! cell's `modbus::Registers`). Only a broken frame (protocol id not 0, a length outside 2..=260) or a timeout closes the
-//! connection. The request and answer types stay tokio-modbus's.
+//! cell's `modbus::Registers`). Only a broken frame (protocol id not 0, a length outside
+//! 2..=260) or a timeout closes the connection. The request and answer types stay tokio-modbus's.
 
 use std::borrow::Cow;
 use std::net::SocketAddr;
