@@ -60,6 +60,23 @@ use twins::twins;
 /// The largest `--max-steps`: sequences grow as (modes − 1)^depth.
 pub const MAX_DEPTH: usize = 8;
 
+/// What every stage of one feed-region search reads: the options, the region, and the names
+/// of the parts (a part and its flipped face, or the parts of one plan).
+#[derive(Clone, Copy)]
+pub(crate) struct Context<'a> {
+    pub(crate) opt: &'a PlanOptions,
+    pub(crate) region: &'a FeedRegion,
+    pub(crate) names: &'a [&'a str],
+}
+
+/// The starts a candidate is confirmed from: those its poses are tracked from, and the
+/// interleaved ones its finished plan is checked from.
+#[derive(Clone, Copy)]
+pub(crate) struct Starts<'a> {
+    pub(crate) tracked: &'a [Tagged],
+    pub(crate) verify: &'a [Tagged],
+}
+
 /// What the confirmation of a feed-region plan measured.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FeedCheck {
@@ -595,7 +612,8 @@ pub fn plan_parts(
     let (mut starts, mut rejected) = (starts, Vec::new());
     for round in 0..=s.refine {
         let rounds = (round, s.refine);
-        match search.levels(&starts, &verify, (opt, region, &names), rounds, progress)? {
+        let ctx = Context { opt, region, names: &names };
+        match search.levels(&starts, &verify, ctx, rounds, progress)? {
             Round::Plan(mut syn) => {
                 if let Some(f) = syn.feed.as_mut() {
                     f.rejected += rejected.len();
@@ -638,10 +656,11 @@ impl Search<'_> {
         &mut self,
         starts: &[Tagged],
         verify: &[Tagged],
-        (opt, region, names): (&PlanOptions, &FeedRegion, &[&str]),
+        ctx: Context<'_>,
         rounds: (usize, usize),
         progress: &dyn Progress,
     ) -> Result<Round, PlanFailure> {
+        let opt = ctx.opt;
         let s = opt.feed_search;
         let nm = self.tracker.sim.plate.modes.len();
         let mut level = vec![Node { seq: Vec::new(), poses: starts.to_vec() }];
@@ -661,13 +680,8 @@ impl Search<'_> {
             };
             progress.stage(&what, (level.len() * nm) as u64);
             let (next, found) = self.expand(&level, (s.tol_deg, depth), progress)?;
-            let (best, why, off) = confirm(
-                &mut self.tracker,
-                &found,
-                (starts, verify),
-                (opt, region, names),
-                progress,
-            )?;
+            let from = Starts { tracked: starts, verify };
+            let (best, why, off) = confirm(&mut self.tracker, &found, from, ctx, progress)?;
             rejected.extend(why);
             if let Some(syn) = best {
                 let mut syn = syn;

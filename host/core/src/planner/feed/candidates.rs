@@ -4,7 +4,8 @@
 //! [`super`], step 3).
 
 use super::{
-    FeedCheck, FeedRegion, Node, Tagged, Tracker, of_part, orientations, part_orientations, spreads,
+    Context, FeedCheck, Node, Starts, Tagged, Tracker, of_part, orientations, part_orientations,
+    spreads,
 };
 use crate::model::angle::cdist;
 use crate::planner::position::tracked_position;
@@ -32,10 +33,11 @@ pub(super) const REFINE_STARTS: usize = 16;
 pub(super) fn confirm(
     t: &mut Tracker,
     found: &[Node],
-    (starts, verify): (&[Tagged], &[Tagged]),
-    (opt, region, names): (&PlanOptions, &FeedRegion, &[&str]),
+    from: Starts<'_>,
+    ctx: Context<'_>,
     progress: &dyn Progress,
 ) -> Result<Confirmed, PlanFailure> {
+    let (opt, starts) = (ctx.opt, from.tracked);
     let mut open: Vec<Tracking> = (found.iter().take(opt.feed_search.candidates).enumerate())
         .map(|(i, c)| Tracking::new(i, &c.seq, starts, t.sim.periods.len()))
         .collect();
@@ -66,14 +68,14 @@ pub(super) fn confirm(
         }
         let c = open.swap_remove(k);
         let i = c.i;
-        let d = match c.draft(&t.sim.periods, (opt, names)) {
+        let d = match c.draft(&t.sim.periods, ctx) {
             Ok(d) => d,
             Err(e) => {
                 why.push((i, e));
                 continue;
             }
         };
-        match check(t, d, (region, starts, verify), (opt, names)) {
+        match check(t, d, from, ctx) {
             Ok(syn) => {
                 best = Some(syn);
                 break;
@@ -171,7 +173,7 @@ impl<'a> Tracking<'a> {
     fn draft(
         self,
         periods: &[f64],
-        (opt, names): (&PlanOptions, &[&str]),
+        Context { opt, names, .. }: Context<'_>,
     ) -> Result<Draft, String> {
         let spreads = spreads(&self.poses, periods);
         let modes = self.modes();
@@ -194,8 +196,8 @@ impl<'a> Tracking<'a> {
 fn check(
     t: &mut Tracker,
     d: Draft,
-    (region, starts, verify): (&FeedRegion, &[Tagged], &[Tagged]),
-    (opt, names): (&PlanOptions, &[&str]),
+    Starts { tracked: starts, verify }: Starts<'_>,
+    Context { opt, region, names }: Context<'_>,
 ) -> Result<Synthesis, (String, Vec<Tagged>)> {
     // Tracked starts settled within their step durations unless some lingered (left out of
     // the durations); only then can they end elsewhere when run with the fixed durations.
@@ -284,6 +286,7 @@ fn checked_error(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::feed_region::FeedRegion;
     use crate::model::plate::PlateModel;
     use crate::model::pose::Pose;
     use crate::planner::feed::{FeedSearch, interleaved_starts, tests::tracker, tracked_starts};
@@ -293,22 +296,22 @@ mod tests {
     fn confirm_exhaustive(
         t: &mut Tracker,
         found: &[Node],
-        (starts, verify): (&[Tagged], &[Tagged]),
-        (opt, region, names): (&PlanOptions, &FeedRegion, &[&str]),
+        from: Starts<'_>,
+        ctx: Context<'_>,
     ) -> (Option<Synthesis>, Vec<u64>) {
+        let (opt, starts) = (ctx.opt, from.tracked);
         let mut drafts: Vec<(u64, usize, Draft)> = Vec::new();
         for (i, c) in found.iter().enumerate() {
             let mut tr = Tracking::new(i, &c.seq, starts, 1);
             while !tr.done() && tr.advance(t, opt, starts.len()).is_ok() {}
             if tr.done() {
                 let ms = tr.so_far_ms();
-                drafts.extend(tr.draft(&t.sim.periods, (opt, names)).ok().map(|d| (ms, i, d)));
+                drafts.extend(tr.draft(&t.sim.periods, ctx).ok().map(|d| (ms, i, d)));
             }
         }
         drafts.sort_by_key(|(ms, i, _)| (*ms, *i));
         let totals = drafts.iter().map(|d| d.0).collect();
-        let plan = (drafts.into_iter())
-            .find_map(|(_, _, d)| check(t, d, (region, starts, verify), (opt, names)).ok());
+        let plan = (drafts.into_iter()).find_map(|(_, _, d)| check(t, d, from, ctx).ok());
         (plan, totals)
     }
 
@@ -335,7 +338,7 @@ mod tests {
         let tag = |v: Vec<Pose>| v.into_iter().map(|q| (0, q)).collect::<Vec<Tagged>>();
         let starts = tag(tracked_starts(&region, body, &plate, &s));
         let verify = tag(interleaved_starts(&region, body, &plate, &s));
-        let ctx = (&opt, &region, &["triangle"][..]);
+        let ctx = Context { opt: &opt, region: &region, names: &["triangle"] };
         let nodes = |seqs: &[Vec<usize>]| -> Vec<Node> {
             seqs.iter().map(|q| Node { seq: q.clone(), poses: Vec::new() }).collect()
         };
@@ -345,15 +348,25 @@ mod tests {
         let ms = |syn: &Synthesis| syn.steps.iter().map(|s| s.duration_ms).collect::<Vec<_>>();
         for (what, order) in [("as listed", &seqs), ("reversed", &reversed)] {
             let mut ex = tracker(&plate);
-            let (want, totals) =
-                confirm_exhaustive(&mut ex, &nodes(order), (&starts, &verify), ctx);
+            let (want, totals) = confirm_exhaustive(
+                &mut ex,
+                &nodes(order),
+                Starts { tracked: &starts, verify: &verify },
+                ctx,
+            );
             let want = want.expect("a plan among the 2- and 3-step sequences");
             // The choice matters: several candidates track to one orientation, not all as fast.
             assert!(totals.len() >= 3 && totals[0] < totals[totals.len() - 1], "{totals:?}");
             let mut bf = tracker(&plate);
             let hidden = crate::progress::Silent;
-            let (got, _, _) =
-                confirm(&mut bf, &nodes(order), (&starts, &verify), ctx, &hidden).unwrap();
+            let (got, _, _) = confirm(
+                &mut bf,
+                &nodes(order),
+                Starts { tracked: &starts, verify: &verify },
+                ctx,
+                &hidden,
+            )
+            .unwrap();
             let got = got.expect("the best-first search finds a plan");
             assert_eq!((modes(&got), ms(&got)), (modes(&want), ms(&want)), "{what}");
             assert_eq!(got.final_orientation_deg, want.final_orientation_deg, "{what}");
@@ -378,9 +391,11 @@ mod tests {
             .map(|q| (0, q))
             .collect();
         let found = [Node { seq: vec![0, 1], poses: Vec::new() }];
-        let ctx = (&opt, &region, &["triangle"][..]);
+        let ctx = Context { opt: &opt, region: &region, names: &["triangle"] };
         let hidden = crate::progress::Silent;
-        let err = confirm(&mut t, &found, (&starts, &starts), ctx, &hidden).unwrap_err();
+        let err =
+            confirm(&mut t, &found, Starts { tracked: &starts, verify: &starts }, ctx, &hidden)
+                .unwrap_err();
         let msg = err.to_string();
         assert!(matches!(err, PlanFailure::OutOfTime { .. }), "{msg}");
         assert!(
