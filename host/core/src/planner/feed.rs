@@ -408,6 +408,14 @@ fn spread(poses: &[Pose], period: f64) -> (f64, f64) {
     (mean, dev)
 }
 
+/// Tracked poses closer than this in orientation (deg, mod the period) and [`SAME_POSE_MM`]
+/// in position stand for one another in the search ([`cluster`]). Not [`super::cluster`]'s
+/// rests (running means of simulated final orientations) nor the goal test's merge of
+/// reachable orientations: a representative pose, so that runs are memoised.
+const SAME_POSE_DEG: f64 = 1.0;
+/// See [`SAME_POSE_DEG`] (mm).
+const SAME_POSE_MM: f64 = 2.0;
+
 /// Greedy clustering of rest poses: a pose joins the first cluster of its part whose first
 /// pose is within 1° (mod the part's period) and 2 mm; that first pose stands for the cluster.
 /// Poses that close end alike under the next mode unless they lie on a basin boundary, which
@@ -417,8 +425,8 @@ fn cluster(poses: &[Tagged], periods: &[f64]) -> Vec<Tagged> {
     for &(i, q) in poses {
         let near = |&(j, r): &Tagged| {
             j == i
-                && cdist(r.theta.to_degrees(), q.theta.to_degrees(), periods[i]) < 1.0
-                && (r.x - q.x).hypot(r.y - q.y) < 2.0
+                && cdist(r.theta.to_degrees(), q.theta.to_degrees(), periods[i]) < SAME_POSE_DEG
+                && (r.x - q.x).hypot(r.y - q.y) < SAME_POSE_MM
         };
         if !reps.iter().any(near) {
             reps.push((i, q));
