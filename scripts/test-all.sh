@@ -23,8 +23,14 @@ RUSTDOCFLAGS="-D warnings" cargo doc --no-deps
 
 # The README's and docs' marked command examples, run on the debug binary and compared with the
 # output they show (scripts/docs-check.sh --update rewrites outdated ones).
+# One debug build of the host crates, their tests and the `chladni` binary, which the docs
+# check, the tests and the hardware-in-the-loop step all use (a plain `cargo build --bin
+# chladni` resolves other features and would build every dependency again).
+step "build (host crates and their tests, debug)"
+cargo test --no-run
+
 step "docs check (command examples)"
-scripts/docs-check.sh
+CHLADNI_BIN=target/debug/chladni scripts/docs-check.sh
 
 # The fuzz crate is its own workspace (fuzz/): formatted and linted with the same stable
 # toolchain; without libFuzzer's runtime, so no C++ is compiled for the check.
@@ -57,7 +63,6 @@ scripts/fuzz.sh smoke "${CHLADNI_FUZZ_SECONDS:-15}"
 # scripts/hitl.sh runs the end-to-end suite against a port instead of its own QEMU; try that
 # path here against a standalone `chladni emulator` (no board on CI).
 step "hardware-in-the-loop path (scripts/hitl.sh against a standalone emulator)"
-cargo build --bin chladni
 hitl_dir=$(mktemp -d)
 source scripts/lib/emulator.sh
 emu=""
