@@ -30,21 +30,24 @@ pub const POSITION_TOL_MM: f64 = 1.0;
 /// the exact region's diameter.
 pub(crate) const TRACKED_POSITION_TOL_MM: f64 = 2.0;
 
-/// A fixed position as plans report it: the mean of `points`, rounded to 1 µm.
-fn reported_mean(points: impl ExactSizeIterator<Item = [f64; 2]> + Clone) -> [f64; 2] {
+/// The mean of `points` (mm); the origin for none.
+fn mean(points: &[[f64; 2]]) -> [f64; 2] {
     let n = points.len().max(1) as f64;
-    let sum = points.fold([0.0, 0.0], |s, p| [s[0] + p[0], s[1] + p[1]]);
-    [(sum[0] / n * 1000.0).round() / 1000.0, (sum[1] / n * 1000.0).round() / 1000.0]
+    [points.iter().map(|p| p[0]).sum::<f64>() / n, points.iter().map(|p| p[1]).sum::<f64>() / n]
+}
+
+/// A fixed position as plans report it: rounded to 1 µm.
+fn reported(m: [f64; 2]) -> [f64; 2] {
+    [(m[0] * 1000.0).round() / 1000.0, (m[1] * 1000.0).round() / 1000.0]
 }
 
 /// The position tracked final poses fix ([`TRACKED_POSITION_TOL_MM`]), rounded to 1 µm, or
 /// `None` when they spread wider.
 pub(crate) fn tracked_position(poses: &[Pose]) -> Option<[f64; 2]> {
-    let n = poses.len().max(1) as f64;
-    let m =
-        [poses.iter().map(|q| q.x).sum::<f64>() / n, poses.iter().map(|q| q.y).sum::<f64>() / n];
-    let fixed = poses.iter().all(|q| (q.x - m[0]).hypot(q.y - m[1]) <= TRACKED_POSITION_TOL_MM);
-    fixed.then(|| reported_mean(poses.iter().map(|q| [q.x, q.y])))
+    let points: Vec<[f64; 2]> = poses.iter().map(|q| [q.x, q.y]).collect();
+    let m = mean(&points);
+    let fixed = points.iter().all(|p| (p[0] - m[0]).hypot(p[1] - m[1]) <= TRACKED_POSITION_TOL_MM);
+    fixed.then(|| reported(m))
 }
 
 /// The points whose convex hull holds every place the centroid can be after `path` (mode,
@@ -117,7 +120,7 @@ pub(crate) fn fixed_position(
     if pts.is_empty() || diameter(&pts) >= POSITION_TOL_MM {
         return None;
     }
-    Some(reported_mean(pts.iter().copied()))
+    Some(reported(mean(&pts)))
 }
 
 /// Runs a plan (as `chladni simulate` does, fixed durations) from the inset plate corners and
