@@ -76,7 +76,7 @@ max_len() {
   case $1 in
     request_handler) echo 1024 ;;
     plan_store) echo 256 ;;
-    part_analysis) echo 640 ;;
+    part_analysis) echo 256 ;;
     *) echo 4096 ;;
   esac
 }

@@ -35,13 +35,15 @@ use chladni_shared::icd::store::{
 };
 use libfuzzer_sys::fuzz_target;
 
-/// Flash pages the store gets: room for a few plans, so "full" happens too.
-const PAGES: usize = 8;
+/// Flash pages the store gets: the marker page and 3 for the map, room for a plan of about 200
+/// steps or a few short ones, so "full" happens often. (8 before issue 42: a reboot reads back
+/// all the flash holds, so a smaller flash makes executions cheaper.)
+const PAGES: usize = 4;
 
 /// Operations read from one input, at most (bytes past them are ignored): an execution's cost
 /// grows with its program (every reboot reads the map back and checks every slot), and
 /// libFuzzer grows inputs to 4 KB, hundreds of operations that mostly repeat what short
-/// programs do. Each execution starts from erased flash; 16 operations still fill the 8 pages
+/// programs do. Each execution starts from erased flash; 16 operations still fill the pages
 /// (a few uploads of up to 256 steps) and drive garbage collection and "full". (24 before
 /// issue 42: the cost of an execution grows faster than linearly with its operations, as
 /// every reboot reads back all that the earlier ones wrote.)

@@ -135,8 +135,8 @@ pub struct PlanStore<F: NorFlash, C: CacheImpl<u16> = StoreCache> {
     /// The whole area: the marker page, then the map.
     area: Range<u32>,
     format: Format,
-    /// Bytes in the map's range.
-    range_len: u32,
+    /// Pages in the map's range.
+    map_pages: u32,
     geometry: Geometry,
     /// Makes an empty cache (a format starts the map over).
     new_cache: fn() -> C,
@@ -162,7 +162,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         let max_len = (MAX_PAGES * F::ERASE_SIZE) as u32;
         let area = range.start..range.end.min(range.start.saturating_add(max_len));
         let map = map_range(&area, F::ERASE_SIZE);
-        let range_len = map.end.saturating_sub(map.start);
+        let map_pages = map.end.saturating_sub(map.start) / F::ERASE_SIZE as u32;
         let backend = match MapConfig::<Verified<F>>::try_new(map) {
             Ok(config) => Backend::Map(MapStorage::new(Verified::new(flash), config, new_cache())),
             Err(_) => {
@@ -179,7 +179,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
             stale: true,
             area,
             format: Format::Unknown,
-            range_len,
+            map_pages,
             geometry: Geometry {
                 overhead: MapStorage::<u16, Verified<F>, C>::item_overhead_size(),
                 word: F::WRITE_SIZE.max(F::READ_SIZE) as u32,
@@ -399,7 +399,16 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         // (The buffer holds the longest chunk: `layout::MAX_VALUE`.)
         let encoded = postcard::to_slice(&item, &mut self.chunk.0);
         let len = encoded.map_err(|_| Refusal::Store(StoreError::Flash))?.len();
-        Ok(Staged { bank: upload.bank, index, len, steps, ms })
+        let bank = upload.bank;
+        // The chunk and the commit's header must leave the reserve free: a full store can
+        // still delete. Refused, the upload ends and its chunks are cleared at once.
+        let growth = self.geometry.item_size(len) + self.geometry.max_record_size();
+        if growth > self.free_bytes() {
+            self.upload = None;
+            self.tidy().await;
+            return Err(Refusal::Store(StoreError::Full));
+        }
+        Ok(Staged { bank, index, len, steps, ms })
     }
 
     /// Writes the staged chunk from the chunk buffer.
@@ -477,12 +486,13 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         Ok(self.index.page(from_slot, self.free_bytes()))
     }
 
-    /// Flash left for plans: the range, less the newest item of every key, less one page that
-    /// sequential-storage keeps erased for garbage collection. (Items do not span pages, so
-    /// the tail of each page may go unused: the last plans may not fit all of it.)
+    /// Flash left for plans: what the map is sure to hold (`Geometry::capacity`), less the
+    /// newest item of every key, less the room kept so that a delete or a configuration
+    /// change always fits (`Geometry::reserve`).
     fn free_bytes(&self) -> u32 {
-        let reserve = F::ERASE_SIZE as u32 + self.index.live_bytes();
-        self.range_len.saturating_sub(reserve)
+        let capacity = self.geometry.capacity(self.map_pages, F::ERASE_SIZE as u32);
+        let used = self.index.live_bytes() + self.geometry.reserve();
+        capacity.saturating_sub(used)
     }
 
     /// Deletes a plan; what was deleted.

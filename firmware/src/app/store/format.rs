@@ -74,7 +74,12 @@ pub async fn is_blank<F: NorFlash>(flash: &mut F, range: Range<u32>) -> Result<b
     while at < range.end {
         let n = buf.len().min((range.end - at) as usize);
         flash.read(at, &mut buf[..n]).await?;
-        if buf[..n].iter().any(|b| *b != 0xff) {
+        // A word at a time (a fresh bank is 256 KiB to read at first boot), bytes at the end.
+        let erased = buf[..n].chunks(8).all(|w| match <[u8; 8]>::try_from(w) {
+            Ok(word) => u64::from_ne_bytes(word) == u64::MAX,
+            Err(_) => w.iter().all(|b| *b == 0xff),
+        });
+        if !erased {
             return Ok(false);
         }
         at += n as u32;

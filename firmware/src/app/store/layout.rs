@@ -12,8 +12,9 @@
 //! Values are postcard encodings. sequential-storage keeps the newest item of each key; an
 //! item carries its own CRC, so a write cut by a power failure leaves the older item in effect.
 
-use chladni_shared::icd::plan::Step;
-use chladni_shared::icd::store::{CHUNK_STEPS, MAX_CHUNKS, PLAN_SLOTS, PlanName};
+use chladni_shared::icd::plan::{DeviceLimits, Step};
+use chladni_shared::icd::sense::ControlConfig;
+use chladni_shared::icd::store::{CHUNK_STEPS, DeviceConfig, MAX_CHUNKS, PLAN_SLOTS, PlanName};
 use sequential_storage::map::{SerializationError, Value};
 use serde::{Deserialize, Serialize};
 
@@ -160,7 +161,66 @@ impl Geometry {
     pub fn size_of<T: Serialize>(&self, value: &T) -> u32 {
         self.item_size(encoded_len(value))
     }
+
+    /// Live bytes (the newest item of every key, with the one being written) that a map of
+    /// `pages` pages of `page` bytes is sure to hold. sequential-storage keeps one page erased
+    /// for its garbage collection, writes items whole into a page between a start and an end
+    /// marker word, and closes a page when the next item does not fit, so each page may
+    /// waste up to one largest item; it answers `FullStorage` only after moving the live items
+    /// of every page, so below this sum a write always finds room.
+    pub const fn capacity(&self, pages: u32, page: u32) -> u32 {
+        let per_page = page.saturating_sub(2 * self.word + self.item_size(MAX_VALUE));
+        pages.saturating_sub(1) * per_page
+    }
+
+    /// Room kept for the writes that must not fail for space: a delete's tombstone and a new
+    /// configuration (each replaces an item, so neither grows the store for long).
+    pub fn reserve(&self) -> u32 {
+        self.tombstone_size() + self.size_of(&WORST_CONFIG)
+    }
+
+    /// Flash a commit's plan header may take.
+    pub fn max_record_size(&self) -> u32 {
+        let mut name = PlanName::new();
+        while name.push('x').is_ok() {}
+        let record = PlanRecord {
+            name,
+            repeat: u16::MAX,
+            steps: u16::MAX,
+            crc: u32::MAX,
+            total_ms: u64::MAX,
+            bank: u8::MAX,
+        };
+        self.size_of(&Some(record))
+    }
 }
+
+/// The configuration with every field at its longest encoding (a struct literal, so a new
+/// field must be added here).
+const WORST_CONFIG: DeviceConfig = DeviceConfig {
+    limits: DeviceLimits {
+        min_freq_mhz: u32::MAX,
+        max_freq_mhz: u32::MAX,
+        max_amplitude_q15: u16::MAX,
+        max_accel_mmps2: u32::MAX,
+        max_steps: u16::MAX,
+        max_total_ms: u64::MAX,
+    },
+    control: ControlConfig {
+        open_loop_mmps2: u32::MAX,
+        open_loop_effort_q15: u16::MAX,
+        open_loop_ms: u32::MAX,
+        warn_band_mdb: u32::MAX,
+        abort_band_mdb: u32::MAX,
+        band_ms: u32::MAX,
+        max_accel_mmps2: u32::MAX,
+        no_data_ms: u32::MAX,
+        saturation_ms: u32::MAX,
+        check_effort_q15: u16::MAX,
+        check_ms: u32::MAX,
+        check_min_mmps2: u32::MAX,
+    },
+};
 
 /// Largest value the store writes or reads: a full chunk of steps at their longest encoding
 /// (frequency, duration and ramp as varints of at most 5 bytes; the level a variant tag and a

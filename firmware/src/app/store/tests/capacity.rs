@@ -64,14 +64,16 @@ fn every_slot_takes_a_longest_plan_through_two_rounds_of_the_flash() {
         assert_eq!(load(&mut s, PlanRef::Slot(slot as u8)).as_ref(), Ok(p));
     }
     let plan_bytes = listed.iter().map(|p| p.bytes).max().unwrap();
-    // Less the marker page and the page kept erased for garbage collection.
-    let empty = ((BANK_PAGES - 2) * PAGE_SIZE) as u32;
+    let empty = block_on(PlanStore::new(MockFlash::new(BANK_PAGES), range(BANK_PAGES)).list(0))
+        .unwrap()
+        .free_bytes;
     std::println!(
         "capacity: {PLAN_SLOTS} slots of longest plans, {plan_bytes} B each; {free} B free with \
          all of them stored; free_bytes of an empty bank ({empty} B) holds {} such plans",
         empty / plan_bytes,
     );
-    assert!(free > 200 * 1024, "{free} B free");
+    // (119 088 B when the store began to keep its reserve: 34 more such plans.)
+    assert!(free > 100 * 1024, "{free} B free");
 }
 
 /// Some of what [`costs`] measured.

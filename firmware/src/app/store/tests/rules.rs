@@ -298,16 +298,57 @@ fn the_list_comes_in_pages() {
 }
 
 #[test]
-fn free_bytes_is_the_range_less_live_items_and_a_page() {
+fn free_bytes_is_the_sure_capacity_less_live_items_and_the_reserve() {
     let mut s = store(8);
     let empty = block_on(s.list(0)).unwrap().free_bytes;
-    // 8 pages: the marker page, and one page kept erased for garbage collection.
-    assert_eq!(empty, 6 * PAGE_SIZE as u32);
+    // 8 pages: the marker page, one page kept erased for garbage collection, and 6 pages
+    // that each may waste a largest item (8 + 680 bytes) besides their two marker words; less
+    // the reserve: a tombstone (16 bytes) and the longest configuration (8 + 96).
+    assert_eq!(empty, 6 * (PAGE_SIZE as u32 - 2 * 8 - 688) - (16 + 104));
     let summary = upload(&mut s, &plan("f", 256, 1), None).unwrap();
     let free = block_on(s.list(0)).unwrap().free_bytes;
     assert_eq!(free, empty - summary.bytes);
     // 8 chunks of 32 steps and the header; each item 8 bytes of header, data 8-aligned.
     assert!(summary.bytes as usize > 256 * 7 && summary.bytes % 8 == 0);
+}
+
+/// Found by the `plan_store` fuzz target: plans filled a small store to the last byte, and
+/// then a delete (its tombstone) and a configuration change were refused `Full`; the only
+/// way out would have been a format. Uploads now stop short of the reserve.
+#[test]
+fn a_store_filled_by_uploads_still_deletes_and_configures() {
+    for pages in [4, 5, 6] {
+        let mut s = store(pages);
+        let mut stored = std::vec::Vec::new();
+        // Packed to the last byte: plans of falling sizes, each size until the store refuses.
+        for steps in [200, 90, 40, 17, 8, 3, 1] {
+            loop {
+                let k = stored.len() as u32;
+                let p = plan(&std::format!("p{k}"), steps, k);
+                match upload(&mut s, &p, None) {
+                    Ok(summary) => stored.push((summary.slot, p)),
+                    Err(r) => {
+                        assert_eq!(r, Refusal::Store(StoreError::Full), "{pages} pages");
+                        break;
+                    }
+                }
+            }
+        }
+        assert!(stored.len() >= 2, "{pages} pages: {} plans", stored.len());
+        // The refused upload ended and left nothing behind: the store still fills the same.
+        assert!(block_on(s.index_matches_flash()));
+        let mut c = DeviceConfig::DEFAULT;
+        c.limits.max_freq_mhz = 800_000;
+        assert_eq!(block_on(s.set_config(c)), Ok(c), "{pages} pages");
+        for (slot, p) in &stored {
+            assert_eq!(load(&mut s, PlanRef::Slot(*slot)).as_ref(), Ok(p));
+            let deleted = block_on(s.delete(&PlanRef::Slot(*slot))).map(|d| d.slot);
+            assert_eq!(deleted, Ok(*slot), "{pages} pages");
+        }
+        let mut s = reopen(s, pages);
+        assert_eq!(list_all(&mut s).unwrap().0, std::vec::Vec::new());
+        assert_eq!(block_on(s.load_config()), c);
+    }
 }
 
 #[test]
