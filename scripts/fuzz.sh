@@ -4,6 +4,8 @@
 #   scripts/fuzz.sh install              the pinned nightly and cargo-fuzz (fuzz/toolchain.env);
 #                                        idempotent, offline when both are there
 #   scripts/fuzz.sh seeds                (re)writes the seed corpora, fuzz/corpus/<target>/seed-*
+#   scripts/fuzz.sh build                writes the seeds and builds every target (what smoke
+#                                        does first)
 #   scripts/fuzz.sh smoke [SECONDS]      every target for SECONDS each (default 20): fails on a
 #                                        crash, prints executions and coverage per target
 #   scripts/fuzz.sh run TARGET [-- ARGS] one target until libFuzzer's ARGS stop it
@@ -14,8 +16,10 @@
 # fuzz/target. Corpus: fuzz/corpus/<target>/ (generated seeds and what libFuzzer adds), plus
 # the committed crash inputs of fuzz/regressions/<target>/, replayed at every start. A crash
 # lands in fuzz/artifacts/<target>/; the log of the last run in fuzz/target/logs/<target>.log.
-# FUZZ_SANITIZER=none|address|... picks another sanitizer (none runs two to four times as
-# fast); FUZZ_BUILD_FLAGS adds cargo-fuzz build options (e.g. --no-trace-compares).
+# Builds: `build` and `smoke` use AddressSanitizer with compare tracing (memory errors in the
+# dependencies' unsafe code show at once); `run` leaves both out (the long runs: 3.5-6 times
+# as fast, docs/fuzzing.md). FUZZ_SANITIZER=none|address|... and FUZZ_BUILD_FLAGS (cargo-fuzz
+# build options, e.g. --no-trace-compares) override either default.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # shellcheck source=../fuzz/toolchain.env
@@ -64,10 +68,15 @@ seeds() {
 # No defmt logging either (the workspace's .cargo/config.toml asks for `info`): on the host it
 # encodes every line into a buffer that nothing reads, a cost on every refused request.
 export DEFMT_LOG=off
-build_args=(--debug-assertions --no-cfg-fuzzing --sanitizer "${FUZZ_SANITIZER:-address}")
-# More `cargo fuzz build` options, e.g. FUZZ_BUILD_FLAGS=--no-trace-compares.
-read -r -a extra <<<"${FUZZ_BUILD_FLAGS:-}"
-build_args+=("${extra[@]}")
+# `cargo fuzz build` options for a command: its defaults (above), unless overridden.
+set_build_args() {
+  local sanitizer=address flags=""
+  if [ "$1" = run ]; then sanitizer=none flags=--no-trace-compares; fi
+  build_args=(--debug-assertions --no-cfg-fuzzing --sanitizer "${FUZZ_SANITIZER:-$sanitizer}")
+  local extra
+  read -r -a extra <<<"${FUZZ_BUILD_FLAGS-$flags}"
+  build_args+=("${extra[@]}")
+}
 
 # libFuzzer's input cap per target, bytes: longer inputs only repeat what shorter ones do, at
 # a cost that grows with their length (each harness also reads at most so many steps; its doc
@@ -148,10 +157,12 @@ summary() {
 
 cmd=${1:-}
 [ $# -gt 0 ] && shift
+set_build_args "$cmd"
 case "$cmd" in
   install) install ;;
   list) targets ;;
   seeds) require; seeds ;;
+  build) require; seeds; build ;;
   smoke)
     secs=${1:-20}
     [[ "$secs" =~ ^[0-9]+$ ]] || die "smoke takes a number of seconds, not '$secs'"

@@ -13,6 +13,39 @@ scripts/install-deps.sh
 step "format"
 cargo fmt --all -- --check
 
+# The firmware boards and the fuzz targets build in target directories of their own, so they
+# start now, beside the host crates' clippy, rustdoc and debug build, whose long one-crate
+# stretches (chladni-core, the test binaries' links) leave a core idle. Their output is
+# printed, and their failure fails the run, at their own step below.
+background=$(mktemp -d)
+emu=""
+hitl_dir=""
+# On any exit: no build left running, no emulator, no temporary files.
+cleanup() {
+  local job
+  for job in $(jobs -p); do pkill -P "$job" 2>/dev/null || true; done
+  kill $(jobs -p) $emu 2>/dev/null || true
+  rm -rf "$background" ${hitl_dir:+"$hitl_dir"}
+}
+trap cleanup EXIT
+(
+  for board in qemu stm32l475 stm32l475-pwm; do
+    echo "== clippy + build firmware ($board)"
+    scripts/firmware.sh clippy "$board"
+    scripts/firmware.sh size "$board"
+  done
+) >"$background/firmware.log" 2>&1 &
+firmware_job=$!
+scripts/fuzz.sh build >"$background/fuzz.log" 2>&1 &
+fuzz_job=$!
+# A background job's log, and its status.
+finish() {
+  local rc=0
+  wait "$1" || rc=$?
+  cat "$2"
+  [ $rc = 0 ] || { echo "test-all: $3 failed (exit $rc)" >&2; exit $rc; }
+}
+
 step "clippy (host crates)"
 cargo clippy --all-targets -- -D warnings
 
@@ -38,11 +71,8 @@ step "format + clippy (fuzz crate)"
 cargo fmt --manifest-path fuzz/Cargo.toml -- --check
 cargo clippy --manifest-path fuzz/Cargo.toml --all-targets --no-default-features -- -D warnings
 
-for board in qemu stm32l475 stm32l475-pwm; do
-  step "clippy + build firmware ($board)"
-  scripts/firmware.sh clippy "$board"
-  scripts/firmware.sh size "$board"
-done
+step "firmware: clippy and build of every board (started after the format check)"
+finish "$firmware_job" "$background/firmware.log" "the firmware build"
 
 step "tests (host, on-target in QEMU, end-to-end)"
 cargo test
@@ -57,16 +87,15 @@ cargo clippy -p chladni-firmware --lib --tests --features mock-flash -- -D warni
 
 # Each fuzz target for a short time on the pinned nightly (the long runs are by hand:
 # docs/fuzzing.md). Fails on any crash.
-step "fuzz smoke run (${CHLADNI_FUZZ_SECONDS:-15} s per target)"
-scripts/fuzz.sh smoke "${CHLADNI_FUZZ_SECONDS:-15}"
+step "fuzz smoke run (${CHLADNI_FUZZ_SECONDS:-8} s per target)"
+finish "$fuzz_job" "$background/fuzz.log" "the fuzz targets' build"
+scripts/fuzz.sh smoke "${CHLADNI_FUZZ_SECONDS:-8}"
 
 # scripts/hitl.sh runs the end-to-end suite against a port instead of its own QEMU; try that
 # path here against a standalone `chladni emulator` (no board on CI).
 step "hardware-in-the-loop path (scripts/hitl.sh against a standalone emulator)"
 hitl_dir=$(mktemp -d)
 source scripts/lib/emulator.sh
-emu=""
-trap 'kill $emu 2>/dev/null || true; rm -rf "$hitl_dir"' EXIT
 start_emulator target/debug/chladni "$hitl_dir" --time-limit-s 600 --log "$hitl_dir/firmware.log" \
   --flash-file "$hitl_dir/flash.bin"
 CHLADNI_EXPECT_BOARD=qemu scripts/hitl.sh "$port" --no-flash

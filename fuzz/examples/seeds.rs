@@ -197,7 +197,7 @@ fn part_analysis() -> Vec<(String, Vec<u8>)> {
             star.extend((0..16).map(|i| (i * 37 % 256) as u8));
             star.push(5);
             star.extend((0..10).map(|i| (i * 91 % 256) as u8));
-            star.extend([0, 0, 0, 0x40, 1]);
+            star.extend([0, 0, 0, 0x40, 7]);
             seeds.push((format!("star-law{law}-ratio{ratio}"), star));
         }
     }

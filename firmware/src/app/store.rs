@@ -346,7 +346,8 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
     ) -> Result<u16, Refusal> {
         let staged = self.stage(chunk, limits).await?;
         let stored = self.write_staged(&staged).await;
-        // On an error the upload stays where it was; the chunk may be sent again.
+        // On an error the upload stays where it was and the chunk may be sent again (a chunk
+        // refused `Full` in `stage` ended it).
         stored.map_err(Refusal::Store)?;
         Ok(self.accept_staged(&staged))
     }
