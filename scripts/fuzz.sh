@@ -127,7 +127,8 @@ fuzz_one() {
     trap 'interrupted=1' INT
     "${run[@]}" 2>&1 | tee -i "$log" || rc=$?
     trap - INT
-    if [ $interrupted = 1 ]; then
+    # (72: libFuzzer's exit code when a signal stopped it, e.g. SIGINT sent to it alone.)
+    if [ $interrupted = 1 ] || [ "$rc" = 72 ]; then
       summary "$target" "$log" $((SECONDS - t0))
       echo "fuzz: $target interrupted"
       return 130
