@@ -135,8 +135,13 @@ pub struct PlanStore<F: NorFlash, C: CacheImpl<u16> = StoreCache> {
     /// The whole area: the marker page, then the map.
     area: Range<u32>,
     format: Format,
-    /// Pages in the map's range.
-    map_pages: u32,
+    /// Live bytes uploads may fill: what the map is sure to hold (`Geometry::capacity`) less
+    /// the room kept so that a delete or a configuration change always fits
+    /// (`Geometry::reserve`). Fixed by the flash, so computed once.
+    room: u32,
+    /// Flash a commit's plan header may take (`Geometry::max_record_size`), held free by
+    /// every chunk of an upload.
+    max_record: u32,
     geometry: Geometry,
     /// Makes an empty cache (a format starts the map over).
     new_cache: fn() -> C,
@@ -163,6 +168,11 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         let area = range.start..range.end.min(range.start.saturating_add(max_len));
         let map = map_range(&area, F::ERASE_SIZE);
         let map_pages = map.end.saturating_sub(map.start) / F::ERASE_SIZE as u32;
+        let geometry = Geometry {
+            overhead: MapStorage::<u16, Verified<F>, C>::item_overhead_size(),
+            word: F::WRITE_SIZE.max(F::READ_SIZE) as u32,
+        };
+        let capacity = geometry.capacity(map_pages, F::ERASE_SIZE as u32);
         let backend = match MapConfig::<Verified<F>>::try_new(map) {
             Ok(config) => Backend::Map(MapStorage::new(Verified::new(flash), config, new_cache())),
             Err(_) => {
@@ -179,11 +189,9 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
             stale: true,
             area,
             format: Format::Unknown,
-            map_pages,
-            geometry: Geometry {
-                overhead: MapStorage::<u16, Verified<F>, C>::item_overhead_size(),
-                word: F::WRITE_SIZE.max(F::READ_SIZE) as u32,
-            },
+            room: capacity.saturating_sub(geometry.reserve()),
+            max_record: geometry.max_record_size(),
+            geometry,
             new_cache,
             pending: None,
             failed: None,
@@ -403,7 +411,7 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         let bank = upload.bank;
         // The chunk and the commit's header must leave the reserve free: a full store can
         // still delete. Refused, the upload ends and its chunks are cleared at once.
-        let growth = self.geometry.item_size(len) + self.geometry.max_record_size();
+        let growth = self.geometry.item_size(len) + self.max_record;
         if growth > self.free_bytes() {
             self.upload = None;
             self.tidy().await;
@@ -487,13 +495,9 @@ impl<F: NorFlash, C: CacheImpl<u16>> PlanStore<F, C> {
         Ok(self.index.page(from_slot, self.free_bytes()))
     }
 
-    /// Flash left for plans: what the map is sure to hold (`Geometry::capacity`), less the
-    /// newest item of every key, less the room kept so that a delete or a configuration
-    /// change always fits (`Geometry::reserve`).
+    /// Flash left for plans: the room uploads may fill, less the newest item of every key.
     fn free_bytes(&self) -> u32 {
-        let capacity = self.geometry.capacity(self.map_pages, F::ERASE_SIZE as u32);
-        let used = self.index.live_bytes() + self.geometry.reserve();
-        capacity.saturating_sub(used)
+        self.room.saturating_sub(self.index.live_bytes())
     }
 
     /// Deletes a plan; what was deleted.
