@@ -19,7 +19,8 @@
 //! substrings: `CHLADNI_TABLE_PLATES=free`, `CHLADNI_TABLE_PARTS=gear,key`;
 //! `CHLADNI_TABLE_SUGGEST=0` skips the suggest rows, `only` runs them alone (each `plate suggest` stops at its
 //! default `--budget-s 60`, past it by at most the first candidate that is planned); `CHLADNI_TABLE_JOBS=2` runs two cases at
-//! once (default 1: the timings are per command on an otherwise idle machine).
+//! once (default 1: the timings are per command on an otherwise idle machine);
+//! `CHLADNI_TABLE_BIN=PATH` runs another `chladni` binary (an older build, to compare).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -82,11 +83,10 @@ struct Ran {
 
 fn chladni(root: &Path, args: &[&str]) -> Ran {
     let start = Instant::now();
-    let out = Command::new(env!("CARGO_BIN_EXE_chladni"))
-        .current_dir(root)
-        .args(args)
-        .output()
-        .expect("the chladni binary runs");
+    let bin = std::env::var_os("CHLADNI_TABLE_BIN")
+        .map_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_chladni")), PathBuf::from);
+    let out =
+        Command::new(bin).current_dir(root).args(args).output().expect("the chladni binary runs");
     Ran {
         ok: out.status.success(),
         stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
@@ -461,7 +461,9 @@ const ORDINARY: [&str; 10] = [
 
 fn main() {
     // `cargo bench` passes `--bench`; nothing else is taken.
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("workspace root").to_owned();
+    // host/cli → the workspace root.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).ancestors().nth(2).expect("workspace root");
+    let root = root.to_owned();
     let with_suggest = match std::env::var("CHLADNI_TABLE_SUGGEST").as_deref() {
         Ok("0") => Suggest::Off,
         Ok("only") => Suggest::Only,

@@ -1,7 +1,8 @@
 //! The field wrench of a grid mode, the motion model's inner loop (about two per Heun step;
 //! docs/plan.md, "Planning time"): criterion's time per call for parts of growing outline
 //! length on the free plate's first solver mode (`examples/plates/free-6-modes.toml`), over
-//! 64 poses spread across the plate (one iteration is all 64; the names give the edges).
+//! 64 poses spread across the plate (one iteration is all 64; the names give the edges), by
+//! the motion model's fast rule and by the reference rule it is tested against.
 
 use chladni_core::model::pose::Pose;
 use chladni_core::model::{part::Part, plate::PlateModel};
@@ -21,7 +22,8 @@ fn bench(c: &mut Criterion) {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let plate = PlateModel::load(&dir.join("../../examples/plates/free-6-modes.toml"))
         .expect("the free plate's solver modes load");
-    let field = FieldModel::new(&plate.modes[0], &plate);
+    let fast = FieldModel::new(&plate.modes[0], &plate);
+    let reference = fast.clone().reference();
     // 64 poses on a golden-ratio spiral over the plate's interior, each turned differently.
     let poses: Vec<Pose> = (0..64)
         .map(|i| {
@@ -38,10 +40,12 @@ fn bench(c: &mut Criterion) {
         let part = Part::load(&dir.join(path)).expect("the part loads");
         let body = Body::with_samples(&part, chladni_core::motion::body::PLANNER_BODY_SAMPLES);
         let edges: usize = body.rings.iter().map(Vec::len).sum();
-        let name = format!("{} ({edges} edges)", part.name);
-        group.bench_function(name, |b| {
-            b.iter(|| poses.iter().map(|q| field.wrench(&body, *q).fx).sum::<f64>())
-        });
+        for (rule, field) in [("fast", &fast), ("reference", &reference)] {
+            let name = format!("{} ({edges} edges), {rule}", part.name);
+            group.bench_function(name, |b| {
+                b.iter(|| poses.iter().map(|q| field.wrench(&body, *q).fx).sum::<f64>())
+            });
+        }
     }
     group.finish();
 }

@@ -30,6 +30,57 @@ pub struct Body {
     pub radius: f64,
     /// Interior sample points (relative to the centroid) and their weights (mm²).
     pub samples: Vec<([f64; 2], f64)>,
+    /// Per ring: the moment rule of a hole ([`HoleRule`]); `None` for the outline.
+    pub holes: Vec<Option<HoleRule>>,
+}
+
+/// A hole's area integral by four points: the hole's centroid ± a along its first principal
+/// axis and ± b along the second, a quarter of its area each, with a² = 2·I₁/A and b² = 2·I₂/A
+/// (I₁, I₂ its principal second moments of area). The rule has the hole's area, centroid and
+/// second moments, so it integrates every polynomial of degree 2 over the hole exactly, and of
+/// degree 3 over a centrally symmetric hole (a round one). Where a field varies little across
+/// a hole (a hole small against a grid cell), the grid wrench takes it instead of the hole's
+/// outline integral (`motion::field`, the grid's fast rule).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HoleRule {
+    /// Largest distance from the hole's centroid to its outline (mm).
+    pub radius: f64,
+    /// The four points, relative to the part's centroid (mm).
+    pub points: [[f64; 2]; 4],
+    /// The weight of each point: a quarter of the hole's area (mm²).
+    pub weight: f64,
+}
+
+impl HoleRule {
+    /// The rule of a ring (either winding), relative to the same origin as its points.
+    pub fn of(ring: &[[f64; 2]]) -> HoleRule {
+        let (a, c) = geometry::area_centroid([ring]);
+        // Second moments about the centroid (signed like `a`, so the ratios are positive).
+        let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+        for (i, &p) in ring.iter().enumerate() {
+            let q = ring[(i + 1) % ring.len()];
+            let (p, q) = ([p[0] - c[0], p[1] - c[1]], [q[0] - c[0], q[1] - c[1]]);
+            let cr = p[0] * q[1] - q[0] * p[1];
+            sxx += cr * (p[0] * p[0] + p[0] * q[0] + q[0] * q[0]) / 12.0;
+            syy += cr * (p[1] * p[1] + p[1] * q[1] + q[1] * q[1]) / 12.0;
+            sxy += cr * (p[0] * q[1] + 2.0 * p[0] * p[1] + 2.0 * q[0] * q[1] + q[0] * p[1]) / 24.0;
+        }
+        let (ixx, iyy, ixy) = (sxx / a, syy / a, sxy / a);
+        // Principal axes of [[ixx, ixy], [ixy, iyy]] (per unit area).
+        let half = 0.5 * (ixx - iyy);
+        let root = half.hypot(ixy);
+        let (l1, l2) = (0.5 * (ixx + iyy) + root, (0.5 * (ixx + iyy) - root).max(0.0));
+        let phi = 0.5 * (2.0 * ixy).atan2(ixx - iyy);
+        let (s, co) = phi.sin_cos();
+        let (ra, rb) = ((2.0 * l1).sqrt(), (2.0 * l2).sqrt());
+        let at = |u: f64, v: f64| [c[0] + u * co - v * s, c[1] + u * s + v * co];
+        let radius = ring.iter().map(|p| (p[0] - c[0]).hypot(p[1] - c[1])).fold(0.0, f64::max);
+        HoleRule {
+            radius,
+            points: [at(ra, 0.0), at(-ra, 0.0), at(0.0, rb), at(0.0, -rb)],
+            weight: 0.25 * a.abs(),
+        }
+    }
 }
 
 impl Body {
@@ -90,7 +141,8 @@ impl Body {
             samples.iter().map(|p| p[1]).sum::<f64>() / n,
         );
         let samples = samples.into_iter().map(|p| ([p[0] - mx, p[1] - my], a / n)).collect();
-        Body { rings, centroid, area: a, polar, radius, samples }
+        let holes = (0..rings.len()).map(|i| (i > 0).then(|| HoleRule::of(&rings[i]))).collect();
+        Body { rings, centroid, area: a, polar, radius, samples, holes }
     }
 
     /// The part's rings at a pose (plate frame).

@@ -38,6 +38,13 @@ const GL4: [(f64, f64); 4] = [
     (0.930_568_155_797_026_3, 0.173_927_422_568_727),
 ];
 
+/// 3-point Gauss–Legendre nodes on [0, 1] and weights: exact for degree 5.
+const GL3: [(f64, f64); 3] = [
+    (0.112_701_665_379_258_3, 0.277_777_777_777_777_8),
+    (0.5, 0.444_444_444_444_444_4),
+    (0.887_298_334_620_741_7, 0.277_777_777_777_777_8),
+];
+
 /// 2-point Gauss–Legendre nodes on [0, 1] and weights: exact for degree 3.
 const GL2: [(f64, f64); 2] = [(0.211_324_865_405_187_1, 0.5), (0.788_675_134_594_812_9, 0.5)];
 
@@ -46,6 +53,20 @@ const GL2: [(f64, f64); 2] = [(0.211_324_865_405_187_1, 0.5), (0.788_675_134_594
 /// within the same 5·10⁻⁸ of the exact rule as with 4 points everywhere (test
 /// `grid_outline_wrench_matches_the_exact_boundary_integral`; at 0.5 cells: 7.7·10⁻⁸).
 const SHORT: f64 = 0.25;
+
+/// The rule a grid mode's wrench is integrated by: along the outline, each piece of an edge
+/// inside one cell by Gauss–Legendre points ([`Bicubic::outline_wrench`]), and for the fast
+/// rule small holes by their moment rule (`motion::field`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Quadrature {
+    /// 4 points a piece, 2 on pieces under [`SHORT`] of a cell; every hole by its outline:
+    /// within 10⁻⁶ of the exact integral, the reference the fast rule is tested against.
+    Reference,
+    /// 3 points a piece, 2 under [`SHORT`]; holes within `SMALL_HOLE` of a cell by their
+    /// moment rule: the motion model's rule (its error against the reference is measured in
+    /// `motion::field`'s tests: 1.2·10⁻⁴ of the largest speed at worst).
+    Fast,
+}
 
 /// A Catmull–Rom bicubic interpolant of grid samples, as per-cell polynomial coefficients:
 /// the same surface as [`crate::motion::field::grid_eval`] (to rounding), evaluated with one
@@ -146,12 +167,13 @@ impl Bicubic {
     /// `boundary_wrench` specialised to the grid. Each vertex is turned once, and each edge
     /// walks the cells it crosses in order (`edge_integrals`): no sort, no allocation, no
     /// rounding call per piece.
-    pub fn outline_wrench(
+    pub fn outline_wrench<'r>(
         &self,
-        rings: &[Vec<[f64; 2]>],
+        rings: impl IntoIterator<Item = &'r Vec<[f64; 2]>>,
         origin: [f64; 2],
         (sin, cos): (f64, f64),
         k: [f64; 2],
+        rule: Quadrature,
     ) -> [f64; 3] {
         let (mut fx, mut fy, mut m) = (0.0, 0.0, 0.0);
         let turn = |p: [f64; 2]| [cos * p[0] - sin * p[1], sin * p[0] + cos * p[1]];
@@ -165,7 +187,7 @@ impl Bicubic {
                 let d = [rb[0] - ra[0], rb[1] - ra[1]];
                 // Grid coordinates along the edge: (ua + s·du, va + s·dv), s ∈ [0, 1].
                 let a = [(origin[0] + ra[0]) * ihx, (origin[1] + ra[1]) * ihy];
-                let (i0, i1) = self.edge_integrals(a, [d[0] * ihx, d[1] * ihy], k);
+                let (i0, i1) = self.edge_integrals(a, [d[0] * ihx, d[1] * ihy], k, rule);
                 fx -= i0 * d[1];
                 fy += i0 * d[0];
                 m += i0 * (ra[0] * d[0] + ra[1] * d[1]) + i1 * (d[0] * d[0] + d[1] * d[1]);
@@ -178,10 +200,17 @@ impl Bicubic {
     /// ∫ k φ² ds and ∫ k φ² s ds over s ∈ [0, 1] along the segment a + s·d (grid coordinates):
     /// the segment is cut where it crosses a grid line, found by stepping from cell to cell
     /// (a digital differential analyser), and each piece, inside one cell's polynomial,
-    /// integrated with 4-point Gauss–Legendre (2-point when shorter than [`SHORT`]). Outside
+    /// integrated with 4-point Gauss–Legendre by the reference `rule`, 3-point by the fast one,
+    /// and 2-point by both on a piece shorter than [`SHORT`] of a cell. Outside
     /// the plate φ is the clamped coordinate's, as in `grid_eval`; the grid lines beyond the
     /// plate still cut pieces.
-    fn edge_integrals(&self, a: [f64; 2], d: [f64; 2], k: [f64; 2]) -> (f64, f64) {
+    fn edge_integrals(
+        &self,
+        a: [f64; 2],
+        d: [f64; 2],
+        k: [f64; 2],
+        rule: Quadrature,
+    ) -> (f64, f64) {
         let (umax, vmax) = ((self.nx - 1) as f64, (self.ny - 1) as f64);
         let (imax, jmax) = (self.nx as i64 - 2, self.ny as i64 - 2);
         let (mut x, mut y) = (Crossings::new(a[0], d[0]), Crossings::new(a[1], d[1]));
@@ -207,6 +236,10 @@ impl Bicubic {
                 };
                 if h * h * (d[0] * d[0] + d[1] * d[1]) <= SHORT * SHORT {
                     for (t, wt) in GL2 {
+                        point(t, wt);
+                    }
+                } else if rule == Quadrature::Fast {
+                    for (t, wt) in GL3 {
                         point(t, wt);
                     }
                 } else {
@@ -509,7 +542,7 @@ mod tests {
                 let v = b.value(p);
                 k[usize::from(v > 0.0)] * v * v
             });
-            let fast = b.outline_wrench(&rings, origin, (sin, cos), k);
+            let fast = b.outline_wrench(&rings, origin, (sin, cos), k, Quadrature::Reference);
             // Scale: area (~900 mm²) × largest Ψ (~2), moments × radius.
             for (i, (e, f)) in exact.iter().zip(fast).enumerate() {
                 let scale = if i == 2 { 2000.0 * 30.0 } else { 2000.0 };
@@ -529,14 +562,14 @@ mod tests {
         // it. (Stepping past grid lines by 10⁻¹² of the edge, as the walk once did, never
         // ends at 10²⁰ mm, where consecutive lines round to the same parameter.)
         for origin in [[1e20, -1e20], [-3e18, 50.0], [1e15, 1e15], [-400.0, 900.0]] {
-            let w = b.outline_wrench(&ring, origin, turn, [1.0, 1.0]);
+            let w = b.outline_wrench(&ring, origin, turn, [1.0, 1.0], Quadrature::Fast);
             assert!(w.iter().all(|v| v.is_finite()), "{origin:?}: {w:?}");
         }
         // A pose that is not finite gives no number, and returns.
-        let w = b.outline_wrench(&ring, [f64::NAN, 10.0], turn, [1.0, 1.0]);
+        let w = b.outline_wrench(&ring, [f64::NAN, 10.0], turn, [1.0, 1.0], Quadrature::Fast);
         assert!(w.iter().any(|v| v.is_nan()), "{w:?}");
         // At ∞ it returns too (a cell walk from there would never end).
-        let _ = b.outline_wrench(&ring, [f64::INFINITY, 10.0], turn, [1.0, 1.0]);
+        let _ = b.outline_wrench(&ring, [f64::INFINITY, 10.0], turn, [1.0, 1.0], Quadrature::Fast);
     }
 
     #[test]

@@ -72,3 +72,40 @@ pub(crate) fn predicted_rest(body: &Body, theta0: f64) -> f64 {
         }
     }
 }
+
+/// The repository's `examples/` folder.
+fn examples() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples")
+}
+
+/// The three example plates' own solver modes (`examples/plates/*-6-modes.toml`).
+pub(crate) fn solver_plates() -> Vec<PlateModel> {
+    ["cantilever", "free", "hinged-rod"]
+        .iter()
+        .map(|n| PlateModel::load(&examples().join(format!("plates/{n}-6-modes.toml"))).unwrap())
+        .collect()
+}
+
+/// The example parts and the ordinary ones (`examples/parts/`, `examples/parts/ordinary/`),
+/// each face of a part that flips, sorted by file name.
+pub(crate) fn example_parts() -> Vec<Part> {
+    let mut files = Vec::new();
+    for dir in ["parts", "parts/ordinary"] {
+        for e in std::fs::read_dir(examples().join(dir)).unwrap() {
+            let path = e.unwrap().path();
+            if path.extension().is_some_and(|x| x == "json") {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    let mut parts = Vec::new();
+    for f in files {
+        let part = Part::load(&f).unwrap();
+        if part.flips {
+            parts.push(part.mirrored());
+        }
+        parts.push(part);
+    }
+    parts
+}
