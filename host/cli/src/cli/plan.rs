@@ -625,6 +625,10 @@ pub struct SimulateArgs {
     /// a clock and the step.
     #[arg(long, value_name = "FILE.gif")]
     animate: Option<PathBuf>,
+    /// Integrate grid (solver) modes by the reference wrench rule, not the fast one the
+    /// planner uses: confirms a plan independently of the fast rule, at 1.2–3.5× the CPU.
+    #[arg(long)]
+    reference_wrench: bool,
 }
 
 /// The trials and seed of each face: a part dropped on both faces lands face up in the
@@ -662,8 +666,9 @@ impl SimulateArgs {
                 )),
                 other => bad(other.to_string()),
             })?;
+        let rule = |f: FieldModel| if self.reference_wrench { f.reference() } else { f };
         let fields: Vec<FieldModel> =
-            plate.modes.iter().map(|m| FieldModel::new(m, &plate)).collect();
+            plate.modes.iter().map(|m| rule(FieldModel::new(m, &plate))).collect();
         let sim =
             together::Sim { plate: &plate, fields: &fields, steps: &steps, feed: region.as_ref() };
         if let Some(n) = self.copies {

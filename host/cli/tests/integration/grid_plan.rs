@@ -156,3 +156,34 @@ fn rocking_frequency_must_stay_below_the_first_elastic_mode() {
         "{err}"
     );
 }
+
+/// `simulate --reference-wrench` runs the grid modes by the reference rule: the crank lever
+/// (its ⌀5 bore enters the fast rule by its moment rule) under the free plate's first solver
+/// mode ends, from the same seeded starts, at poses that differ from the fast rule's (the flag
+/// took effect) by no more than the two rules' agreement allows.
+#[test]
+fn simulate_by_the_reference_wrench_ends_where_the_fast_rule_does() {
+    use support::cli::{ex, ok_json, tmp};
+    let plan = tmp("reference-wrench", "plan.json");
+    let text = r#"{"name": "crank lever", "period_deg": 360.0, "final_orientation_deg": 0.0,
+        "steps": [{"freq_hz": 108.419, "duration_ms": 30000, "amplitude": 1.0, "ramp_ms": 20}]}"#;
+    std::fs::write(&plan, text).unwrap();
+    let (part, plate) = (ex("parts/ordinary/crank-lever.json"), ex("plates/free-6-modes.toml"));
+    let plan_s = plan.to_string_lossy().into_owned();
+    let ends = |extra: &[&str]| {
+        let mut args = vec!["simulate", &part, "--plate", &plate, "--plan", &plan_s];
+        args.extend(["--trials", "6", "--json", "--poses"]);
+        args.extend(extra);
+        let v = ok_json(&support::cli::chladni(&args));
+        let poses = v["poses"].as_array().unwrap().clone();
+        poses.iter().map(|p| p["end"].clone()).collect::<Vec<_>>()
+    };
+    let (fast, reference) = (ends(&[]), ends(&["--reference-wrench"]));
+    assert_eq!(fast.len(), reference.len());
+    assert_ne!(fast, reference, "the flag changes nothing");
+    for (a, b) in fast.iter().zip(&reference) {
+        let d = |k: &str| (a[k].as_f64().unwrap() - b[k].as_f64().unwrap()).abs();
+        let deg = d("theta_deg").min(360.0 - d("theta_deg"));
+        assert!(d("x_mm").hypot(d("y_mm")) < 0.05 && deg < 0.05, "{a} vs {b}");
+    }
+}
