@@ -119,8 +119,10 @@ impl Group<'_> {
 
     /// Can bodies i and j touch (bounding circles within the gap)?
     fn near(&self, i: usize, j: usize, qs: &[Pose]) -> bool {
-        let d = (qs[i].x - qs[j].x).hypot(qs[i].y - qs[j].y);
-        d <= self.radius(i) + self.radius(j) + self.gap(i, j)
+        // Squared: this test runs for every pair at every stage, and `hypot` is a libm call.
+        let (dx, dy) = (qs[i].x - qs[j].x, qs[i].y - qs[j].y);
+        let reach = self.radius(i) + self.radius(j) + self.gap(i, j);
+        dx * dx + dy * dy <= reach * reach
     }
 
     /// Each body's mobility W = μ·diag(1/A, 1/A, 1/J).
