@@ -86,8 +86,8 @@ pub(crate) fn solver_plates() -> Vec<PlateModel> {
         .collect()
 }
 
-/// The example parts and the ordinary ones (`examples/parts/`, `examples/parts/ordinary/`),
-/// each face of a part that flips, sorted by file name.
+/// The example parts and the ordinary ones in JSON (`examples/parts/`,
+/// `examples/parts/ordinary/`), each face of a part that flips, sorted by file name.
 pub(crate) fn example_parts() -> Vec<Part> {
     let mut files = Vec::new();
     for dir in ["parts", "parts/ordinary"] {
