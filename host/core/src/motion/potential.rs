@@ -59,10 +59,10 @@ const SHORT: f64 = 0.25;
 /// rule small holes by their moment rule (`motion::field`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Quadrature {
-    /// 4 points a piece, 2 on pieces under [`SHORT`] of a cell; every hole by its outline:
+    /// 4 points a piece, 2 on pieces under a quarter of a cell; every hole by its outline:
     /// within 10⁻⁶ of the exact integral, the reference the fast rule is tested against.
     Reference,
-    /// 3 points a piece, 2 under [`SHORT`]; holes within `SMALL_HOLE` of a cell by their
+    /// 3 points a piece, 2 under a quarter cell; holes within `SMALL_HOLE` of a cell by their
     /// moment rule: the motion model's rule (its error against the reference is measured in
     /// `motion::field`'s tests: 1.2·10⁻⁴ of the largest speed at worst).
     Fast,
