@@ -457,7 +457,7 @@ impl FieldModel {
                 Wrench { fx: f * xhat[0], fy: f * xhat[1], m }
             }
             FieldModel::Grid { cells, k, rule: Quadrature::Fast, .. } => {
-                self.grid_wrench(cells, *k, body, pose)
+                self.grid_wrench(cells, *k, body, pose, (s, c))
             }
             FieldModel::Grid { cells, k, rule: Quadrature::Reference, .. } => {
                 let o = [pose.x, pose.y];
@@ -494,8 +494,15 @@ impl FieldModel {
     /// The grid's fast rule: f = −∇(k φ²) along the outline ([`crate::motion::potential`],
     /// 3 points a piece), a hole within [`SMALL_HOLE`] of a cell by its four-point moment rule
     /// ([`crate::motion::body::HoleRule`]: the wrench of the filled outline minus the hole's).
-    fn grid_wrench(&self, cells: &Bicubic, k: [f64; 2], body: &Body, pose: Pose) -> Wrench {
-        let (s, c) = pose.theta.sin_cos();
+    /// `(s, c)`: the pose's (sin θ, cos θ), which [`FieldModel::wrench`] has already computed.
+    fn grid_wrench(
+        &self,
+        cells: &Bicubic,
+        k: [f64; 2],
+        body: &Body,
+        pose: Pose,
+        (s, c): (f64, f64),
+    ) -> Wrench {
         let [hx, hy] = cells.spacing();
         let small = SMALL_HOLE * hx.min(hy);
         let rule = |i: usize| body.holes.get(i).copied().flatten().filter(|h| h.radius <= small);
