@@ -79,6 +79,10 @@ pub struct ModeEntry {
     /// Amplitude ramp (ms).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ramp_ms: Option<i64>,
+    /// How far the mode's nodes lie from where `node` puts them, [dx, dy] (mm): a measured
+    /// correction (`chladni plate learn` writes it), applied when the entry is typed.
+    #[serde(skip_serializing_if = "Option::is_none", deserialize_with = "opt_pair")]
+    pub shift_mm: Option<[f64; 2]>,
     /// The node.
     #[serde(skip_serializing_if = "Option::is_none", deserialize_with = "node_entry")]
     pub node: Option<NodeEntry>,
@@ -603,6 +607,7 @@ node = { kind = "line", angle_deg = 90.0, offset_mm = 0.0 }
             freq_hz: Some(60.0),
             field: Some("sine".into()),
             wavelength_mm: Some(80.0),
+            shift_mm: Some([1.5, -2.0]),
             node: Some(NodeEntry::Hyperbola {
                 center_mm: Some([150.0, 100.0]),
                 angle_deg: Some(0.0),
