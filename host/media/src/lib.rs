@@ -5,6 +5,7 @@
 //! print ([`shapes`]).
 #![forbid(unsafe_code)]
 
+pub mod camera;
 pub mod plot;
 pub mod shapes;
 pub mod vision;
