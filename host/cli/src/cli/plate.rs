@@ -433,7 +433,7 @@ impl FromPhotoArgs {
                 size_mm: Some(size),
                 ..PlateTable::default()
             };
-            PlateFile { plate, mode: entries }
+            PlateFile { plate, mode: entries, learned: None }
         };
         Ok(modes_file::render(&file.plate, file.mode)?)
     }

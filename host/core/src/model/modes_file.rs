@@ -170,7 +170,7 @@ pub fn add_entry(modes: &mut Vec<ModeEntry>, entry: ModeEntry) -> Result<Added, 
 
 /// Renders a plate file with the given `[plate]` table and `[[mode]]` entries.
 pub fn render(plate: &PlateTable, modes: Vec<ModeEntry>) -> Result<String, toml::ser::Error> {
-    toml::to_string(&PlateFile { plate: plate.clone(), mode: modes })
+    toml::to_string(&PlateFile { plate: plate.clone(), mode: modes, learned: None })
 }
 
 #[cfg(test)]

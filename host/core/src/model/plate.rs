@@ -12,6 +12,7 @@
 //! gain = 1.0                         # or gain_left / gain_right
 //! speed_mm_s = 10.0                  # settle speed μ (default 10)
 //! ramp_ms = 20                       # amplitude ramp at the start of the step (default 20)
+//! shift_mm = [0.0, 0.0]              # the nodes moved by [dx, dy] (a learned correction)
 //! node = { kind = "line", angle_deg = 90.0, offset_mm = 0.0 }
 //! # or several lines of one mode:
 //! # node = { kind = "lines", lines = [{ angle_deg = 90.0, offset_mm = -50.0 }, { angle_deg = 0.0 }] }
@@ -76,6 +77,36 @@ pub enum Node {
 }
 
 impl Node {
+    /// The same node moved by `shift` (mm): a line's offset changes by the shift's component
+    /// along its normal n̂, a hyperbola's centre moves. A grid is resampled at the moved points; where they fall off the grid,
+    /// φ is extended linearly from its edge ([`Grid::shifted`]).
+    pub fn shifted(self, shift: [f64; 2]) -> Node {
+        if shift == [0.0, 0.0] {
+            return self;
+        }
+        let moved = |l: NodeLine| {
+            let (s, c) = l.angle_deg.to_radians().sin_cos();
+            NodeLine {
+                angle_deg: l.angle_deg,
+                offset_mm: l.offset_mm - s * shift[0] + c * shift[1],
+            }
+        };
+        match self {
+            Node::Line { angle_deg, offset_mm } => {
+                let l = moved(NodeLine { angle_deg, offset_mm });
+                Node::Line { angle_deg: l.angle_deg, offset_mm: l.offset_mm }
+            }
+            Node::Lines(lines) => Node::Lines(lines.into_iter().map(moved).collect()),
+            Node::Hyperbola { center_mm, angle_deg, a_mm, b_mm } => Node::Hyperbola {
+                center_mm: [center_mm[0] + shift[0], center_mm[1] + shift[1]],
+                angle_deg,
+                a_mm,
+                b_mm,
+            },
+            Node::Grid(g) => Node::Grid(g.shifted(shift)),
+        }
+    }
+
     /// Kind name.
     pub fn kind(&self) -> &'static str {
         match self {
@@ -106,6 +137,9 @@ pub struct Mode {
     pub speed_mm_s: f64,
     /// Amplitude ramp (ms).
     pub ramp_ms: u32,
+    /// How far the nodes were moved from where the entry's `node` puts them (mm): `node` is
+    /// already the moved one; kept to say so and to write it back.
+    pub shift_mm: [f64; 2],
     /// The node.
     pub node: Node,
 }
@@ -281,6 +315,7 @@ const MODE_KEYS: &[&str] = &[
     "gain_right",
     "speed_mm_s",
     "ramp_ms",
+    "shift_mm",
     "node",
     "lambda",
 ];
@@ -330,7 +365,37 @@ pub(crate) fn check_mode(
         }
     };
     let law = law_of(&c, e, &node)?;
-    Ok(Mode { name, freq_hz, amplitude, law, gain_left, gain_right, speed_mm_s, ramp_ms, node })
+    let shift_mm = shift_of(&c, e.shift_mm, size_mm)?;
+    let node = node.shifted(shift_mm);
+    let (gl, gr) = (gain_left, gain_right);
+    Ok(Mode {
+        name,
+        freq_hz,
+        amplitude,
+        law,
+        gain_left: gl,
+        gain_right: gr,
+        speed_mm_s,
+        ramp_ms,
+        shift_mm,
+        node,
+    })
+}
+
+/// A mode's `shift_mm`: finite, and less than the plate's size along each axis.
+fn shift_of(c: &Ctx, shift: Option<[f64; 2]>, size_mm: [f64; 2]) -> Result<[f64; 2], ModelError> {
+    let Some(s) = shift else { return Ok([0.0, 0.0]) };
+    if s.iter().zip(size_mm).all(|(v, side)| v.is_finite() && v.abs() < side) {
+        return Ok(s);
+    }
+    Err(c.bad(
+        "shift_mm",
+        format!("{s:?}"),
+        &format!(
+            "must be [dx, dy] in mm, each less than the plate's side ({} x {} mm)",
+            size_mm[0], size_mm[1]
+        ),
+    ))
 }
 
 #[cfg(test)]
@@ -704,6 +769,71 @@ node = { kind = "grid", nx = 2, ny = 2, values = [1.0, -1.0, 0.5, -0.5] }
         assert_eq!(m.modes[1].node.kind(), "hyperbola");
         assert_eq!(m.modes[2].node.kind(), "grid");
         assert_eq!(m.modes[2].name, "mode 3");
+    }
+
+    #[test]
+    fn a_shift_moves_each_kind_of_node_and_is_kept() {
+        let m = model(
+            r#"
+[[mode]]
+freq_hz = 60.0
+shift_mm = [3.0, -4.0]
+node = { kind = "line", angle_deg = 90.0, offset_mm = 10.0 }
+[[mode]]
+freq_hz = 80
+shift_mm = [3.0, -4.0]
+node = { kind = "hyperbola", center_mm = [150.0, 100.0], a_mm = 40.0, b_mm = 60.0 }
+"#,
+        )
+        .unwrap();
+        // A vertical line's normal n̂ = (−1, 0): moving right by 3 mm is an offset of −3.
+        assert_eq!(m.modes[0].node, Node::Line { angle_deg: 90.0, offset_mm: 7.0 });
+        assert_eq!(m.modes[0].shift_mm, [3.0, -4.0]);
+        let Node::Hyperbola { center_mm, .. } = m.modes[1].node else { panic!("hyperbola") };
+        assert_eq!(center_mm, [153.0, 96.0]);
+        let far = r#"
+[[mode]]
+freq_hz = 60
+shift_mm = [400.0, 0.0]
+node = { kind = "line", angle_deg = 0.0 }
+"#;
+        let e = model(far);
+        let e = e.unwrap_err().to_string();
+        assert!(e.contains("shift_mm") && e.contains("400") && e.contains("300 x 200"), "{e}");
+    }
+
+    #[test]
+    fn a_shifted_grid_is_the_shape_moved() {
+        use std::f64::consts::PI;
+        // φ = sin(πx/W)·cos(πy/H) sampled every 5 mm; shifted by 5 mm along x it must read, at
+        // interior points, what the original reads 5 mm left of them, up to the sign the
+        // renormalisation may pick (the field is −∇φ², blind to it; the peak stays a sample,
+        // so the scale is unchanged).
+        let (nx, ny, size) = (61, 41, [300.0, 200.0]);
+        let phi = |x: f64, y: f64| (PI * x / size[0]).sin() * (PI * y / size[1]).cos();
+        let values = (0..ny)
+            .flat_map(|j| (0..nx).map(move |i| (i, j)))
+            .map(|(i, j)| phi(i as f64 * 5.0, j as f64 * 5.0))
+            .collect();
+        let g = Grid { nx, ny, size_mm: size, values };
+        let shifted = g.shifted([5.0, 0.0]);
+        let field = crate::motion::field::grid_eval;
+        for p in [[100.0, 50.0], [200.0, 150.0], [37.0, 121.0]] {
+            let (moved, _) = field(&shifted, p);
+            let (there, _) = field(&g, [p[0] - 5.0, p[1]]);
+            assert!((moved.abs() - there.abs()).abs() < 1e-3, "{p:?}: {moved} vs {there}");
+        }
+        // Off the plate's edge the shape goes on along its edge slope, not flat: the sample at
+        // x = 0 comes from x = −5, φ(0) and 5 mm of the slope back.
+        let edge = shifted.at(0, 32);
+        let slope = PI / size[0] * (PI * 160.0 / size[1]).cos();
+        assert!((edge.abs() - (5.0 * slope).abs()).abs() < 1e-3, "{edge} vs {}", -5.0 * slope);
+        // Along y: the nodal line y = 100 moves to y = 107.
+        let up = g.shifted([0.0, 7.0]);
+        for x in [40.0, 150.0, 260.0] {
+            let (v, _) = field(&up, [x, 107.0]);
+            assert!(v.abs() < 1e-3, "φ({x}, 107) = {v}");
+        }
     }
 
     #[test]

@@ -37,6 +37,55 @@ pub struct PlateFile {
     /// The `[[mode]]` array, as written (values checked by [`crate::model::plate`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub mode: Vec<ModeEntry>,
+    /// What `chladni plate learn` measured to correct the modes (informative: the corrections
+    /// themselves are the entries' `speed_mm_s` and `shift_mm`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub learned: Option<Learned>,
+}
+
+/// The `[learned]` table: where the corrections of a learned plate come from, and how well
+/// they predict bursts the fit did not see.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Learned {
+    /// The plate file the corrections start from.
+    pub given: String,
+    /// When the bursts were driven (UTC, RFC 3339).
+    pub at: String,
+    /// The camera the parts were seen with.
+    pub camera: String,
+    /// Bursts fitted.
+    pub bursts: u32,
+    /// Bursts kept out of the fit to judge it.
+    pub held_out: u32,
+    /// Per mode.
+    #[serde(default)]
+    pub mode: Vec<LearnedMode>,
+}
+
+/// One mode's correction and its held-out prediction error before (the given plate) and
+/// after (the learned one).
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct LearnedMode {
+    /// The mode's drive frequency (Hz).
+    pub freq_hz: f64,
+    /// Bursts fitted.
+    pub bursts: u32,
+    /// Bursts held out.
+    pub held_out: u32,
+    /// Measured speed over the given one.
+    pub speed_factor: f64,
+    /// Measured node shift [dx, dy] (mm).
+    pub shift_mm: [f64; 2],
+    /// Held-out RMS position error of a burst's prediction on the given plate (mm).
+    pub before_mm: f64,
+    /// The same on the learned plate (mm).
+    pub after_mm: f64,
+    /// Held-out RMS orientation error on the given plate (degrees).
+    pub before_deg: f64,
+    /// The same on the learned plate (degrees).
+    pub after_deg: f64,
 }
 
 /// One `[[mode]]` entry as written: every key optional here; which are needed, their ranges
@@ -79,6 +128,10 @@ pub struct ModeEntry {
     /// Amplitude ramp (ms).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ramp_ms: Option<i64>,
+    /// How far the mode's nodes lie from where `node` puts them, [dx, dy] (mm): a measured
+    /// correction (`chladni plate learn` writes it), applied when the entry is typed.
+    #[serde(skip_serializing_if = "Option::is_none", deserialize_with = "opt_pair")]
+    pub shift_mm: Option<[f64; 2]>,
     /// The node.
     #[serde(skip_serializing_if = "Option::is_none", deserialize_with = "node_entry")]
     pub node: Option<NodeEntry>,
@@ -603,6 +656,7 @@ node = { kind = "line", angle_deg = 90.0, offset_mm = 0.0 }
             freq_hz: Some(60.0),
             field: Some("sine".into()),
             wavelength_mm: Some(80.0),
+            shift_mm: Some([1.5, -2.0]),
             node: Some(NodeEntry::Hyperbola {
                 center_mm: Some([150.0, 100.0]),
                 angle_deg: Some(0.0),
@@ -614,6 +668,7 @@ node = { kind = "line", angle_deg = 90.0, offset_mm = 0.0 }
         let file = PlateFile {
             plate: PlateTable { size_mm: Some([300.0, 200.0]), ..PlateTable::default() },
             mode: vec![entry.clone()],
+            learned: None,
         };
         let back = PlateFile::parse(&toml::to_string(&file).unwrap(), "t").unwrap();
         assert_eq!(back.mode, vec![entry]);

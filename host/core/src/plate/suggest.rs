@@ -365,7 +365,7 @@ fn try_candidate(
         Err(e) => return (no(Why::PlateModel, e.to_string()), false),
     };
     let mode = rock.into_iter().chain(forced_entries(forced, &s.all, set.grid)).collect();
-    let model = match PlateModel::from_file(&PlateFile { plate: table, mode }) {
+    let model = match PlateModel::from_file(&PlateFile { plate: table, mode, learned: None }) {
         Ok(m) => m,
         Err(e) => return (no(Why::PlateModel, e.to_string()), false),
     };
@@ -502,7 +502,7 @@ mod tests {
         let all = solver::solve_all(&plate, 10);
         let forced = drive::forced(&all, 4, drive, plate.damping_ratio);
         let mode = forced_entries(&forced, &all, 31);
-        PlateModel::from_file(&PlateFile { plate: file.plate, mode }).unwrap()
+        PlateModel::from_file(&PlateFile { plate: file.plate, mode, learned: None }).unwrap()
     }
 
     #[test]

@@ -161,6 +161,7 @@ impl SweepArgs {
             let mut file = plate.unwrap_or_else(|| PlateFile {
                 plate: PlateTable { name: "from sweep".into(), ..PlateTable::default() },
                 mode: Vec::new(),
+                learned: None,
             });
             file.mode.extend(resonances.iter().map(|r| measured_mode(r.freq_hz, r.q)));
             let text = modes_file::render(&file.plate, file.mode)
