@@ -11,6 +11,7 @@
 //! - [`output`]: output files written atomically, never over one of the command's inputs.
 //! - [`progress`]: what long work reports as it goes; the caller draws it.
 //! - [`rng`]: the one seeded pseudo-random generator.
+//! - [`steer`]: closed-loop steering: the plate as learned from bursts, the command of a cycle.
 #![forbid(unsafe_code)]
 
 pub mod analysis;
@@ -21,3 +22,4 @@ pub mod planner;
 pub mod plate;
 pub mod progress;
 pub mod rng;
+pub mod steer;

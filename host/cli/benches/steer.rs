@@ -1,0 +1,312 @@
+//! Steering in the in-process rig (`chladni_core::steer::sim`): a true plate that is the
+//! given plate with each mode's field shifted 4–8 mm (random direction) and its speed off by
+//! ×0.4–×2.5 (log-uniform), parts moved by the same motion model plus noise (0.2 mm, 0.5° per
+//! burst, a bounce of up to 8 mm in one burst of 50).
+//!
+//! Sections (stdout, one line per result):
+//! - `choose`: the cost of one cycle's choice, 3 parts × 12 modes × 6 bursts, look-ahead over
+//!   the best 3 and without (median and worst of 30 calls, one thread);
+//! - `learn`: bursts chosen by the learning policy (recovering home between when needed) until
+//!   each mode has 12, then the fit, with every 4th burst held out: per mode the held-out
+//!   RMS error before and after, the fitted and the true correction;
+//! - `one`: 20 seeded trials of one part from a random start to a goal at least 80 mm away,
+//!   within 2 mm and 3°, the loop starting from the given plate and correcting online;
+//! - `three`: 20 seeded trials of three identical parts to three goals at least 60 mm apart,
+//!   within 3 mm and 3°.
+//!
+//! Goals are poses the part can hold: a random drop run to rest under a random mode of the
+//! true plate (`Truth::random_goal`).
+//!
+//! The modes: the free plate's first 12 solver modes, written once by the binary
+//! (`chladni plate modes examples/plate-free.toml --count 12 --write-modes FILE`), at
+//! [`SPEED_MM_S`]. `cargo bench -p chladni --bench steer`; `STEER_SECTIONS=choose,one`
+//! picks sections, `STEER_TRIALS=5` sets the trials per section.
+
+use std::path::Path;
+use std::process::Command as Process;
+use std::time::Instant;
+
+use chladni_core::model::part::Part;
+use chladni_core::model::plate::PlateModel;
+use chladni_core::model::pose::Pose;
+use chladni_core::motion::body::Body;
+use chladni_core::rng::Rng;
+use chladni_core::steer::cost::{Piece, distance_mm};
+use chladni_core::steer::policy::{LearnStep, Rules, next_learning_step};
+use chladni_core::steer::sim::{Noise, TrialOptions, Truth, steer_trial};
+use chladni_core::steer::{Burst, Correction, Menu, Model, PartGoal, choose, learn};
+
+/// The given plate's settle speed (mm/s). With the true factors of ×0.4–×2.5, parts cross
+/// 100 mm in the 3–10 s of the rig (measured by the `speed` section).
+const SPEED_MM_S: f64 = 120.0;
+
+/// The parts: the first steers alone; the three are the learning set.
+const PARTS: [&str; 3] = [
+    "examples/parts/ordinary/hex-key.json",
+    "examples/parts/ordinary/tee-plate.json",
+    "examples/parts/ordinary/keyed-gear.json",
+];
+
+/// The free plate's first 12 solver modes, written by the `chladni` binary, at `SPEED_MM_S`.
+fn twelve_modes(root: &Path) -> PlateModel {
+    let out = std::env::temp_dir().join(format!("chladni-steer-{}.toml", std::process::id()));
+    let status = Process::new(env!("CARGO_BIN_EXE_chladni"))
+        .current_dir(root)
+        .args(["plate", "modes", "examples/plate-free.toml", "--count", "12", "--write-modes"])
+        .arg(&out)
+        .output()
+        .expect("the chladni binary runs");
+    assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+    let mut plate = PlateModel::load(&out).expect("the written modes load");
+    let _ = std::fs::remove_file(&out);
+    assert_eq!(plate.modes.len(), 12, "12 modes written");
+    for m in &mut plate.modes {
+        m.speed_mm_s = SPEED_MM_S;
+    }
+    plate
+}
+
+/// A true correction per mode: a shift of 4–8 mm in a random direction, a factor
+/// log-uniform in ×0.4–×2.5.
+fn true_corrections(rng: &mut Rng, n: usize) -> Vec<Correction> {
+    (0..n)
+        .map(|_| {
+            let (r, a) = (rng.range(4.0, 8.0), rng.range(0.0, std::f64::consts::TAU));
+            let speed_factor = rng.range(0.4f64.ln(), 2.5f64.ln()).exp();
+            Correction { shift_mm: [r * a.cos(), r * a.sin()], speed_factor }
+        })
+        .collect()
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() { f64::NAN } else { v[v.len() / 2] }
+}
+
+/// The speed of parts on the true plates: the median time (s) a part dropped at random takes
+/// to cover 100 mm at its mean speed over its first 0.25 s (a part that moves at all).
+fn speed(plate: &PlateModel, pieces: &[Piece]) {
+    let mut rng = Rng::seeded(11);
+    let mut crossing = Vec::new();
+    for seed in 0..10 {
+        let truth =
+            Model::with_corrections(plate.clone(), &true_corrections(&mut rng, 12)).unwrap();
+        let mut t = Truth::new(truth, Noise::default(), seed);
+        for piece in pieces {
+            let start = t.random_pose(&piece.body, 5.0);
+            for mode in 0..12 {
+                let end = t.model.predict(&piece.body, start, mode, 0.25).unwrap();
+                let d = distance_mm(start, end);
+                if d > 1.0 {
+                    crossing.push(25.0 / d);
+                }
+            }
+        }
+    }
+    let n = crossing.len();
+    let q = |f: f64, v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[((n as f64 * f) as usize).min(n - 1)]
+    };
+    println!(
+        "speed: 100 mm at the first 0.25 s's mean speed takes {:.1} s (median; quartiles {:.1}–{:.1} s) over {n} drops x modes",
+        q(0.5, &mut crossing),
+        q(0.25, &mut crossing),
+        q(0.75, &mut crossing)
+    );
+}
+
+fn choose_cost(plate: &PlateModel, pieces: &[Piece]) {
+    let model = Model::new(plate.clone());
+    let poses = [
+        Pose { x: 80.0, y: 60.0, theta: 0.4 },
+        Pose { x: 150.0, y: 140.0, theta: 1.3 },
+        Pose { x: 230.0, y: 80.0, theta: 2.2 },
+    ];
+    let goals = [
+        Pose { x: 200.0, y: 150.0, theta: 1.0 },
+        Pose { x: 90.0, y: 110.0, theta: 0.2 },
+        Pose { x: 160.0, y: 60.0, theta: 2.9 },
+    ];
+    let parts: Vec<PartGoal> =
+        pieces.iter().zip(poses).zip(goals).map(|((p, q), g)| PartGoal::new(p, q, g)).collect();
+    for lookahead in [3, 0] {
+        let menu = Menu { lookahead, ..Menu::default() };
+        let mut ms: Vec<f64> = (0..30)
+            .map(|_| {
+                let t = Instant::now();
+                std::hint::black_box(choose(&model, &parts, &menu).unwrap());
+                t.elapsed().as_secs_f64() * 1e3
+            })
+            .collect();
+        let worst = ms.iter().copied().fold(0.0, f64::max);
+        println!(
+            "choose: 3 parts x 12 modes x {} bursts, look-ahead {lookahead}: median {:.1} ms, worst {worst:.1} ms",
+            menu.bursts_s.len(),
+            median(&mut ms)
+        );
+    }
+}
+
+fn main() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let sections =
+        std::env::var("STEER_SECTIONS").unwrap_or_else(|_| "speed,choose,learn,one,three".into());
+    let trials: u64 = std::env::var("STEER_TRIALS").ok().and_then(|v| v.parse().ok()).unwrap_or(20);
+    let plate = twelve_modes(&root);
+    let pieces: Vec<Piece> = PARTS
+        .iter()
+        .map(|p| Piece::new(&Part::load(&root.join(p)).expect("the part loads")))
+        .collect();
+    let on = |s: &str| sections.split(',').any(|x| x == s);
+    if on("speed") {
+        speed(&plate, &pieces);
+    }
+    if on("choose") {
+        choose_cost(&plate, &pieces);
+    }
+    if on("learn") {
+        learn_section(&plate, &pieces);
+    }
+    if on("one") {
+        trials_section(&plate, &pieces[0], 1, trials);
+    }
+    if on("three") {
+        trials_section(&plate, &pieces[0], 3, trials);
+    }
+}
+
+/// Bursts recorded by the learning policy until each mode has `per_mode`.
+fn record(
+    truth: &mut Truth,
+    model: &Model,
+    pieces: &[Piece],
+    per_mode: usize,
+) -> (Vec<Burst>, f64, usize) {
+    let menu = Menu { bursts_s: vec![0.2, 0.4, 0.7, 1.0, 1.5], lookahead: 0 };
+    let rules = Rules::default();
+    let mut poses: Vec<Pose> = pieces.iter().map(|p| truth.random_pose(&p.body, 10.0)).collect();
+    let mut counts = vec![0usize; model.mode_count()];
+    let (mut bursts, mut drive_s, mut recovers) = (Vec::new(), 0.0, 0);
+    while counts.iter().any(|c| *c < per_mode) && drive_s < 3600.0 {
+        let parts: Vec<(&Piece, Pose)> = pieces.iter().zip(&poses).map(|(p, q)| (p, *q)).collect();
+        let bodies: Vec<(&Body, Pose)> = parts.iter().map(|(p, q)| (&p.body, *q)).collect();
+        let (mode, burst_s, recorded) =
+            match next_learning_step(model, &parts, &counts, &menu, &rules).unwrap() {
+                LearnStep::Burst { mode, burst_s } => (mode, burst_s, true),
+                LearnStep::Recover(cmd) => (cmd.mode, cmd.burst_s, false),
+            };
+        let after = truth.burst(&bodies, mode, burst_s).unwrap();
+        if recorded {
+            counts[mode] += 1;
+            let seen =
+                poses.iter().zip(&after).enumerate().map(|(i, (b, a))| (i, *b, *a)).collect();
+            bursts.push(Burst { mode, burst_s, parts: seen });
+        } else {
+            recovers += 1;
+        }
+        drive_s += burst_s;
+        poses = after;
+    }
+    (bursts, drive_s, recovers)
+}
+
+fn learn_section(plate: &PlateModel, pieces: &[Piece]) {
+    let mut rng = Rng::seeded(44);
+    let truth_c = true_corrections(&mut rng, plate.modes.len());
+    let mut truth =
+        Truth::new(Model::with_corrections(plate.clone(), &truth_c).unwrap(), Noise::default(), 7);
+    let given = Model::new(plate.clone());
+    let (bursts, drive_s, recovers) = record(&mut truth, &given, pieces, 12);
+    let t = Instant::now();
+    let learned = learn(plate, pieces, &bursts, Default::default()).unwrap();
+    println!(
+        "learn: {} bursts ({recovers} recovery bursts between), {drive_s:.0} s of drive, fit {:.1} s",
+        bursts.len(),
+        t.elapsed().as_secs_f64()
+    );
+    println!(
+        "mode | used | held | before mm / deg | after mm / deg | after/before | shift (true) mm | factor (true)"
+    );
+    for (r, tc) in learned.reports.iter().zip(&truth_c) {
+        let f = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.2}"));
+        let ratio = r.after_mm.zip(r.before_mm).map(|(a, b)| a / b.max(1e-9));
+        let c = r.correction;
+        println!(
+            "{} | {} | {} | {} / {} | {} / {} | {} | ({:.1}, {:.1}) ({:.1}, {:.1}) | {:.2} ({:.2})",
+            r.mode + 1,
+            r.bursts_used,
+            r.held_out,
+            f(r.before_mm),
+            f(r.before_deg),
+            f(r.after_mm),
+            f(r.after_deg),
+            f(ratio),
+            c.shift_mm[0],
+            c.shift_mm[1],
+            tc.shift_mm[0],
+            tc.shift_mm[1],
+            c.speed_factor,
+            tc.speed_factor
+        );
+    }
+}
+
+/// `trials` seeded closed-loop trials of `n` identical parts.
+fn trials_section(plate: &PlateModel, piece: &Piece, n: usize, trials: u64) {
+    let (tol_mm, tol_deg) = if n == 1 { (2.0, 3.0) } else { (3.0, 3.0) };
+    let opt =
+        TrialOptions { tol_mm, tol_deg, time_limit_s: 300.0, menu: Menu::default(), correct: true };
+    let (mut ok, mut times, mut cycle_ms) = (0, Vec::new(), Vec::new());
+    for seed in 0..trials {
+        let mut rng = Rng::seeded(1000 + seed);
+        let truth_c = true_corrections(&mut rng, plate.modes.len());
+        let mut truth = Truth::new(
+            Model::with_corrections(plate.clone(), &truth_c).unwrap(),
+            Noise::default(),
+            seed,
+        );
+        let Some((starts, goals)) = setup(&mut truth, piece, n) else {
+            println!("trial {seed}: no goals found");
+            continue;
+        };
+        let mut model = Model::new(plate.clone());
+        let t = Instant::now();
+        let r = steer_trial(&mut truth, &mut model, piece, &starts, &goals, &opt).unwrap();
+        let wall = t.elapsed().as_secs_f64();
+        cycle_ms.push(wall * 1e3 / r.cycles.max(1) as f64);
+        ok += usize::from(r.reached);
+        times.push(if r.reached { r.drive_s } else { f64::INFINITY });
+        println!(
+            "trial {seed}: {} in {} cycles, {:.1} s of drive; errors mm {:?} deg {:?}",
+            if r.reached { "reached" } else { "NOT reached" },
+            r.cycles,
+            r.drive_s,
+            r.error_mm.iter().map(|v| (v * 10.0).round() / 10.0).collect::<Vec<_>>(),
+            r.error_deg.iter().map(|v| (v * 10.0).round() / 10.0).collect::<Vec<_>>()
+        );
+    }
+    println!(
+        "{n} part(s), {tol_mm} mm / {tol_deg} deg: {ok} of {} reached; median drive time {:.1} s; wall {:.0} ms per cycle (median)",
+        times.len(),
+        median(&mut times),
+        median(&mut cycle_ms)
+    );
+}
+
+/// Random starts and reachable goals: each goal at least 80 mm from its start (one part) or
+/// the goals at least 60 mm apart (several).
+fn setup(truth: &mut Truth, piece: &Piece, n: usize) -> Option<(Vec<Pose>, Vec<Pose>)> {
+    for _ in 0..100 {
+        let goals: Vec<Pose> =
+            (0..n).map(|_| truth.random_goal(&piece.body, 5.0)).collect::<Option<_>>()?;
+        let starts: Vec<Pose> = (0..n).map(|_| truth.random_pose(&piece.body, 5.0)).collect();
+        let apart =
+            |v: &[Pose], d: f64| (0..n).all(|i| (i + 1..n).all(|j| distance_mm(v[i], v[j]) >= d));
+        let far = n > 1 || distance_mm(starts[0], goals[0]) >= 80.0;
+        if far && apart(&goals, 60.0) && apart(&starts, 2.0 * piece.body.radius) {
+            return Some((starts, goals));
+        }
+    }
+    None
+}

@@ -1,0 +1,117 @@
+//! The command of one control cycle: the mode and burst length whose predicted outcome most
+//! reduces the parts' total cost ([`crate::steer::cost`]), with a look-ahead of one more
+//! command over the best few first commands.
+
+use crate::model::pose::Pose;
+use crate::steer::SteerError;
+use crate::steer::cost::{PartGoal, total_cost};
+use crate::steer::model::{Model, check_bursts};
+
+/// The commands one cycle chooses from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Menu {
+    /// Burst lengths (s), each > 0.
+    pub bursts_s: Vec<f64>,
+    /// Look-ahead: how many of the best first commands (by their own predicted cost) are
+    /// tried with every second command; 0: none.
+    pub lookahead: usize,
+}
+
+impl Default for Menu {
+    /// Six bursts from 0.1 to 2 s (a short one to nudge a part near its goal, a long one to
+    /// cross the plate), a look-ahead over the best 3 first commands.
+    fn default() -> Self {
+        Menu { bursts_s: vec![0.1, 0.2, 0.4, 0.7, 1.2, 2.0], lookahead: 3 }
+    }
+}
+
+/// The second command of a look-ahead, and the cost predicted after both.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Then {
+    /// Mode index.
+    pub mode: usize,
+    /// Burst length (s).
+    pub burst_s: f64,
+    /// Total cost (mm) predicted after the first command and this one.
+    pub cost: f64,
+}
+
+/// One cycle's command.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Command {
+    /// Mode index into the model's plate.
+    pub mode: usize,
+    /// Burst length (s).
+    pub burst_s: f64,
+    /// Each part's pose predicted after the burst, in the parts' order.
+    pub predicted: Vec<Pose>,
+    /// Total cost (mm) predicted after the burst.
+    pub cost: f64,
+    /// The look-ahead's second command, when the pair was predicted to end lower than any
+    /// single command (the reason this first command was chosen).
+    pub then: Option<Then>,
+}
+
+/// A first command and its prediction.
+struct Candidate {
+    mode: usize,
+    burst: usize,
+    poses: Vec<Pose>,
+    cost: f64,
+}
+
+/// Every (mode, burst) command's predicted poses and cost from `poses`: one run per part and
+/// mode, read at every burst length.
+fn candidates(model: &Model, parts: &[PartGoal], poses: &[Pose], bursts: &[f64]) -> Vec<Candidate> {
+    let mut out = Vec::with_capacity(model.mode_count() * bursts.len());
+    let mut per_part: Vec<Vec<Pose>> = vec![Vec::new(); parts.len()];
+    for mode in 0..model.mode_count() {
+        for ((part, pose), pred) in parts.iter().zip(poses).zip(&mut per_part) {
+            model.predict_unchecked(&part.piece.body, *pose, mode, bursts, pred);
+        }
+        for burst in 0..bursts.len() {
+            let poses: Vec<Pose> = per_part.iter().map(|p| p[burst]).collect();
+            let cost = total_cost(parts, &poses);
+            out.push(Candidate { mode, burst, poses, cost });
+        }
+    }
+    out
+}
+
+/// The command that most reduces the total cost of `parts` (at their `pose`s) under
+/// `model`, choosing among every mode and burst of `menu`. With a look-ahead, each of the
+/// `menu.lookahead` best first commands is valued at the lower of its own cost and the best
+/// cost any second command reaches after it; the first command of lowest value wins (ties:
+/// the lower cost of its own). "Do nothing" is never an option: the best command is
+/// returned even when every command raises the cost (each cycle moves the parts).
+pub fn choose(model: &Model, parts: &[PartGoal], menu: &Menu) -> Result<Command, SteerError> {
+    if parts.is_empty() {
+        return Err(SteerError::NoParts);
+    }
+    check_bursts(&menu.bursts_s)?;
+    let bursts = &menu.bursts_s;
+    let start: Vec<Pose> = parts.iter().map(|p| p.pose).collect();
+    let mut first = candidates(model, parts, &start, bursts);
+    first.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+    let mut best: Option<(f64, usize, Option<Then>)> = None;
+    for (k, c) in first.iter().enumerate().take(menu.lookahead.max(1)) {
+        let then =
+            if menu.lookahead > 0 { best_second(model, parts, &c.poses, bursts) } else { None };
+        let value = then.filter(|t| t.cost < c.cost).map_or(c.cost, |t| t.cost);
+        let then = then.filter(|t| t.cost < c.cost);
+        if best.as_ref().is_none_or(|b| value < b.0) {
+            best = Some((value, k, then));
+        }
+    }
+    let (_, k, then) = best.ok_or(SteerError::NoParts)?;
+    let c = first.swap_remove(k);
+    Ok(Command { mode: c.mode, burst_s: bursts[c.burst], predicted: c.poses, cost: c.cost, then })
+}
+
+/// The second command of lowest cost from `poses`.
+fn best_second(model: &Model, parts: &[PartGoal], poses: &[Pose], bursts: &[f64]) -> Option<Then> {
+    candidates(model, parts, poses, bursts)
+        .into_iter()
+        .min_by(|a, b| a.cost.total_cmp(&b.cost))
+        .map(|c| Then { mode: c.mode, burst_s: bursts[c.burst], cost: c.cost })
+}

@@ -1,0 +1,86 @@
+//! How far a part is from its goal: one number in millimetres, the distance of the centroids
+//! plus [`MM_PER_DEG`] per degree of orientation error, the error taken modulo the part's
+//! rotational symmetry period (a square at 90° is a square at 0°).
+
+use crate::model::angle::cdist;
+use crate::model::part::Part;
+use crate::model::pose::Pose;
+use crate::motion::body::{Body, PLANNER_BODY_SAMPLES};
+use crate::planner::symmetry_order;
+
+/// Millimetres one degree of orientation error counts as: 2/3, so that the tolerance box of a
+/// placement (2 mm and 3°) costs the same along either side, and a part 90° off (at most, for
+/// a part with no symmetry 180°) counts as 60 mm off. The fits of [`crate::steer::fit`] weigh
+/// an orientation residual by the same factor.
+pub const MM_PER_DEG: f64 = 2.0 / 3.0;
+
+/// A part prepared for steering: its body for the motion model and the period (deg) its
+/// orientations are taken modulo, 360° over its rotational symmetry order.
+#[derive(Debug, Clone)]
+pub struct Piece {
+    /// The part for the motion model ([`PLANNER_BODY_SAMPLES`] samples, as the planner's runs).
+    pub body: Body,
+    /// Its symmetry period (deg).
+    pub period_deg: f64,
+}
+
+impl Piece {
+    /// A validated part, prepared.
+    pub fn new(part: &Part) -> Piece {
+        Piece {
+            body: Body::with_samples(part, PLANNER_BODY_SAMPLES),
+            period_deg: 360.0 / f64::from(symmetry_order(part).max(1)),
+        }
+    }
+}
+
+/// The orientation error (deg, in [0, period/2]) of `pose` against `goal`.
+pub fn angle_error_deg(pose: Pose, goal: Pose, period_deg: f64) -> f64 {
+    cdist(pose.theta.to_degrees(), goal.theta.to_degrees(), period_deg)
+}
+
+/// The distance (mm) of `pose`'s centroid from `goal`'s.
+pub fn distance_mm(pose: Pose, goal: Pose) -> f64 {
+    (pose.x - goal.x).hypot(pose.y - goal.y)
+}
+
+/// One part to steer: its body, where it is, where it should go and how much it counts.
+#[derive(Debug, Clone, Copy)]
+pub struct PartGoal<'a> {
+    /// The part.
+    pub piece: &'a Piece,
+    /// Where it is now.
+    pub pose: Pose,
+    /// Where it should be.
+    pub goal: Pose,
+    /// Weight of its cost in the total (1 normally).
+    pub weight: f64,
+    /// Millimetres per degree of orientation error ([`MM_PER_DEG`] normally; 0 when only
+    /// the position matters, as when parts are brought home).
+    pub mm_per_deg: f64,
+}
+
+impl<'a> PartGoal<'a> {
+    /// A part at `pose` to be steered to `goal`, weight 1, orientation at [`MM_PER_DEG`].
+    pub fn new(piece: &'a Piece, pose: Pose, goal: Pose) -> PartGoal<'a> {
+        PartGoal { piece, pose, goal, weight: 1.0, mm_per_deg: MM_PER_DEG }
+    }
+
+    /// The weighted cost (mm) of this part at `pose`.
+    pub fn cost_at(&self, pose: Pose) -> f64 {
+        self.weight
+            * (distance_mm(pose, self.goal)
+                + self.mm_per_deg * angle_error_deg(pose, self.goal, self.piece.period_deg))
+    }
+
+    /// Is the part at `pose` within `tol_mm` and `tol_deg` of its goal?
+    pub fn within(&self, pose: Pose, tol_mm: f64, tol_deg: f64) -> bool {
+        distance_mm(pose, self.goal) <= tol_mm
+            && angle_error_deg(pose, self.goal, self.piece.period_deg) <= tol_deg
+    }
+}
+
+/// The total cost (mm) of the parts at `poses` (one per part, in order).
+pub fn total_cost(parts: &[PartGoal], poses: &[Pose]) -> f64 {
+    parts.iter().zip(poses).map(|(p, q)| p.cost_at(*q)).sum()
+}
