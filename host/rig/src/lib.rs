@@ -38,6 +38,18 @@ pub enum RigError {
     /// The true plate does not type.
     #[error("the true plate: {0}")]
     TruePlate(ModelError),
+    /// A true plate of another size than the given one.
+    #[error(
+        "the true plate is {} × {} mm, the given plate {} × {} mm: they are one plate, so give \
+         them one size",
+        .truth[0], .truth[1], .given[0], .given[1]
+    )]
+    SizeMismatch {
+        /// The given plate's size (mm).
+        given: [f64; 2],
+        /// The true plate's.
+        truth: [f64; 2],
+    },
     /// A range option that is no range.
     #[error("{flag} {min}..{max}: give {what}")]
     BadRange {
@@ -125,6 +137,24 @@ pub enum RigError {
     /// The async runtime or the terminal failed.
     #[error("{0}")]
     Runtime(std::io::Error),
+}
+
+impl RigError {
+    /// The user's input is wrong (exit code 2), not the run.
+    pub fn is_bad_input(&self) -> bool {
+        matches!(
+            self,
+            RigError::GivenPlate(_)
+                | RigError::TruePlate(_)
+                | RigError::SizeMismatch { .. }
+                | RigError::BadRange { .. }
+                | RigError::NoParts
+                | RigError::AtCount { .. }
+                | RigError::AtOffPlate { .. }
+                | RigError::AtOverlap { .. }
+                | RigError::Place(_)
+        )
+    }
 }
 
 /// The line `chladni rig --json` prints once it listens (keys in alphabetical order).

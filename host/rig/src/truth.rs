@@ -66,9 +66,14 @@ fn round4(v: f64) -> f64 {
 }
 
 impl TruePlate {
-    /// A true plate given as a plate file (its shifts as written; no speed factors).
-    pub fn from_file(file: PlateFile) -> Result<TruePlate, RigError> {
+    /// A true plate given as a plate file (its shifts as written; no speed factors), for the
+    /// plate `given`: both must type, and be one size.
+    pub fn from_file(file: PlateFile, given: &PlateFile) -> Result<TruePlate, RigError> {
+        let typed = PlateModel::from_file(given).map_err(RigError::GivenPlate)?;
         let model = PlateModel::from_file(&file).map_err(RigError::TruePlate)?;
+        if model.size_mm != typed.size_mm {
+            return Err(RigError::SizeMismatch { given: typed.size_mm, truth: model.size_mm });
+        }
         let modes = truths(&file, &model, &[]);
         Ok(TruePlate { file, model, modes })
     }

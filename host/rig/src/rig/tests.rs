@@ -18,7 +18,8 @@ const PLATE: &str = "[plate]\nname = \"t\"\nsize_mm = [300.0, 200.0]\n\
     node = { kind = \"line\", angle_deg = 0.0, offset_mm = 20.0 }\n";
 
 fn plate() -> TruePlate {
-    TruePlate::from_file(PlateFile::parse(PLATE, "t").unwrap()).unwrap()
+    let file = PlateFile::parse(PLATE, "t").unwrap();
+    TruePlate::from_file(file.clone(), &file).unwrap()
 }
 
 fn triangle() -> Part {
