@@ -108,31 +108,31 @@ pub enum RigError {
     #[error("encoding a frame: {0}")]
     Encode(String),
     /// The controller could not be reached.
-    #[error("cannot follow the controller at {port}: {source}")]
+    #[error("cannot follow the controller at {port}: {reason}")]
     Link {
         /// The link.
         port: String,
         /// Why.
-        source: DeviceError,
+        reason: DeviceError,
     },
     /// The controller's link was lost while serving.
     #[error(
-        "the controller link at {port} was lost: {source}; the rig's camera stopped (start the \
+        "the controller link at {port} was lost: {reason}; the rig's camera stopped (start the \
          controller again, then the rig)"
     )]
     LinkLost {
         /// The link.
         port: String,
         /// Why.
-        source: DeviceError,
+        reason: DeviceError,
     },
     /// The address to listen on cannot be bound.
-    #[error("cannot listen on {addr} (--listen): {source}; choose another address or port 0")]
+    #[error("cannot listen on {addr} (--listen): {reason}; choose another address or port 0")]
     Listen {
         /// The address.
         addr: SocketAddr,
         /// Why.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
     /// The async runtime or the terminal failed.
     #[error("{0}")]

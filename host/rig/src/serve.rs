@@ -126,7 +126,7 @@ pub fn serve(
     stop: mpsc::UnboundedReceiver<()>,
 ) -> Result<(), RigError> {
     let port = options.port.clone();
-    let link = |source| RigError::Link { port: port.clone(), source };
+    let link = |reason| RigError::Link { port: port.clone(), reason };
     let mut client = DeviceClient::open(&options.port, CLIENT_NAME).map_err(link)?;
     let started = Instant::now();
     let first = client.status().map_err(link)?;
@@ -159,7 +159,7 @@ pub fn serve(
     // Open connections (a hanging frame's among them) are dropped with the runtime.
     runtime.shutdown_timeout(Duration::from_secs(1));
     result.map_err(|e| match e {
-        Ended::Lost(source) => RigError::LinkLost { port: options.port.clone(), source },
+        Ended::Lost(reason) => RigError::LinkLost { port: options.port.clone(), reason },
         Ended::Other(e) => e,
     })
 }
@@ -180,7 +180,7 @@ async fn run(
 ) -> Result<(), Ended> {
     let listener = tokio::net::TcpListener::bind(listen)
         .await
-        .map_err(|source| Ended::Other(RigError::Listen { addr: listen, source }))?;
+        .map_err(|reason| Ended::Other(RigError::Listen { addr: listen, reason }))?;
     let addr = listener.local_addr().map_err(|e| Ended::Other(RigError::Runtime(e)))?;
     announce(addr).map_err(|e| Ended::Other(RigError::Runtime(e)))?;
     let router = Router::new()
