@@ -9,7 +9,7 @@
 //! - [`rig`]: the parts on the true plate, moved for each stretch of drive, with bouncing
 //!   noise; what `/truth` reports.
 //! - [`camera`]: frames rendered by `chladni_media::vision::synth`.
-//! - [`serve`]: the follower thread and the HTTP server.
+//! - [`mod@serve`]: the follower thread and the HTTP server ([`serve()`]).
 
 use std::net::SocketAddr;
 
