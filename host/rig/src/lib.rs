@@ -65,6 +65,16 @@ pub enum RigError {
     /// No part to put on the plate.
     #[error("no part on the plate: give at least one --part")]
     NoParts,
+    /// A part of a kind that is not among the kinds given.
+    #[error("part {part} is of kind {kind}, but only {kinds} kinds are given")]
+    NoSuchKind {
+        /// The part (1-based).
+        part: usize,
+        /// Its kind (0-based index).
+        kind: usize,
+        /// Kinds given.
+        kinds: usize,
+    },
     /// `--at` poses that are not one per part.
     #[error(
         "--at gives {given} poses for {parts} parts: give one per part (in the order of --part, \
@@ -149,6 +159,7 @@ impl RigError {
                 | RigError::SizeMismatch { .. }
                 | RigError::BadRange { .. }
                 | RigError::NoParts
+                | RigError::NoSuchKind { .. }
                 | RigError::AtCount { .. }
                 | RigError::AtOffPlate { .. }
                 | RigError::AtOverlap { .. }

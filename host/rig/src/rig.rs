@@ -113,8 +113,11 @@ impl Rig {
     /// The plate with its parts at their start poses.
     pub fn new(config: RigConfig) -> Result<Rig, RigError> {
         let RigConfig { plate, kinds, parts, at, seed, noise } = config;
-        if parts.is_empty() || parts.iter().any(|&k| k >= kinds.len()) {
+        if parts.is_empty() {
             return Err(RigError::NoParts);
+        }
+        if let Some((i, &kind)) = parts.iter().enumerate().find(|(_, k)| **k >= kinds.len()) {
+            return Err(RigError::NoSuchKind { part: i + 1, kind, kinds: kinds.len() });
         }
         let fields = plate.model.modes.iter().map(|m| FieldModel::new(m, &plate.model)).collect();
         let bodies: Vec<Body> = parts.iter().map(|&k| Body::new(&kinds[k])).collect();

@@ -206,6 +206,10 @@ fn random_drops_are_reproducible_and_apart_and_bad_start_poses_are_named() {
     assert!(e.to_string().contains("parts 1 and 2: the parts overlap"), "{e}");
     let e = Rig::new(two(vec![q(50.0, 50.0), q(295.0, 100.0)])).unwrap_err();
     assert!(e.to_string().contains("part 2 (295, 100, 0°): the part reaches over"), "{e}");
+    let e = Rig::new(RigConfig { parts: vec![], ..config(None, 1) }).unwrap_err();
+    assert!(matches!(e, RigError::NoParts), "{e}");
+    let e = Rig::new(RigConfig { parts: vec![0, 2], ..config(None, 1) }).unwrap_err();
+    assert!(e.to_string().contains("part 2 is of kind 2, but only 2 kinds"), "{e}");
 }
 
 #[test]
