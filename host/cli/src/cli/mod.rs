@@ -22,6 +22,7 @@ mod physics;
 mod plan;
 mod plate;
 mod progress;
+mod rig;
 mod serve;
 mod verify;
 
@@ -147,6 +148,9 @@ enum Command {
     /// Physics models (particle on a vibrating string).
     #[command(subcommand)]
     Physics(physics::PhysicsCommand),
+    /// A virtual rig: a snapshot camera over a simulated plate whose parts move under what the
+    /// controller drives, on a true plate that differs from the given one (docs/rig.md).
+    Rig(rig::RigArgs),
     /// Serve the controller to a cell: Modbus TCP for a PLC, HTTP for people (docs/cell.md).
     Serve(serve::ServeArgs),
     /// A photo of the plate after a run against the plan's prediction: per part ok or off,
@@ -168,6 +172,7 @@ impl Cli {
             Command::Physics(cmd) => cmd.run(),
             Command::Plan(args) => args.run(),
             Command::Simulate(args) => args.run(),
+            Command::Rig(args) => args.run(),
             Command::Serve(args) => args.run(),
             Command::Verify(args) => args.run(),
         }

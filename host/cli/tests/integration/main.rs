@@ -27,6 +27,7 @@ mod cli_model_inputs;
 mod cli_photo;
 mod cli_physics;
 mod cli_plan;
+mod cli_rig;
 mod cli_serve_http;
 mod cli_serve_limits;
 mod cli_serve_modbus;
