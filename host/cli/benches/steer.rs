@@ -40,11 +40,21 @@ use chladni_core::steer::{Burst, Correction, Menu, Model, PartGoal, choose, lear
 /// 100 mm in the 3–10 s of the rig (measured by the `speed` section).
 const SPEED_MM_S: f64 = 120.0;
 
-/// The parts: the first steers alone; the three are the learning set.
-const PARTS: [&str; 3] = [
-    "examples/parts/ordinary/hex-key.json",
+/// The parts: the hex key steers alone (85 mm long, across the plate), three u-channels
+/// (40 × 30 mm) together; the u-channel, the keyed gear and the spring clip are the learning
+/// set (three parts small enough to keep apart on the plate: [`Rules`]).
+/// The parts of the choice's cost: the burst bench's three.
+const CHOOSE_SET: [&str; 3] = [
     "examples/parts/ordinary/tee-plate.json",
+    "examples/parts/ordinary/hex-key.json",
     "examples/parts/ordinary/keyed-gear.json",
+];
+const HEX_KEY: &str = "examples/parts/ordinary/hex-key.json";
+const U_CHANNEL: &str = "examples/parts/ordinary/u-channel.json";
+const LEARNING_SET: [&str; 3] = [
+    U_CHANNEL,
+    "examples/parts/ordinary/keyed-gear.json",
+    "examples/parts/ordinary/spring-clip.json",
 ];
 
 /// The free plate's first 12 solver modes, written by the `chladni` binary, at `SPEED_MM_S`.
@@ -154,25 +164,24 @@ fn main() {
         std::env::var("STEER_SECTIONS").unwrap_or_else(|_| "speed,choose,learn,one,three".into());
     let trials: u64 = std::env::var("STEER_TRIALS").ok().and_then(|v| v.parse().ok()).unwrap_or(20);
     let plate = twelve_modes(&root);
-    let pieces: Vec<Piece> = PARTS
-        .iter()
-        .map(|p| Piece::new(&Part::load(&root.join(p)).expect("the part loads")))
-        .collect();
+    let load = |p: &str| Piece::new(&Part::load(&root.join(p)).expect("the part loads"));
+    let pieces: Vec<Piece> = LEARNING_SET.iter().map(|p| load(p)).collect();
     let on = |s: &str| sections.split(',').any(|x| x == s);
     if on("speed") {
         speed(&plate, &pieces);
     }
     if on("choose") {
-        choose_cost(&plate, &pieces);
+        let set: Vec<Piece> = CHOOSE_SET.iter().map(|p| load(p)).collect();
+        choose_cost(&plate, &set);
     }
     if on("learn") {
         learn_section(&plate, &pieces);
     }
     if on("one") {
-        trials_section(&plate, &pieces[0], 1, trials);
+        trials_section(&plate, &load(HEX_KEY), 1, trials);
     }
     if on("three") {
-        trials_section(&plate, &pieces[0], 3, trials);
+        trials_section(&plate, &load(U_CHANNEL), 3, trials);
     }
 }
 
@@ -254,9 +263,18 @@ fn learn_section(plate: &PlateModel, pieces: &[Piece]) {
 
 /// `trials` seeded closed-loop trials of `n` identical parts.
 fn trials_section(plate: &PlateModel, piece: &Piece, n: usize, trials: u64) {
-    let (tol_mm, tol_deg) = if n == 1 { (2.0, 3.0) } else { (3.0, 3.0) };
-    let opt =
-        TrialOptions { tol_mm, tol_deg, time_limit_s: 300.0, menu: Menu::default(), correct: true };
+    // One part: a pose within 2 mm and 3°; several: positions within 3 mm (the issue's
+    // targets).
+    let (tol_mm, tol_deg, orientation) = if n == 1 { (2.0, 3.0, true) } else { (3.0, 3.0, false) };
+    let opt = TrialOptions {
+        tol_mm,
+        tol_deg,
+        time_limit_s: 300.0,
+        max_cycles: 5000,
+        orientation,
+        menu: Menu::default(),
+        correct: true,
+    };
     let (mut ok, mut times, mut cycle_ms) = (0, Vec::new(), Vec::new());
     for seed in 0..trials {
         let mut rng = Rng::seeded(1000 + seed);
@@ -287,7 +305,8 @@ fn trials_section(plate: &PlateModel, piece: &Piece, n: usize, trials: u64) {
         );
     }
     println!(
-        "{n} part(s), {tol_mm} mm / {tol_deg} deg: {ok} of {} reached; median drive time {:.1} s; wall {:.0} ms per cycle (median)",
+        "{n} part(s), {tol_mm} mm{}: {ok} of {} reached; median drive time {:.1} s; wall {:.0} ms per cycle (median)",
+        if orientation { format!(" / {tol_deg} deg") } else { String::new() },
         times.len(),
         median(&mut times),
         median(&mut cycle_ms)
@@ -304,7 +323,7 @@ fn setup(truth: &mut Truth, piece: &Piece, n: usize) -> Option<(Vec<Pose>, Vec<P
         let apart =
             |v: &[Pose], d: f64| (0..n).all(|i| (i + 1..n).all(|j| distance_mm(v[i], v[j]) >= d));
         let far = n > 1 || distance_mm(starts[0], goals[0]) >= 80.0;
-        if far && apart(&goals, 60.0) && apart(&starts, 2.0 * piece.body.radius) {
+        if far && apart(&goals, 60.0) && apart(&starts, 2.0 * piece.body.radius + 5.0) {
             return Some((starts, goals));
         }
     }

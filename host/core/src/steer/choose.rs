@@ -18,10 +18,11 @@ pub struct Menu {
 }
 
 impl Default for Menu {
-    /// Six bursts from 0.1 to 2 s (a short one to nudge a part near its goal, a long one to
-    /// cross the plate), a look-ahead over the best 3 first commands.
+    /// Eight bursts from 0.03 to 2 s (short ones to nudge parts near their goals, a long one
+    /// to cross the plate: a part moves at most speed × burst), a look-ahead over the best 3
+    /// first commands.
     fn default() -> Self {
-        Menu { bursts_s: vec![0.1, 0.2, 0.4, 0.7, 1.2, 2.0], lookahead: 3 }
+        Menu { bursts_s: vec![0.03, 0.06, 0.1, 0.2, 0.4, 0.7, 1.2, 2.0], lookahead: 3 }
     }
 }
 

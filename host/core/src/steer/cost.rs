@@ -6,6 +6,7 @@ use crate::model::angle::cdist;
 use crate::model::part::Part;
 use crate::model::pose::Pose;
 use crate::motion::body::{Body, PLANNER_BODY_SAMPLES};
+use crate::motion::shape::Pieces;
 use crate::planner::symmetry_order;
 
 /// Millimetres one degree of orientation error counts as: 2/3, so that the tolerance box of a
@@ -22,15 +23,16 @@ pub struct Piece {
     pub body: Body,
     /// Its symmetry period (deg).
     pub period_deg: f64,
+    /// Its convex pieces, to tell whether two parts touch.
+    pub shapes: Pieces,
 }
 
 impl Piece {
     /// A validated part, prepared.
     pub fn new(part: &Part) -> Piece {
-        Piece {
-            body: Body::with_samples(part, PLANNER_BODY_SAMPLES),
-            period_deg: 360.0 / f64::from(symmetry_order(part).max(1)),
-        }
+        let body = Body::with_samples(part, PLANNER_BODY_SAMPLES);
+        let shapes = Pieces::of(&body);
+        Piece { body, period_deg: 360.0 / f64::from(symmetry_order(part).max(1)), shapes }
     }
 }
 

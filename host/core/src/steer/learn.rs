@@ -5,14 +5,18 @@
 //! The fit ([`crate::steer::fit`]) minimises the squared prediction error (mm, and degrees ×
 //! [`crate::steer::cost::MM_PER_DEG`]) of the used bursts with a weak prior (spreads 30 mm and
 //! ×10: it only conditions a mode whose bursts barely moved its parts), from the best of
-//! several starts: the speed factor alone first (a scan of ×0.4–×2.5 at shift 0), then that
-//! factor with shift 0 and ±5 mm along each axis; the start of least cost is refined.
+//! the speed factor alone first (a scan of ×0.4–×2.5 at shift 0), refined with the shift;
+//! when that fit is poor (RMS above 1.5 mm), also from that factor with ±5 mm along each axis,
+//! the better of the two fits kept. Held-out bursts are scored under the given and the learned
+//! plate, leaving out of both the one held-out part the learned plate finds an outlier (a
+//! bounce no model predicts).
 
 use crate::model::plate::PlateModel;
+use crate::model::plate_file::LearnedMode;
 use crate::steer::SteerError;
 use crate::steer::correct::check_burst;
 use crate::steer::cost::Piece;
-use crate::steer::fit::{Burst, Prior, Problem};
+use crate::steer::fit::{Burst, Prior, Problem, correction_of, outlier, params_of};
 use crate::steer::model::{Correction, Model};
 
 /// How to learn.
@@ -44,6 +48,8 @@ pub struct ModeReport {
     pub held_out: usize,
     /// Parts dropped from the fit as outliers.
     pub outliers: usize,
+    /// Held-out parts left out of the scores as outliers (at most one per mode).
+    pub held_out_outliers: usize,
     /// RMS position error (mm) on held-out bursts under the given plate (`None`: none held out).
     pub before_mm: Option<f64>,
     /// RMS orientation error (deg) on held-out bursts under the given plate.
@@ -63,6 +69,35 @@ pub struct Learned {
     pub model: Model,
     /// One report per mode, in mode order.
     pub reports: Vec<ModeReport>,
+}
+
+impl Learned {
+    /// The `[learned]` table's rows ([`LearnedMode`]) of the modes the fit used bursts of:
+    /// the shift is the mode's whole `shift_mm` (the given file's, if it had one, plus the
+    /// learned one), as a plate file's entry takes it; errors are 0 where none was held out
+    /// (`held_out` = 0 says so).
+    pub fn rows(&self) -> Vec<LearnedMode> {
+        let given = self.model.given();
+        self.reports
+            .iter()
+            .filter(|r| r.bursts_used > 0)
+            .filter_map(|r| {
+                let mode = given.modes.get(r.mode)?;
+                let s = r.correction.shift_mm;
+                Some(LearnedMode {
+                    freq_hz: mode.freq_hz,
+                    bursts: u32::try_from(r.bursts_used).unwrap_or(u32::MAX),
+                    held_out: u32::try_from(r.held_out).unwrap_or(u32::MAX),
+                    speed_factor: r.correction.speed_factor,
+                    shift_mm: [mode.shift_mm[0] + s[0], mode.shift_mm[1] + s[1]],
+                    before_mm: r.before_mm.unwrap_or(0.0),
+                    after_mm: r.after_mm.unwrap_or(0.0),
+                    before_deg: r.before_deg.unwrap_or(0.0),
+                    after_deg: r.after_deg.unwrap_or(0.0),
+                })
+            })
+            .collect()
+    }
 }
 
 /// The learning fit's weak prior.
@@ -106,14 +141,16 @@ pub fn learn<'a>(
         };
         model.set_correction(mode, correction)?;
         let scored = problem(&held, None);
-        let before = rms(&scored, Correction::default());
-        let after = rms(&scored, correction);
+        let scored_keep = scored_items(&scored, correction);
+        let before = rms(&scored, Correction::default(), &scored_keep);
+        let after = rms(&scored, correction, &scored_keep);
         reports.push(ModeReport {
             mode,
             name: plate.modes[mode].name.clone(),
             bursts_used: used.len(),
             held_out: held.len(),
             outliers: keep.iter().filter(|k| !**k).count(),
+            held_out_outliers: scored_keep.iter().filter(|k| !**k).count(),
             before_mm: before.map(|r| r.0),
             before_deg: before.map(|r| r.1),
             after_mm: after.map(|r| r.0),
@@ -132,33 +169,61 @@ fn fit_from_starts(problem: &Problem, iterations: usize) -> (Correction, Vec<boo
         .map(|k| (k, problem.cost(at(0.0, 0.0, k))))
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .map_or(1.0, |(k, _)| k);
-    let starts = [(0.0, 0.0), (5.0, 0.0), (-5.0, 0.0), (0.0, 5.0), (0.0, -5.0)];
-    let start = starts
+    let first = problem.fit(at(0.0, 0.0, factor), iterations);
+    let keep = &first.1;
+    let rms_of = |c: Correction| rms(problem, c, keep).map_or(0.0, |r| r.0);
+    if rms_of(first.0) <= GOOD_FIT_MM {
+        return first;
+    }
+    // A poor fit may be a local minimum: try the shifted starts, refine the best.
+    let all = vec![true; problem.items()];
+    let best = [(5.0, 0.0), (-5.0, 0.0), (0.0, 5.0), (0.0, -5.0)]
         .into_iter()
         .map(|(dx, dy)| {
-            let p = problem.lm(
-                crate::steer::fit::params_of(at(dx, dy, factor)),
-                &vec![true; problem.items()],
-                2,
-            );
-            let c = crate::steer::fit::correction_of(p);
+            let p = problem.lm(params_of(at(dx, dy, factor)), &all, 2);
+            let c = correction_of(p);
             (c, problem.cost(c))
         })
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map_or(at(0.0, 0.0, factor), |(c, _)| c);
-    problem.fit(start, iterations)
+        .min_by(|a, b| a.1.total_cmp(&b.1));
+    match best {
+        Some((c, cost)) if cost < problem.cost(first.0) => {
+            let other = problem.fit(c, iterations);
+            if rms_of(other.0) < rms_of(first.0) { other } else { first }
+        }
+        _ => first,
+    }
 }
 
-/// RMS position (mm) and orientation (deg) error of `problem`'s bursts under `c`; `None`
-/// when it has none.
-fn rms(problem: &Problem, c: Correction) -> Option<(f64, f64)> {
-    let n = problem.items();
-    if n == 0 {
+/// An RMS position residual (mm) of the fitted bursts below which a fit from the first start
+/// is taken as it is: a few times the noise of a located part after a burst.
+const GOOD_FIT_MM: f64 = 1.5;
+
+/// RMS position (mm) and orientation (deg) error of `problem`'s items in `keep` under `c`;
+/// `None` when there are none.
+fn rms(problem: &Problem, c: Correction, keep: &[bool]) -> Option<(f64, f64)> {
+    let r = problem.item_residuals(&problem.predictions(c));
+    let kept: Vec<&[f64; 3]> = r.iter().zip(keep).filter(|(_, k)| **k).map(|(v, _)| v).collect();
+    if kept.is_empty() {
         return None;
     }
-    let r = problem.item_residuals(&problem.predictions(c));
-    let mm = r.iter().map(|v| v[0] * v[0] + v[1] * v[1]).sum::<f64>() / n as f64;
-    let deg =
-        r.iter().map(|v| (v[2] / crate::steer::cost::MM_PER_DEG).powi(2)).sum::<f64>() / n as f64;
+    let n = kept.len() as f64;
+    let mm = kept.iter().map(|v| v[0] * v[0] + v[1] * v[1]).sum::<f64>() / n;
+    let deg = kept.iter().map(|v| (v[2] / crate::steer::cost::MM_PER_DEG).powi(2)).sum::<f64>() / n;
     Some((mm.sqrt(), deg.sqrt()))
+}
+
+/// Which held-out items to score: all but the one outlier under the learned correction
+/// ([`crate::steer::fit`]'s rule), left out of both the given plate's and the learned one's
+/// error (no model predicts a bounce).
+fn scored_items(problem: &Problem, c: Correction) -> Vec<bool> {
+    let norms: Vec<f64> = problem
+        .item_residuals(&problem.predictions(c))
+        .iter()
+        .map(|r| (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt())
+        .collect();
+    let mut keep = vec![true; norms.len()];
+    if let Some(k) = outlier(&norms) {
+        keep[k] = false;
+    }
+    keep
 }

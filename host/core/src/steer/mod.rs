@@ -121,3 +121,6 @@ pub enum SteerError {
         value: f64,
     },
 }
+
+#[cfg(test)]
+mod tests;

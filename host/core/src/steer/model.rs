@@ -1,11 +1,10 @@
 //! The plate as the loop believes it: the given plate with a [`Correction`] per mode (where
 //! its nodes really are, how fast it really moves parts), and the predictions of a burst.
 
-use crate::model::grid::Grid;
-use crate::model::plate::{Mode, Node, PlateModel};
+use crate::model::plate::{Mode, PlateModel};
 use crate::model::pose::Pose;
 use crate::motion::body::Body;
-use crate::motion::field::{FieldModel, grid_eval};
+use crate::motion::field::FieldModel;
 use crate::motion::integrate::{Run, SimParams, run};
 use crate::steer::SteerError;
 
@@ -230,52 +229,15 @@ pub fn pose_at(r: &Run, t: f64) -> Pose {
     }
 }
 
-/// `mode` with correction `c`: its speed scaled and its field translated.
+/// `mode` with correction `c` on top of it: its nodes moved by the correction's shift
+/// ([`crate::model::plate::Node::shifted`]; the mode's own `shift_mm`, if the plate file had one, grows by it) and
+/// its speed scaled.
 pub fn corrected_mode(mode: &Mode, c: Correction) -> Mode {
-    let mut m = shifted(mode, c.shift_mm);
-    m.speed_mm_s = mode.speed_mm_s * c.speed_factor;
-    m
-}
-
-/// `mode` with its field translated by `s` (mm): straight nodes move along their normal, a
-/// hyperbola's centre moves, a grid is resampled at p − s (clamped at the plate's edge, as the
-/// grid's interpolant is).
-fn shifted(mode: &Mode, s: [f64; 2]) -> Mode {
-    let along_normal = |angle_deg: f64| {
-        let (sn, cs) = angle_deg.to_radians().sin_cos();
-        -sn * s[0] + cs * s[1]
-    };
-    let node = match &mode.node {
-        Node::Line { angle_deg, offset_mm } => {
-            Node::Line { angle_deg: *angle_deg, offset_mm: offset_mm + along_normal(*angle_deg) }
-        }
-        Node::Lines(lines) => Node::Lines(
-            lines
-                .iter()
-                .map(|l| crate::model::plate::NodeLine {
-                    angle_deg: l.angle_deg,
-                    offset_mm: l.offset_mm + along_normal(l.angle_deg),
-                })
-                .collect(),
-        ),
-        Node::Hyperbola { center_mm, angle_deg, a_mm, b_mm } => Node::Hyperbola {
-            center_mm: [center_mm[0] + s[0], center_mm[1] + s[1]],
-            angle_deg: *angle_deg,
-            a_mm: *a_mm,
-            b_mm: *b_mm,
-        },
-        Node::Grid(g) => Node::Grid(shifted_grid(g, s)),
-    };
-    Mode { node, ..mode.clone() }
-}
-
-fn shifted_grid(g: &Grid, s: [f64; 2]) -> Grid {
-    let mut values = Vec::with_capacity(g.values.len());
-    for j in 0..g.ny {
-        for i in 0..g.nx {
-            let p = g.point(i, j);
-            values.push(grid_eval(g, [p[0] - s[0], p[1] - s[1]]).0);
-        }
+    let s = c.shift_mm;
+    Mode {
+        node: mode.node.clone().shifted(s),
+        shift_mm: [mode.shift_mm[0] + s[0], mode.shift_mm[1] + s[1]],
+        speed_mm_s: mode.speed_mm_s * c.speed_factor,
+        ..mode.clone()
     }
-    Grid { values, ..g.clone() }
 }

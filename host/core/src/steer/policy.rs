@@ -4,15 +4,18 @@
 //! The policy: modes are taken least-recorded first (so each is recorded about as often as
 //! the others, from the poses the previous bursts left: varied), each with the longest burst
 //! of the menu after which every part is predicted to stay [`Rules::rim_mm`] clear of the
-//! rim, to move no more than [`Rules::max_move_mm`], and not to gather with another; a burst
-//! that moves no part by [`Rules::min_move_mm`] shows little and is taken only if no mode
-//! offers better. When no mode has such a burst, or the parts already gathered or reached the
+//! rim, to move no more than [`Rules::max_move_mm`], and not to come within
+//! [`Rules::gap_mm`] of another; among modes recorded equally often, one that moves some part
+//! by [`Rules::min_move_mm`] comes first (a part that stays put shows where the node is, not
+//! the speed). When no mode has such a burst, or the parts already gathered or reached the
 //! rim ([`needs_recover`]), the step is [`LearnStep::Recover`]: the command that brings them
 //! towards spread home positions ([`recover`]).
 
+use crate::model::geometry::bounds;
 use crate::model::plate::PlateModel;
 use crate::model::pose::Pose;
 use crate::motion::body::Body;
+use crate::motion::shape::contacts;
 use crate::steer::SteerError;
 use crate::steer::assign::assign;
 use crate::steer::choose::{Command, Menu, choose};
@@ -23,9 +26,9 @@ use crate::steer::model::{Model, check_bursts};
 /// The limits the learning policy keeps.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Rules {
-    /// Clearance (mm) each part's bounding circle keeps from the plate's edge.
+    /// Clearance (mm) each part keeps from the plate's edge.
     pub rim_mm: f64,
-    /// Parts whose bounding circles come closer than this (mm) have gathered.
+    /// Parts that come within this (mm) of touching have gathered.
     pub gap_mm: f64,
     /// Largest predicted move (mm) of any part in one burst.
     pub max_move_mm: f64,
@@ -34,9 +37,9 @@ pub struct Rules {
 }
 
 impl Default for Rules {
-    /// 5 mm from the rim, 5 mm between parts, moves of 2–40 mm.
+    /// 3 mm from the rim and between parts, moves of 2–40 mm.
     fn default() -> Self {
-        Rules { rim_mm: 5.0, gap_mm: 5.0, max_move_mm: 40.0, min_move_mm: 2.0 }
+        Rules { rim_mm: 3.0, gap_mm: 3.0, max_move_mm: 40.0, min_move_mm: 2.0 }
     }
 }
 
@@ -57,18 +60,22 @@ pub enum LearnStep {
 /// Are the parts (bodies at poses) too near the rim or each other to record a burst?
 pub fn needs_recover(plate: &PlateModel, parts: &[(&Piece, Pose)], rules: &Rules) -> bool {
     let [w, h] = plate.size_mm;
-    let near_rim = parts.iter().any(|(b, q)| {
-        let r = b.body.radius + rules.rim_mm;
-        q.x < r || q.y < r || q.x > w - r || q.y > h - r
+    let near_rim = parts.iter().any(|(p, q)| {
+        let placed = p.body.placed(*q);
+        let (lo, hi) = bounds(placed.iter().flatten());
+        let m = rules.rim_mm;
+        lo[0] < m || lo[1] < m || hi[0] > w - m || hi[1] > h - m
     });
     near_rim || gathered(parts, &parts.iter().map(|p| p.1).collect::<Vec<_>>(), rules.gap_mm)
 }
 
-/// Do any two parts at `poses` come closer than `gap` (mm) between bounding circles?
+/// Do any two parts at `poses` come within `gap` (mm) of touching?
 fn gathered(parts: &[(&Piece, Pose)], poses: &[Pose], gap: f64) -> bool {
     (0..parts.len()).any(|i| {
         (i + 1..parts.len()).any(|j| {
-            distance_mm(poses[i], poses[j]) < parts[i].0.body.radius + parts[j].0.body.radius + gap
+            let (a, b) = (parts[i].0, parts[j].0);
+            distance_mm(poses[i], poses[j]) < a.body.radius + b.body.radius + gap
+                && !contacts(&a.shapes, poses[i], &b.shapes, poses[j], gap).is_empty()
         })
     })
 }
@@ -89,34 +96,59 @@ pub fn next_learning_step(
     if needs_recover(model.given(), parts, rules) {
         return Ok(LearnStep::Recover(recover(model, parts, menu)?));
     }
+    let count = |m: usize| counts.get(m).copied().unwrap_or(0);
     let mut order: Vec<usize> = (0..model.mode_count()).collect();
-    order.sort_by_key(|m| counts.get(*m).copied().unwrap_or(0));
+    order.sort_by_key(|m| count(*m));
     let bodies: Vec<(&Body, Pose)> = parts.iter().map(|(p, q)| (&p.body, *q)).collect();
-    let mut fallback = None;
+    let mut fallback: Option<(usize, LearnStep)> = None;
     for mode in order {
+        // A still part is no reason to record a more-recorded mode: it shows the node.
+        if let Some((c, step)) = &fallback
+            && count(mode) > *c
+        {
+            return Ok(step.clone());
+        }
         let preds = model.predict_all(&bodies, mode, &menu.bursts_s)?;
-        // Longest first: the longest safe burst shows the most.
-        for (k, &burst_s) in menu.bursts_s.iter().enumerate().rev() {
-            let after: Vec<Pose> = preds.iter().map(|p| p[k]).collect();
-            let moves: Vec<f64> =
-                parts.iter().zip(&after).map(|(p, q)| distance_mm(p.1, *q)).collect();
-            let moved: Vec<(&Piece, Pose)> =
-                parts.iter().zip(&after).map(|(p, q)| (p.0, *q)).collect();
-            let safe = moves.iter().all(|d| *d <= rules.max_move_mm)
-                && !needs_recover(model.given(), &moved, rules);
-            if !safe {
-                continue;
+        match safe_burst(model, parts, &preds, menu, rules) {
+            Some((burst_s, true)) => return Ok(LearnStep::Burst { mode, burst_s }),
+            Some((burst_s, false)) if fallback.is_none() => {
+                fallback = Some((count(mode), LearnStep::Burst { mode, burst_s }));
             }
-            if moves.iter().any(|d| *d >= rules.min_move_mm) {
-                return Ok(LearnStep::Burst { mode, burst_s });
-            }
-            fallback = fallback.or(Some(LearnStep::Burst { mode, burst_s }));
+            _ => {}
         }
     }
     match fallback {
-        Some(step) => Ok(step),
+        Some((_, step)) => Ok(step),
         None => Ok(LearnStep::Recover(recover(model, parts, menu)?)),
     }
+}
+
+/// The longest burst of `menu` whose predictions `preds` (`[part][burst]`) keep the rules,
+/// and whether it is informative (moves some part by [`Rules::min_move_mm`]).
+fn safe_burst(
+    model: &Model,
+    parts: &[(&Piece, Pose)],
+    preds: &[Vec<Pose>],
+    menu: &Menu,
+    rules: &Rules,
+) -> Option<(f64, bool)> {
+    let mut still = None;
+    // Longest first: the longest safe burst shows the most.
+    for (k, &burst_s) in menu.bursts_s.iter().enumerate().rev() {
+        let after: Vec<Pose> = preds.iter().map(|p| p[k]).collect();
+        let moves: Vec<f64> = parts.iter().zip(&after).map(|(p, q)| distance_mm(p.1, *q)).collect();
+        let moved: Vec<(&Piece, Pose)> = parts.iter().zip(&after).map(|(p, q)| (p.0, *q)).collect();
+        let safe = moves.iter().all(|d| *d <= rules.max_move_mm)
+            && !needs_recover(model.given(), &moved, rules);
+        if !safe {
+            continue;
+        }
+        if moves.iter().any(|d| *d >= rules.min_move_mm) {
+            return Some((burst_s, true));
+        }
+        still = still.or(Some((burst_s, false)));
+    }
+    still
 }
 
 /// `n` home positions spread over the plate's middle two thirds: the cell centres of a grid

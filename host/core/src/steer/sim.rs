@@ -12,7 +12,7 @@ use crate::steer::SteerError;
 use crate::steer::assign::assign_goals;
 use crate::steer::choose::{Menu, choose};
 use crate::steer::correct::Corrector;
-use crate::steer::cost::{PartGoal, Piece, angle_error_deg, distance_mm};
+use crate::steer::cost::{MM_PER_DEG, PartGoal, Piece, angle_error_deg, distance_mm};
 use crate::steer::fit::Burst;
 use crate::steer::model::Model;
 
@@ -125,6 +125,10 @@ pub struct TrialOptions {
     pub tol_deg: f64,
     /// Drive-time limit (s): the sum of the bursts driven.
     pub time_limit_s: f64,
+    /// Cycle limit.
+    pub max_cycles: usize,
+    /// Orientations count (cost and tolerance); `false`: positions only.
+    pub orientation: bool,
     /// The commands.
     pub menu: Menu,
     /// Correct the model online from each burst.
@@ -150,8 +154,8 @@ pub struct TrialResult {
     pub error_deg: Vec<f64>,
 }
 
-/// The closed loop against `truth`: identical parts (`piece` at each of `starts`) assigned
-/// to `goals`, then cycles of choose → drive
+/// The closed loop against `truth`: identical parts (`piece` at each of `starts`), each
+/// cycle assigned to `goals` ([`assign_goals`]), then choose → drive
 /// → observe (→ correct `model`) until every part is within tolerance or the drive time is
 /// spent.
 pub fn steer_trial(
@@ -162,14 +166,20 @@ pub fn steer_trial(
     goals: &[Pose],
     opt: &TrialOptions,
 ) -> Result<TrialResult, SteerError> {
-    let parts: Vec<PartGoal> = starts.iter().map(|s| PartGoal::new(piece, *s, *s)).collect();
-    let mut parts = assign_goals(&parts, goals)?;
+    let mm_per_deg = if opt.orientation { MM_PER_DEG } else { 0.0 };
+    let tol_deg = if opt.orientation { opt.tol_deg } else { 360.0 };
+    let mut parts: Vec<PartGoal> =
+        starts.iter().map(|s| PartGoal { mm_per_deg, ..PartGoal::new(piece, *s, *s) }).collect();
     let pieces = std::slice::from_ref(piece);
     let mut corrector = Corrector::new(model.mode_count());
     let (mut cycles, mut drive_s) = (0, 0.0);
-    let within =
-        |parts: &[PartGoal]| parts.iter().all(|p| p.within(p.pose, opt.tol_mm, opt.tol_deg));
-    while !within(&parts) && drive_s < opt.time_limit_s {
+    let within = |parts: &[PartGoal]| parts.iter().all(|p| p.within(p.pose, opt.tol_mm, tol_deg));
+    loop {
+        // Identical parts: each cycle, the goals go to the parts that are nearest them now.
+        parts = assign_goals(&parts, goals)?;
+        if within(&parts) || drive_s >= opt.time_limit_s || cycles >= opt.max_cycles {
+            break;
+        }
         let cmd = choose(model, &parts, &opt.menu)?;
         let before: Vec<(&Body, Pose)> = parts.iter().map(|p| (&p.piece.body, p.pose)).collect();
         let after = truth.burst(&before, cmd.mode, cmd.burst_s)?;
