@@ -2,9 +2,12 @@
 //! "Parts in a photo"): first the accuracy over many seeded photos (both faces, both
 //! polarities, touching pairs), printed as a table of the error distribution, at the full
 //! 1280 × 900 px (≈ 0.26 mm per pixel) and at half that (640 × 450, ≈ 0.52 mm); then
-//! criterion's time per photo (corners found automatically, seven parts, one touching pair).
+//! criterion's time per photo (corners found automatically, seven parts, one touching pair);
+//! then the camera loop's case: three parts (one of each kind) located in full with the corners
+//! given, against `track` from their poses in the photo before.
 
-use chladni_media::vision::synth::{Photo, pose_error, random_poses, render, sample_parts};
+use chladni_media::vision::synth::{Photo, Placed, pose_error, random_poses, render, sample_parts};
+use chladni_media::vision::track::{Near, track};
 use chladni_media::vision::{Template, locate};
 use criterion::{Criterion, criterion_group, criterion_main};
 
@@ -87,9 +90,64 @@ fn bench(c: &mut Criterion) {
     g.finish();
 }
 
+/// `last` moved by `d_mm` (each part in its own direction) and turned by ±`d_deg`; `over`:
+/// every part turned over too.
+fn moved(last: &[Placed], d_mm: f64, d_deg: f64, over: bool) -> Vec<Placed> {
+    let turn = |k: usize| if k.is_multiple_of(2) { d_deg } else { -d_deg };
+    let dir = |k: usize| 2.0 * k as f64 + 0.5;
+    last.iter()
+        .enumerate()
+        .map(|(k, p)| Placed {
+            c: [p.c[0] + d_mm * dir(k).cos(), p.c[1] + d_mm * dir(k).sin()],
+            theta_deg: p.theta_deg + turn(k),
+            flipped: p.flipped != over,
+            ..p.clone()
+        })
+        .collect()
+}
+
+/// Full locate against `track` for three parts at 1280 × 900: moved as in one loop cycle
+/// (2 mm, 3°), as far as the quick refinement reaches (10 mm, 20°), and turned over (every
+/// part searched as the full locate searches a blob: the worst case short of a lost part).
+fn loop_cycle(c: &mut Criterion) {
+    let parts = sample_parts();
+    let t: Vec<Template> = parts.iter().map(Template::new).collect();
+    let last = vec![
+        Placed { part: 0, c: [70.0, 60.0], theta_deg: 30.0, flipped: false },
+        Placed { part: 1, c: [160.0, 140.0], theta_deg: 100.0, flipped: true },
+        Placed { part: 2, c: [240.0, 70.0], theta_deg: 200.0, flipped: false },
+    ];
+    let photo = Photo::standard(parts.clone(), last.clone(), 5);
+    let (size, corners) = (photo.size_mm, photo.corners);
+    let (before, _) = locate(&render(&photo), &t, size, Some(corners)).unwrap();
+    let near: Vec<Near> = before.parts.iter().map(Near::from).collect();
+    let mut g = c.benchmark_group("locate");
+    g.sample_size(20);
+    let cases = [
+        ("2mm_3deg", 2.0, 3.0, false),
+        ("10mm_20deg", 10.0, 20.0, false),
+        ("2mm_3deg_turned_over", 2.0, 3.0, true),
+    ];
+    for (name, d_mm, d_deg, over) in cases {
+        let img = render(&Photo { placed: moved(&last, d_mm, d_deg, over), ..photo.clone() });
+        let r = track(&img, &t, size, corners, &before.levels, &near).unwrap();
+        assert!(r.all_found().is_some(), "{:?}", r.parts);
+        println!("track {name}: {} of 3 parts by the refinement alone", r.quick);
+        if name == "2mm_3deg" {
+            g.bench_function("3_parts_full_corners_given", |b| {
+                b.iter(|| locate(&img, &t, size, Some(corners)).unwrap())
+            });
+        }
+        g.bench_function(format!("3_parts_track_{name}"), |b| {
+            b.iter(|| track(&img, &t, size, corners, &before.levels, &near).unwrap())
+        });
+    }
+    g.finish();
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().without_plots();
-    targets = bench
+    targets = bench, loop_cycle
 }
 criterion_main!(benches);

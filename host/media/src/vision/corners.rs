@@ -249,6 +249,71 @@ pub(crate) fn find_corners(img: &GrayImage) -> Result<[[f64; 2]; 4], LocateError
     Ok(c)
 }
 
+/// The square-pixel grid of the rectified plate: the map from its pixels to the photo's, its
+/// size (px) and its pixel size (mm). The full view and a tracker's windows share it, so a
+/// window's pixels are the full view's pixels.
+pub(crate) struct Grid {
+    /// Rectified pixel position (continuous, top row = the plate's top edge) → photo position.
+    pub hom: Homography,
+    /// Width (px).
+    pub w: u32,
+    /// Height (px).
+    pub h: u32,
+    /// Pixel size (mm).
+    pub pix: f64,
+}
+
+impl Grid {
+    /// The plate (`size_mm`) whose corners sit at `corners` in `img`, with square pixels as
+    /// fine as the photo's finest view of the plate.
+    pub fn new(
+        img: &GrayImage,
+        corners: [[f64; 2]; 4],
+        size_mm: [f64; 2],
+    ) -> Result<Grid, RectifyError> {
+        check_corners(img.width(), img.height(), &corners)?;
+        let len = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
+        let [bl, br, tr, tl] = corners;
+        let along_x = len(bl, br).max(len(tl, tr));
+        let along_y = len(bl, tl).max(len(br, tr));
+        let pix = (size_mm[0] / along_x).min(size_mm[1] / along_y);
+        let (w, h) = (size_mm[0] / pix, size_mm[1] / pix);
+        let out = [[0.0, h], [w, h], [w, 0.0], [0.0, 0.0]];
+        let hom = Homography::from_points(out, corners).ok_or(RectifyError::NotConvex(corners))?;
+        let (wi, hi) = (w.round().max(2.0) as u32, h.round().max(2.0) as u32);
+        // Pixel size from the rounded image, so that the image spans the plate exactly.
+        let pix = 0.5 * (size_mm[0] / f64::from(wi) + size_mm[1] / f64::from(hi));
+        let out = [
+            [0.0, f64::from(hi)],
+            [f64::from(wi), f64::from(hi)],
+            [f64::from(wi), 0.0],
+            [0.0, 0.0],
+        ];
+        let hom = Homography::from_points(out, corners).unwrap_or(hom);
+        Ok(Grid { hom, w: wi, h: hi, pix })
+    }
+
+    /// The part of the rectified view whose top-left pixel is (`x0`, `y0`), `w` × `h` pixels
+    /// of `scale` × `scale` view pixels each, sampled from `img` at each one's centre: at
+    /// scale 1, the full view's own pixels.
+    pub fn window(
+        &self,
+        img: &GrayImage,
+        [x0, y0, w, h]: [u32; 4],
+        scale: u32,
+    ) -> Option<GrayImage> {
+        let s = f64::from(scale);
+        let (x0, y0) = (f64::from(x0), f64::from(y0));
+        let (fw, fh) = (f64::from(w), f64::from(h));
+        let (x1, y1) = (x0 + fw * s, y0 + fh * s);
+        let from = [[0.0, 0.0], [fw, 0.0], [fw, fh], [0.0, fh]];
+        let to = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]].map(|p| self.hom.map(p));
+        // The same projective map on a shifted, scaled domain: four points fix it.
+        let hom = Homography::from_points(from, to)?;
+        Some(warp(img, &hom, w, h, 0))
+    }
+}
+
 /// The square-on view of the plate (`size_mm`) whose corners sit at `corners` in the photo,
 /// with square pixels as fine as the photo's finest view of the plate: (image, mm per pixel).
 pub(crate) fn rectify_square(
@@ -256,20 +321,6 @@ pub(crate) fn rectify_square(
     corners: [[f64; 2]; 4],
     size_mm: [f64; 2],
 ) -> Result<(GrayImage, f64), RectifyError> {
-    check_corners(img.width(), img.height(), &corners)?;
-    let len = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
-    let [bl, br, tr, tl] = corners;
-    let along_x = len(bl, br).max(len(tl, tr));
-    let along_y = len(bl, tl).max(len(br, tr));
-    let pix = (size_mm[0] / along_x).min(size_mm[1] / along_y);
-    let (w, h) = (size_mm[0] / pix, size_mm[1] / pix);
-    let out = [[0.0, h], [w, h], [w, 0.0], [0.0, 0.0]];
-    let hom = Homography::from_points(out, corners).ok_or(RectifyError::NotConvex(corners))?;
-    let (wi, hi) = (w.round().max(2.0) as u32, h.round().max(2.0) as u32);
-    // Pixel size from the rounded image, so that the image spans the plate exactly.
-    let pix = 0.5 * (size_mm[0] / f64::from(wi) + size_mm[1] / f64::from(hi));
-    let out =
-        [[0.0, f64::from(hi)], [f64::from(wi), f64::from(hi)], [f64::from(wi), 0.0], [0.0, 0.0]];
-    let hom2 = Homography::from_points(out, corners).unwrap_or(hom);
-    Ok((warp(img, &hom2, wi, hi, 0), pix))
+    let g = Grid::new(img, corners, size_mm)?;
+    Ok((warp(img, &g.hom, g.w, g.h, 0), g.pix))
 }

@@ -17,6 +17,9 @@
 //! rotational symmetry order m. `flipped` = the part lies on its other face, whose θ = 0 is
 //! [`Part::mirrored`]; a part with a mirror axis looks the same on both faces and is always
 //! reported face up, at the equivalent turn.
+//!
+//! From photo to photo of a camera loop, [`track::track`] looks for each part only near its last
+//! pose, with the [`Levels`] this pipeline learned.
 
 use chladni_shared::icd::units::Given;
 use image::{GrayImage, Luma};
@@ -37,6 +40,7 @@ mod split;
 pub mod synth;
 #[cfg(test)]
 mod tests;
+pub mod track;
 pub mod verify;
 
 use fit::{Fitted, Sample, View};
@@ -260,6 +264,9 @@ pub struct Report {
     pub pixel_mm: f64,
     /// Whether the parts are darker than the plate.
     pub parts_dark: bool,
+    /// The view's grey levels, for [`track`](track::track) on the next photos.
+    #[serde(skip)]
+    pub levels: Levels,
 }
 
 /// A connected region of part-class pixels.
@@ -276,43 +283,109 @@ pub(crate) struct Blob {
 }
 
 /// Pixels at the plate's edge left out of the blobs (the surroundings bleed in there).
-const MARGIN_PX: u32 = 2;
+pub(crate) const MARGIN_PX: u32 = 2;
 
-/// Thresholded blobs of the rectified view, their label image, whether parts are dark, and
-/// the part/plate contrast.
-fn segment(img: &GrayImage) -> (Vec<u32>, Vec<Blob>, bool, f64) {
+/// The grey levels of a rectified, flattened view, as shares of its plate's level (the view's
+/// median grey: the plate is most of it). Light multiplies plate and parts alike, so the
+/// shares hold across the plate and from frame to frame while the levels themselves follow the
+/// light: [`track`](track::track) thresholds its windows with them, where Otsu on a window
+/// that is mostly part, or all plate, would split whatever is there.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Levels {
+    /// Whether the parts are darker than the plate.
+    pub parts_dark: bool,
+    /// The part/plate threshold (greys above it are the lighter class).
+    pub threshold: f64,
+    /// The mean grey difference between part and plate pixels.
+    pub contrast: f64,
+}
+
+/// A view's part-class blobs, their label image (row-major), the parts' polarity and the
+/// part/plate contrast (grey levels).
+pub(crate) struct Segmented {
+    pub labels: Vec<u32>,
+    pub blobs: Vec<Blob>,
+    pub parts_dark: bool,
+    pub contrast: f64,
+}
+
+/// Whether pixel (`x`, `y`) of a `w` × `h` view lies inside `margin` (px at the left, top,
+/// right and bottom).
+fn inner(x: u32, y: u32, (w, h): (u32, u32), m: [u32; 4]) -> bool {
+    x >= m[0] && y >= m[1] && x + m[2] < w && y + m[3] < h
+}
+
+/// The median grey of `img` inside `margin` (left, top, right, bottom px).
+pub(crate) fn median_grey(img: &GrayImage, margin: [u32; 4]) -> f64 {
+    let mut hist = [0usize; 256];
+    let dim = img.dimensions();
+    for (_, _, p) in img.enumerate_pixels().filter(|(x, y, _)| inner(*x, *y, dim, margin)) {
+        hist[usize::from(p[0])] += 1;
+    }
+    let half = hist.iter().sum::<usize>().div_ceil(2);
+    let mut seen = 0;
+    for (g, n) in hist.iter().enumerate() {
+        seen += n;
+        if seen >= half && seen > 0 {
+            return g as f64;
+        }
+    }
+    0.0
+}
+
+/// Otsu-thresholded blobs of the rectified view, and its levels.
+fn segment(img: &GrayImage) -> (Segmented, Levels) {
     let t = otsu_level(img);
-    let (w, h) = img.dimensions();
-    let inner =
-        |x: u32, y: u32| x >= MARGIN_PX && y >= MARGIN_PX && x + MARGIN_PX < w && y + MARGIN_PX < h;
-    let (mut n_hi, mut s_hi, mut s_lo) = (0usize, 0.0, 0.0);
-    for (x, y, p) in img.enumerate_pixels().filter(|(x, y, _)| inner(*x, *y)) {
-        let _ = (x, y);
+    let m = [MARGIN_PX; 4];
+    let dim = img.dimensions();
+    let (mut n_hi, mut n_lo, mut s_hi, mut s_lo) = (0usize, 0usize, 0.0, 0.0);
+    for (_, _, p) in img.enumerate_pixels().filter(|(x, y, _)| inner(*x, *y, dim, m)) {
         if p[0] > t {
             n_hi += 1;
             s_hi += f64::from(p[0]);
         } else {
+            n_lo += 1;
             s_lo += f64::from(p[0]);
         }
     }
-    let total = ((w.saturating_sub(2 * MARGIN_PX)) * (h.saturating_sub(2 * MARGIN_PX))) as usize;
-    let n_lo = total.saturating_sub(n_hi);
     let parts_dark = n_lo < n_hi;
     let contrast = (s_hi / n_hi.max(1) as f64 - s_lo / n_lo.max(1) as f64).abs();
+    let plate = median_grey(img, m).max(1.0);
+    let levels = Levels { parts_dark, threshold: f64::from(t) / plate, contrast: contrast / plate };
+    (label(img, t, parts_dark, contrast, m), levels)
+}
+
+/// The 8-connected blobs of the pixels of `img` on the parts' side of `t`, leaving out
+/// `margin` px at the left, top, right and bottom (the plate's edge, where the surroundings
+/// bleed in; a blob reaching it is `at_edge`; a side with no margin is no plate edge).
+pub(crate) fn label(
+    img: &GrayImage,
+    t: u8,
+    parts_dark: bool,
+    contrast: f64,
+    m: [u32; 4],
+) -> Segmented {
+    let (w, h) = img.dimensions();
     let mask = GrayImage::from_fn(w, h, |x, y| {
         let part = (img.get_pixel(x, y)[0] > t) != parts_dark;
-        Luma([if part && inner(x, y) { 255 } else { 0 }])
+        Luma([if part && inner(x, y, (w, h), m) { 255 } else { 0 }])
     });
     let labels = connected_components(&mask, Connectivity::Eight, Luma([0u8]));
     let n = labels.pixels().map(|p| p[0]).max().unwrap_or(0) as usize;
     let mut acc = vec![(0usize, 0.0f64, 0.0f64, [u32::MAX, u32::MAX, 0, 0], false); n + 1];
+    let edge = |x: u32, y: u32| {
+        (m[0] > 0 && x <= m[0])
+            || (m[1] > 0 && y <= m[1])
+            || (m[2] > 0 && x + m[2] + 1 >= w)
+            || (m[3] > 0 && y + m[3] + 1 >= h)
+    };
     for (x, y, p) in labels.enumerate_pixels() {
         let a = &mut acc[p[0] as usize];
         a.0 += 1;
         a.1 += f64::from(x) + 0.5;
         a.2 += f64::from(y) + 0.5;
         a.3 = [a.3[0].min(x), a.3[1].min(y), a.3[2].max(x), a.3[3].max(y)];
-        a.4 |= x <= MARGIN_PX || y <= MARGIN_PX || x + MARGIN_PX + 1 >= w || y + MARGIN_PX + 1 >= h;
+        a.4 |= edge(x, y);
     }
     let blobs = (1..=n)
         .filter(|&l| acc[l].0 > 0)
@@ -327,7 +400,7 @@ fn segment(img: &GrayImage) -> (Vec<u32>, Vec<Blob>, bool, f64) {
             }
         })
         .collect();
-    (labels.into_raw(), blobs, parts_dark, contrast)
+    Segmented { labels: labels.into_raw(), blobs, parts_dark, contrast }
 }
 
 /// The two faces of a template as outline samples at the photo's pixel size.
@@ -336,11 +409,25 @@ pub(crate) struct Faces {
     pub flipped: Option<Vec<Sample>>,
 }
 
+impl Faces {
+    /// Each template's faces, sampled every 1.5 px of `pix` mm.
+    pub fn of(templates: &[Template], pix: f64) -> Vec<Faces> {
+        let step = 1.5 * pix;
+        templates
+            .iter()
+            .map(|t| Faces {
+                up: fit::samples(&t.part, step),
+                flipped: t.mirrored.as_ref().map(|m| fit::samples(m, step)),
+            })
+            .collect()
+    }
+}
+
 /// The search context: the view, the templates and their samples.
 pub(crate) struct Ctx<'a> {
     pub view: View<'a>,
     pub templates: &'a [Template],
-    pub faces: Vec<Faces>,
+    pub faces: &'a [Faces],
 }
 
 impl Ctx<'_> {
@@ -404,7 +491,7 @@ impl Ctx<'_> {
 }
 
 /// What one blob is.
-enum Outcome {
+pub(crate) enum Outcome {
     Parts(Vec<Located>),
     Other(Unknown),
 }
@@ -416,7 +503,7 @@ fn ratios(ctx: &Ctx, b: &Blob) -> Vec<f64> {
 }
 
 /// Decides what blob `b` is.
-fn classify(ctx: &Ctx, b: &Blob) -> Outcome {
+pub(crate) fn classify(ctx: &Ctx, b: &Blob) -> Outcome {
     let r = ratios(ctx, b);
     let centre = ctx.mm(b.centroid_px);
     let area_mm2 = b.area_px as f64 * ctx.view.pix * ctx.view.pix;
@@ -466,7 +553,11 @@ fn classify(ctx: &Ctx, b: &Blob) -> Outcome {
 }
 
 /// Checks the parts against the plate and the photo's resolution.
-fn check_templates(t: &[Template], size_mm: [f64; 2], pix: f64) -> Result<(), LocateError> {
+pub(crate) fn check_templates(
+    t: &[Template],
+    size_mm: [f64; 2],
+    pix: f64,
+) -> Result<(), LocateError> {
     if t.is_empty() {
         return Err(LocateError::NoParts);
     }
@@ -506,28 +597,20 @@ pub fn locate(
     let (img, pix) = corners::rectify_square(photo, corners, size_mm)?;
     check_templates(templates, size_mm, pix)?;
     let flat = flat::flatten(&img, MARGIN_PX);
-    let (labels, blobs, parts_dark, contrast) = segment(&flat);
-    let step = 1.5 * pix;
-    let faces = templates
-        .iter()
-        .map(|t| Faces {
-            up: fit::samples(&t.part, step),
-            flipped: t.mirrored.as_ref().map(|m| fit::samples(m, step)),
-        })
-        .collect();
+    let (seg, levels) = segment(&flat);
+    let faces = Faces::of(templates, pix);
     let view = View {
         img: &flat,
-        labels: &labels,
+        labels: &seg.labels,
         pix,
         h_mm: size_mm[1],
-        pol: if parts_dark { -1.0 } else { 1.0 },
-        contrast,
+        pol: if seg.parts_dark { -1.0 } else { 1.0 },
+        contrast: seg.contrast,
         evaluated: Default::default(),
     };
-    let ctx = Ctx { view, templates, faces };
+    let ctx = Ctx { view, templates, faces: &faces };
     let (mut parts, mut unknown) = (Vec::new(), Vec::new());
-    let min_px = MIN_BLOB_MM2 / (pix * pix);
-    for b in blobs.iter().filter(|b| b.area_px as f64 >= min_px.max(20.0)) {
+    for b in seg.blobs.iter().filter(|b| not_dust(b, pix)) {
         match classify(&ctx, b) {
             Outcome::Parts(p) => parts.extend(p),
             Outcome::Other(u) => unknown.push(u),
@@ -539,8 +622,15 @@ pub fn locate(
     parts.sort_by(|a, b| {
         (a.y_mm, a.x_mm).partial_cmp(&(b.y_mm, b.x_mm)).unwrap_or(std::cmp::Ordering::Equal)
     });
-    let report = Report { parts, unknown, corners, corners_found, pixel_mm: pix, parts_dark };
+    let parts_dark = seg.parts_dark;
+    let report =
+        Report { parts, unknown, corners, corners_found, pixel_mm: pix, parts_dark, levels };
     Ok((report, img))
+}
+
+/// Whether blob `b` is big enough to be anything but dust at `pix` mm per pixel.
+pub(crate) fn not_dust(b: &Blob, pix: f64) -> bool {
+    b.area_px as f64 >= (MIN_BLOB_MM2 / (pix * pix)).max(20.0)
 }
 
 fn nothing_matches(unknown: &[Unknown], templates: &[Template]) -> LocateError {

@@ -216,6 +216,43 @@ pub fn random_poses(
     out
 }
 
+/// `placed` moved as between two photos of a camera loop: each part shifted by up to
+/// `max_mm` in a random direction and turned by up to ±`max_deg`, on its face, kept on the
+/// plate (5 mm clear of its edge) and `gap_mm` clear of the others (a part that finds no such
+/// place in 50 draws stays where it was).
+pub fn nudge(
+    parts: &[Part],
+    placed: &[Placed],
+    size_mm: [f64; 2],
+    (max_mm, max_deg): (f64, f64),
+    gap_mm: f64,
+    seed: u64,
+) -> Vec<Placed> {
+    let mut rng = Rng(seed);
+    let mut out = placed.to_vec();
+    for i in 0..out.len() {
+        for _ in 0..50 {
+            let (ang, d) = (std::f64::consts::TAU * rng.uniform(), max_mm * rng.uniform());
+            let p = Placed {
+                c: [out[i].c[0] + d * ang.cos(), out[i].c[1] + d * ang.sin()],
+                theta_deg: out[i].theta_deg + max_deg * (2.0 * rng.uniform() - 1.0),
+                ..out[i].clone()
+            };
+            let r = radius(parts, &p) + 5.0;
+            let on = p.c[0] > r && p.c[1] > r && p.c[0] < size_mm[0] - r && p.c[1] < size_mm[1] - r;
+            let clear = out.iter().enumerate().filter(|(j, _)| *j != i).all(|(_, o)| {
+                (o.c[0] - p.c[0]).hypot(o.c[1] - p.c[1])
+                    > radius(parts, o) + radius(parts, &p) + gap_mm
+            });
+            if on && clear {
+                out[i] = p;
+                break;
+            }
+        }
+    }
+    out
+}
+
 /// The bounding radius (mm) of a placed part.
 fn radius(parts: &[Part], p: &Placed) -> f64 {
     let part = &parts[p.part];

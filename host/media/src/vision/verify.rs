@@ -495,6 +495,7 @@ mod tests {
             corners_found: false,
             pixel_mm: 0.3,
             parts_dark: true,
+            levels: super::super::Levels { parts_dark: true, threshold: 0.6, contrast: 0.7 },
         }
     }
 
