@@ -32,7 +32,8 @@ pub struct ModeTruth {
     pub freq_hz: f64,
     /// The mode's name.
     pub name: String,
-    /// How far its nodes lie from the given plate's (mm, plate frame).
+    /// Its `shift_mm` (mm, plate frame): how far its nodes lie from where its node entry puts
+    /// them (for a warp, the given plate's shift plus the one drawn).
     pub shift_mm: [f64; 2],
     /// The true settle speed (mm/s).
     pub speed_mm_s: f64,
@@ -51,14 +52,12 @@ pub struct TruePlate {
     pub modes: Vec<ModeTruth>,
 }
 
-/// The shift of an entry's nodes (mm): where the plate file holds one.
-fn shift_of(_entry: &ModeEntry) -> [f64; 2] {
-    [0.0, 0.0]
-}
-
-/// Moves an entry's nodes by `shift` (mm): the plate file's `shift_mm`, which the mode's
+/// Moves an entry's nodes by `shift` (mm) more than it says: its `shift_mm`, which the mode's
 /// field applies.
-fn set_shift(_entry: &mut ModeEntry, _shift: [f64; 2]) {}
+fn add_shift(entry: &mut ModeEntry, shift: [f64; 2]) {
+    let [x, y] = entry.shift_mm.unwrap_or([0.0, 0.0]);
+    entry.shift_mm = Some([round4(x + shift[0]), round4(y + shift[1])]);
+}
 
 /// Rounds to 4 decimals: the written file is the plate the rig runs.
 fn round4(v: f64) -> f64 {
@@ -74,7 +73,7 @@ impl TruePlate {
         if model.size_mm != typed.size_mm {
             return Err(RigError::SizeMismatch { given: typed.size_mm, truth: model.size_mm });
         }
-        let modes = truths(&file, &model, &[]);
+        let modes = truths(&model, &[]);
         Ok(TruePlate { file, model, modes })
     }
 
@@ -100,11 +99,11 @@ impl TruePlate {
             // Every entry has a mode: the typed plate merged entries, it dropped none.
             let speed = speed.map_or(f64::NAN, |m| m.speed_mm_s);
             entry.speed_mm_s = Some(round4(speed * draw.2));
-            set_shift(entry, draw.1);
+            add_shift(entry, draw.1);
         }
         let model = PlateModel::from_file(&file).map_err(RigError::TruePlate)?;
         let factors: Vec<(f64, f64)> = drawn.iter().map(|d| (d.0, d.2)).collect();
-        let modes = truths(&file, &model, &factors);
+        let modes = truths(&model, &factors);
         Ok(TruePlate { file, model, modes })
     }
 
@@ -147,22 +146,21 @@ fn draw_factor(rng: &mut Rng, w: &Warp) -> f64 {
     rng.range(a.ln(), b.ln()).exp()
 }
 
-/// Each typed mode with its shift (from its first entry) and factor (`factors`: (freq,
-/// factor) as drawn; none for a plate given as a file).
-fn truths(file: &PlateFile, model: &PlateModel, factors: &[(f64, f64)]) -> Vec<ModeTruth> {
-    let near = |a: f64, b: f64| (a - b).abs() < SAME_FREQ_HZ;
+/// Each typed mode with its factor (`factors`: (freq, factor) as drawn; none for a plate given
+/// as a file).
+fn truths(model: &PlateModel, factors: &[(f64, f64)]) -> Vec<ModeTruth> {
     model
         .modes
         .iter()
-        .map(|m| {
-            let entry = file.mode.iter().find(|e| e.freq_hz.is_some_and(|f| near(f, m.freq_hz)));
-            ModeTruth {
-                freq_hz: m.freq_hz,
-                name: m.name.clone(),
-                shift_mm: entry.map_or([0.0, 0.0], shift_of),
-                speed_mm_s: m.speed_mm_s,
-                speed_factor: factors.iter().find(|f| near(f.0, m.freq_hz)).map(|f| f.1),
-            }
+        .map(|m| ModeTruth {
+            freq_hz: m.freq_hz,
+            name: m.name.clone(),
+            shift_mm: m.shift_mm,
+            speed_mm_s: m.speed_mm_s,
+            speed_factor: factors
+                .iter()
+                .find(|f| (f.0 - m.freq_hz).abs() < SAME_FREQ_HZ)
+                .map(|f| f.1),
         })
         .collect()
 }
@@ -170,6 +168,7 @@ fn truths(file: &PlateFile, model: &PlateModel, factors: &[(f64, f64)]) -> Vec<M
 #[cfg(test)]
 mod tests {
     use super::*;
+    use chladni_core::model::plate::Node;
 
     const GIVEN: &str = "[plate]\nname = \"t\"\nsize_mm = [300.0, 200.0]\n\
         [[mode]]\nfreq_hz = 60.0\nnode = { kind = \"line\", angle_deg = 90.0 }\n\
@@ -187,8 +186,18 @@ mod tests {
             assert!((0.4..=2.5).contains(&f), "{f}");
             assert!((m.speed_mm_s - round4(given_speed * f)).abs() < 1e-9, "{m:?}");
         }
-        // The two entries of the 60 Hz mode got the same speed.
+        // The two entries of the 60 Hz mode got the same speed and shift; each mode's nodes
+        // moved by 4–8 mm.
         assert_eq!(a.file.mode[0].speed_mm_s, a.file.mode[1].speed_mm_s);
+        assert_eq!(a.file.mode[0].shift_mm, a.file.mode[1].shift_mm);
+        for m in &a.modes {
+            let r = m.shift_mm[0].hypot(m.shift_mm[1]);
+            assert!((4.0 - 1e-3..=8.0 + 1e-3).contains(&r), "{m:?}");
+        }
+        assert_ne!(a.modes[0].shift_mm, a.modes[1].shift_mm);
+        // The 100 Hz line (angle 0, through the centre) moved by the shift's y.
+        let Node::Line { offset_mm, .. } = a.model.modes[1].node else { panic!() };
+        assert!((offset_mm - a.modes[1].shift_mm[1]).abs() < 1e-9, "{offset_mm}");
         // Reproducible from the seed, another seed draws otherwise.
         let b = TruePlate::warped(&given, &warp, 7).unwrap();
         assert_eq!(a.modes, b.modes);
@@ -197,6 +206,20 @@ mod tests {
         // The file written is the plate run.
         let back = PlateModel::parse(&a.to_toml().unwrap(), "back").unwrap();
         assert_eq!(back, a.model);
+    }
+
+    #[test]
+    fn a_shift_the_given_plate_holds_is_added_to() {
+        let text = GIVEN.replace("speed_mm_s = 20.0", "speed_mm_s = 20.0\nshift_mm = [1.0, 2.0]");
+        let given = PlateFile::parse(&text, "t").unwrap();
+        let warp = Warp { shift_mm: [5.0, 5.0], speed_factor: [1.0, 1.0] };
+        let a = TruePlate::warped(&given, &warp, 7).unwrap();
+        let drawn = [a.modes[1].shift_mm[0] - 1.0, a.modes[1].shift_mm[1] - 2.0];
+        assert!((drawn[0].hypot(drawn[1]) - 5.0).abs() < 1e-3, "{:?}", a.modes[1]);
+        assert_eq!(a.modes[1].speed_factor, Some(1.0));
+        // A true plate from a file reports its own shifts, no factors.
+        let b = TruePlate::from_file(given.clone(), &given).unwrap();
+        assert_eq!((b.modes[1].shift_mm, b.modes[1].speed_factor), ([1.0, 2.0], None));
     }
 
     #[test]

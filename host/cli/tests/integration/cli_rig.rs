@@ -201,6 +201,10 @@ fn the_rig_moves_parts_as_the_controller_drives_and_fails_as_asked() {
     assert!(modes.iter().all(|m| m["speed_factor"] == 1.5), "{modes:?}");
     let plate = PlateModel::load(&written).unwrap();
     assert_eq!(plate.modes[0].speed_mm_s, 15.0, "10 mm/s × 1.5");
+    // The true node moved 4–8 mm (the default warp) from x = 150.
+    let node_x = 150.0 + plate.modes[0].shift_mm[0];
+    let shift = plate.modes[0].shift_mm[0].hypot(plate.modes[0].shift_mm[1]);
+    assert!((4.0 - 1e-3..=8.0 + 1e-3).contains(&shift), "{:?}", plate.modes[0]);
     frame_matches_truth(&rig, plate.size_mm);
 
     // 1 s of drive at the vertical node's 60 Hz and its amplitude, then a stop.
@@ -227,8 +231,8 @@ fn the_rig_moves_parts_as_the_controller_drives_and_fails_as_asked() {
         );
         // Within one poll (20 ms) of drive at 15 mm/s: the rig sees each ramp at two polls.
         assert!(d < 0.3, "part {k}: {p} against {want:?}");
-        // Towards the node at x = 150, by more than 10 mm.
-        assert!((want.x - 150.0).abs() < (start.x - 150.0).abs() - 10.0, "{want:?}");
+        // Towards the true node, by more than 10 mm.
+        assert!((want.x - node_x).abs() < (start.x - node_x).abs() - 10.0, "{want:?}");
     }
     frame_matches_truth(&rig, plate.size_mm);
 
