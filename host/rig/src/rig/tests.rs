@@ -255,3 +255,29 @@ fn a_frame_shows_the_parts_where_the_truth_says() {
     assert!(a.starts_with(b"\x89PNG"));
     assert!(r.render(1, Format::Jpeg).unwrap().starts_with(&[0xff, 0xd8]));
 }
+
+#[test]
+fn a_shifted_mode_moves_parts_as_the_unshifted_one_moves_them_shifted() {
+    let file = PlateFile::parse(PLATE, "t").unwrap();
+    let mut moved = file.clone();
+    moved.mode[0].shift_mm = Some([6.0, -3.0]);
+    let moved = TruePlate::from_file(moved, &file).unwrap();
+    let start = Pose { x: 90.0, y: 70.0, theta: 0.4 };
+    let config = |plate, at: Pose| RigConfig {
+        plate,
+        kinds: vec![triangle()],
+        parts: vec![0],
+        at: Some(vec![at]),
+        seed: 1,
+        noise: QUIET,
+    };
+    let mut a = Rig::new(config(plate(), start)).unwrap();
+    let mut b = Rig::new(config(moved, Pose { x: 96.0, y: 67.0, ..start })).unwrap();
+    for r in [&mut a, &mut b] {
+        follow(r, &polls(60_000, Q15::FULL.0, 400_000, 1000, 460_000));
+    }
+    let (p, q) = (a.poses()[0], b.poses()[0]);
+    assert!(p.x > 140.0, "it reached the node: {p:?}");
+    assert!((q.x - p.x - 6.0).abs() < 0.02 && (q.y - p.y + 3.0).abs() < 1e-9, "{p:?} {q:?}");
+    assert_eq!(b.truth().modes[0].shift_mm, [6.0, -3.0]);
+}
