@@ -61,6 +61,9 @@ pub enum LoopError {
         "the controller faulted: {0}; clear it with `chladni device clear-fault` once the cause is fixed"
     )]
     Fault(String),
+    /// The steering algorithms refused their input (a bug or a bad option).
+    #[error("steering: {0}; the drive was stopped")]
+    Steer(#[from] chladni_core::steer::SteerError),
     /// Ctrl-C.
     #[error("interrupted: the drive was stopped")]
     Interrupted,
@@ -77,6 +80,7 @@ impl LoopError {
             LoopError::MissingParts { .. } => "missing_parts",
             LoopError::NoStop { .. } => "no_stop",
             LoopError::Fault(_) => "fault",
+            LoopError::Steer(_) => "steer",
             LoopError::Interrupted => "interrupted",
         }
     }

@@ -9,6 +9,9 @@
 #![forbid(unsafe_code)]
 
 pub mod error;
+pub mod learn;
+pub mod parts;
 pub mod session;
+pub mod steer;
 
 pub use error::LoopError;

@@ -9,15 +9,14 @@
 //! idle); the camera proves its frame's time (docs/camera.md). Every exit path stops the
 //! drive: errors stop it before they return, and dropping the session stops it.
 
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant, SystemTime};
 
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::Mode;
 use chladni_device::client::DeviceClient;
 use chladni_media::camera::{Camera, Frame};
-use chladni_media::vision::{self, Located, Template};
+use chladni_media::vision::track::{Near, track};
+use chladni_media::vision::{self, Levels, Located, Template};
 use chladni_shared::icd::link::{DriveState, StatusReport};
 use chladni_shared::icd::sense::Level;
 use chladni_shared::icd::units::{MilliHz, Q15, s_from_samples};
@@ -63,32 +62,48 @@ pub struct Sighting {
     pub parts: Vec<Located>,
 }
 
+/// Whether the user asked to stop (Ctrl-C): asked at every wait.
+pub type Interrupted = Box<dyn Fn() -> bool + Send>;
+
 /// A controller link, a camera, the part kinds to look for and the plate's corners.
 pub struct Session {
     client: DeviceClient,
     camera: Camera,
     templates: Vec<Template>,
     config: SessionConfig,
-    interrupted: Arc<AtomicBool>,
+    interrupted: Interrupted,
     /// Frames must be taken at or after this time.
     settled_at: SystemTime,
     /// A drive command may be in effect (a stop is owed).
     driving: bool,
+    /// The grey levels of the last full locate and every part it found: what the next frame
+    /// is tracked from.
+    last: Option<(Levels, Vec<Located>)>,
 }
 
 impl Session {
-    /// A session over `client` and `camera` looking for the part kinds `kinds`; `interrupted`
-    /// (Ctrl-C) ends any wait with [`LoopError::Interrupted`] after stopping the drive.
+    /// A session over `client` and `camera` looking for the part kinds `kinds`; once
+    /// `interrupted()` (Ctrl-C), any wait ends with [`LoopError::Interrupted`] after stopping
+    /// the drive.
     pub fn new(
         client: DeviceClient,
         camera: Camera,
         kinds: &[Part],
         config: SessionConfig,
-        interrupted: Arc<AtomicBool>,
+        interrupted: Interrupted,
     ) -> Session {
         let templates = kinds.iter().map(Template::new).collect();
         let settled_at = SystemTime::now();
-        Session { client, camera, templates, config, interrupted, settled_at, driving: false }
+        Session {
+            client,
+            camera,
+            templates,
+            config,
+            interrupted,
+            settled_at,
+            driving: false,
+            last: None,
+        }
     }
 
     /// The part kinds' templates, in the order given.
@@ -109,15 +124,32 @@ impl Session {
             Ok(f) => f,
             Err(e) => return Err(self.stopped(e.into())),
         };
-        let found =
-            vision::locate(&frame.image, &self.templates, self.config.size_mm, self.config.corners);
-        let (report, _) = match found {
-            Ok(r) => r,
-            Err(e) => return Err(self.stopped(e.into())),
+        let parts = match self.parts_in(&frame.image) {
+            Ok(p) => p,
+            Err(e) => return Err(self.stopped(e)),
         };
-        self.config.corners.get_or_insert(report.corners);
-        let sighting = Sighting { taken: frame.taken, took: start.elapsed(), parts: report.parts };
+        let sighting = Sighting { taken: frame.taken, took: start.elapsed(), parts };
         Ok((sighting, frame))
+    }
+
+    /// The parts in a frame: tracked near where the last frame showed them (a window around
+    /// each, `vision::track`), or, on the first frame and whenever a part is not found in its
+    /// window, located in the whole frame (which also finds the corners once and the grey
+    /// levels tracking thresholds by).
+    fn parts_in(&mut self, image: &image::GrayImage) -> Result<Vec<Located>, LoopError> {
+        let size = self.config.size_mm;
+        if let (Some((levels, last)), Some(corners)) = (&self.last, self.config.corners) {
+            let near: Vec<Near> = last.iter().map(Near::from).collect();
+            let tracked = track(image, &self.templates, size, corners, levels, &near);
+            if let Some(found) = tracked.ok().and_then(|t| t.all_found()) {
+                self.last = Some((*levels, found.clone()));
+                return Ok(found);
+            }
+        }
+        let (report, _) = vision::locate(image, &self.templates, size, self.config.corners)?;
+        self.config.corners.get_or_insert(report.corners);
+        self.last = Some((report.levels, report.parts.clone()));
+        Ok(report.parts)
     }
 
     /// Drives `mode` for `secs` seconds, stops, waits for the controller to be idle, and
@@ -132,7 +164,7 @@ impl Session {
         }
         let until = Instant::now() + Duration::from_secs_f64(secs.max(0.0));
         while Instant::now() < until {
-            if self.interrupted.load(Ordering::SeqCst) {
+            if (self.interrupted)() {
                 return Err(self.stopped(LoopError::Interrupted));
             }
             std::thread::sleep(TICK.min(until.saturating_duration_since(Instant::now())));
@@ -167,7 +199,7 @@ impl Session {
 
     /// `Err(Interrupted)` (the drive stopped) once Ctrl-C was pressed.
     fn check_interrupt(&mut self) -> Result<(), LoopError> {
-        if self.interrupted.load(Ordering::SeqCst) {
+        if (self.interrupted)() {
             return Err(self.stopped(LoopError::Interrupted));
         }
         Ok(())

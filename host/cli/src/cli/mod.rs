@@ -24,6 +24,7 @@ mod plate;
 mod progress;
 mod rig;
 mod serve;
+mod steer;
 mod verify;
 
 /// Bad input from the user: exit code 2.
@@ -153,6 +154,9 @@ enum Command {
     Rig(rig::RigArgs),
     /// Serve the controller to a cell: Modbus TCP for a PLC, HTTP for people (docs/cell.md).
     Serve(serve::ServeArgs),
+    /// Drive parts to goal poses with a camera in the loop; exit 1 if the time runs out first
+    /// (docs/steer.md).
+    Steer(steer::SteerArgs),
     /// A photo of the plate after a run against the plan's prediction: per part ok or off,
     /// the success rate; exit 1 when any part is off (docs/plate.md).
     Verify(verify::VerifyArgs),
@@ -174,6 +178,7 @@ impl Cli {
             Command::Simulate(args) => args.run(),
             Command::Rig(args) => args.run(),
             Command::Serve(args) => args.run(),
+            Command::Steer(args) => args.run(),
             Command::Verify(args) => args.run(),
         }
     }

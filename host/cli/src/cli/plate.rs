@@ -30,6 +30,8 @@ pub enum PlateCommand {
     CalibrateSpeed(super::calibrate::CalibrateArgs),
     /// Try drive points and clamp positions and report which give a part a plan.
     Suggest(SuggestArgs),
+    /// Learn what each mode really does from bursts seen by a camera; write a learned plate.
+    Learn(super::steer::LearnArgs),
 }
 
 impl PlateCommand {
@@ -39,6 +41,7 @@ impl PlateCommand {
             PlateCommand::FromPhoto(a) => a.run(),
             PlateCommand::CalibrateSpeed(a) => a.run(),
             PlateCommand::Suggest(a) => a.run(),
+            PlateCommand::Learn(a) => a.run(),
         }
     }
 }

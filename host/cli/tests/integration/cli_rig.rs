@@ -3,9 +3,6 @@
 //! the mode's node), its frames show the parts where `/truth` says (located within 0.5 mm and
 //! 1°), each failure mode fails as named, Ctrl-C ends it with 0 and a lost link with 1.
 
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::TcpStream;
-use std::process::{Child, ChildStdout, Stdio};
 use std::time::{Duration, SystemTime};
 
 use chladni_core::model::part::Part;
@@ -26,7 +23,8 @@ use nix::unistd::Pid;
 use serde_json::Value;
 
 use crate::support;
-use support::cli::{command, ex, keys, tmp};
+use support::cli::{ex, keys, tmp};
+use support::rig::{RigProcess, get};
 
 /// Start poses of the triangle and the L-shape: apart, on either side of the vertical node at
 /// x = 150 of the four-lines plate (its 60 Hz mode, amplitude 0.8).
@@ -36,89 +34,15 @@ const AT: [&str; 2] = ["100,60,20", "215,140,80"];
 /// full amplitude, the speed going with the amplitude's square: 2/3 of their length.
 const RAMPS_S: f64 = (MANUAL_RAMP_MS + STOP_RAMP_MS) as f64 / 1000.0 * 2.0 / 3.0;
 
-/// A running `chladni rig`, killed when dropped.
-struct RigProcess {
-    child: Child,
-    /// Its stdout, kept open (a closed stdout would end it when it prints its failure).
-    out: BufReader<ChildStdout>,
-    url: String,
-    listening: Value,
-}
-
-impl RigProcess {
-    fn start(port: &str, more: &[&str]) -> RigProcess {
-        let (plate, tri, ell) =
-            (ex("plates/four-lines.toml"), ex("parts/triangle.json"), ex("parts/l-shape.json"));
-        let mut child = command()
-            .args(["rig", "--port", port, "--plate", &plate, "--part", &tri, "--part", &ell])
-            .args(["--at", AT[0], "--at", AT[1], "--noise-mm", "0", "--noise-deg", "0", "--json"])
-            .args(more)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let mut line = String::new();
-        let mut out = BufReader::new(child.stdout.take().unwrap());
-        out.read_line(&mut line).unwrap();
-        let listening: Value = serde_json::from_str(&line).unwrap_or_else(|e| {
-            let mut err = String::new();
-            let _ = child.stderr.take().unwrap().read_to_string(&mut err);
-            panic!("rig printed {line:?} ({e}); stderr: {err}")
-        });
-        let url = listening["url"].as_str().unwrap().trim_end_matches("/frame.png").to_owned();
-        RigProcess { child, out, url, listening }
-    }
-
-    /// Waits for the end: the exit code, the rest of stdout and stderr.
-    fn wait(mut self) -> (Option<i32>, String, String) {
-        let code = self.child.wait().unwrap().code();
-        let (mut out, mut err) = (String::new(), String::new());
-        self.out.read_to_string(&mut out).unwrap();
-        self.child.stderr.take().unwrap().read_to_string(&mut err).unwrap();
-        (code, out, err)
-    }
-}
-
-impl Drop for RigProcess {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-/// An answer: status, headers (lowercase names) and body.
-struct Answer {
-    status: u16,
-    headers: Vec<(String, String)>,
-    body: Vec<u8>,
-}
-
-impl Answer {
-    fn header(&self, name: &str) -> Option<&str> {
-        self.headers.iter().find(|(k, _)| k == name).map(|(_, v)| v.as_str())
-    }
-}
-
-/// `GET url` over HTTP/1.1 with `Connection: close`; `None` when no answer comes in `wait`.
-fn get(url: &str, wait: Duration) -> Option<Answer> {
-    let rest = url.strip_prefix("http://").unwrap();
-    let (addr, path) = rest.split_at(rest.find('/').unwrap());
-    let mut s = TcpStream::connect(addr).unwrap();
-    s.set_read_timeout(Some(wait)).unwrap();
-    write!(s, "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n").unwrap();
-    let mut raw = Vec::new();
-    if s.read_to_end(&mut raw).is_err() || raw.is_empty() {
-        return None;
-    }
-    let end = raw.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
-    let head = String::from_utf8_lossy(&raw[..end]).into_owned();
-    let mut lines = head.lines();
-    let status = lines.next().unwrap().split(' ').nth(1).unwrap().parse().unwrap();
-    let headers = lines
-        .filter_map(|l| l.split_once(':'))
-        .map(|(k, v)| (k.trim().to_ascii_lowercase(), v.trim().to_owned()))
-        .collect();
-    Some(Answer { status, headers, body: raw[end + 4..].to_vec() })
+/// The rig of these tests: the triangle and the L-shape at [`AT`] on the four-lines plate,
+/// no bouncing noise, and `more`.
+fn start(port: &str, more: &[&str]) -> RigProcess {
+    let (plate, tri, ell) =
+        (ex("plates/four-lines.toml"), ex("parts/triangle.json"), ex("parts/l-shape.json"));
+    let mut args = vec!["--port", port, "--plate", &plate, "--part", &tri, "--part", &ell];
+    args.extend(["--at", AT[0], "--at", AT[1], "--noise-mm", "0", "--noise-deg", "0"]);
+    args.extend(more);
+    RigProcess::start(&args)
 }
 
 const PATIENT: Duration = Duration::from_secs(120);
@@ -193,7 +117,7 @@ fn the_rig_moves_parts_as_the_controller_drives_and_fails_as_asked() {
     let written = tmp("rig", "true.toml");
     let w = written.display().to_string();
     let more = ["--speed-factor", "1.5", "--seed", "3", "--write-true-plate", &w];
-    let rig = RigProcess::start(&port, &more);
+    let rig = start(&port, &more);
     assert_eq!(keys(&rig.listening), ["parts", "true_plate", "url"]);
     assert_eq!(rig.listening["parts"], 2);
     let modes = rig.listening["true_plate"]["modes"].as_array().unwrap();
@@ -244,7 +168,7 @@ fn the_rig_moves_parts_as_the_controller_drives_and_fails_as_asked() {
     assert_eq!((code, out.as_str()), (Some(0), ""), "{err}");
 
     // The controller gone: exit 1, named.
-    let rig = RigProcess::start(&port, &[]);
+    let rig = start(&port, &[]);
     emu.kill();
     let (code, out, err) = rig.wait();
     assert_eq!(code, Some(1), "{err}");
@@ -258,7 +182,7 @@ fn the_rig_moves_parts_as_the_controller_drives_and_fails_as_asked() {
 /// Each failure mode after one good frame.
 fn fail_modes(port: &str) {
     for mode in ["garbage", "frozen", "status500", "hang"] {
-        let rig = RigProcess::start(port, &["--fail-after-frames", "1", "--fail-mode", mode]);
+        let rig = start(port, &["--fail-after-frames", "1", "--fail-mode", mode]);
         let frame = format!("{}/frame.png", rig.url);
         let first = get(&frame, PATIENT).expect("the first frame");
         assert_eq!(first.status, 200);

@@ -45,5 +45,6 @@ mod planner;
 mod plate_drive;
 mod qemu_socket;
 mod rim_plan;
+mod steer_loop;
 mod svg_import;
 mod whole_plate;

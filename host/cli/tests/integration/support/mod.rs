@@ -9,3 +9,4 @@ pub mod examples;
 /// The emulated controller and plans for it: the end-to-end tests' support, shared.
 pub use chladni_e2e as emu;
 pub mod photos;
+pub mod rig;
