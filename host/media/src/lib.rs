@@ -5,7 +5,6 @@
 //! print ([`shapes`]).
 #![forbid(unsafe_code)]
 
-pub mod camera;
 pub mod plot;
 pub mod shapes;
 pub mod vision;

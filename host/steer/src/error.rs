@@ -2,7 +2,7 @@
 //! the fix. Whatever the failure, the drive was stopped before it is reported.
 
 use chladni_device::client::DeviceError;
-use chladni_media::camera::CameraError;
+use crate::camera::CameraError;
 use chladni_media::vision::LocateError;
 
 /// A failure of the closed loop.

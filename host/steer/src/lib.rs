@@ -8,6 +8,7 @@
 //! a camera; this crate runs them against the real thing.
 #![forbid(unsafe_code)]
 
+pub mod camera;
 pub mod error;
 pub mod learn;
 pub mod parts;

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant, SystemTime};
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::Mode;
 use chladni_device::client::DeviceClient;
-use chladni_media::camera::{Camera, Frame};
+use crate::camera::{Camera, Frame};
 use chladni_media::vision::track::{Near, track};
 use chladni_media::vision::{self, Levels, Located, Template};
 use chladni_shared::icd::link::{DriveState, StatusReport};

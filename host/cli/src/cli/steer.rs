@@ -19,7 +19,7 @@ use chladni_core::steer::learn::LearnOptions;
 use chladni_core::steer::policy::Rules;
 use chladni_core::steer::{Menu, Model};
 use chladni_device::client::DeviceClient;
-use chladni_media::camera::{Camera, CameraOptions, CameraSource};
+use chladni_steer::camera::{Camera, CameraOptions, CameraSource};
 use chladni_steer::LoopError;
 use chladni_steer::learn::{LearnJob, LearnOutcome, learn_plate};
 use chladni_steer::parts::Kind;
@@ -118,7 +118,7 @@ impl LoopArgs {
     fn session(&self, loaded: &Loaded, command: &str) -> Result<Session, Failure> {
         let bad = |kind: &'static str, msg: String| Failure { kind, error: InputError(msg).into() };
         let source: CameraSource =
-            self.camera.parse().map_err(|e: chladni_media::camera::CameraError| {
+            self.camera.parse().map_err(|e: chladni_steer::camera::CameraError| {
                 bad(e.name(), format!("--camera: {e}"))
             })?;
         let options = CameraOptions {

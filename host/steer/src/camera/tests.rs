@@ -10,7 +10,7 @@ use std::time::{Duration, SystemTime};
 use image::{GrayImage, ImageFormat};
 
 use super::{CameraError, CameraOptions, Frame};
-use crate::vision::synth::{Photo, Placed, render, sample_parts};
+use chladni_media::vision::synth::{Photo, Placed, render, sample_parts};
 
 /// A small photo of one part (96 × 64 px), different noise for each seed.
 fn photo(seed: u64) -> GrayImage {
