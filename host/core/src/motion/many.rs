@@ -306,12 +306,13 @@ pub(crate) fn run_many(
             dt = dt.min(0.25 * r[i] / s.max(1e-30)).min(0.1 / v0[i][2].abs().max(1e-30));
         }
         let scales = Scales { r: &r, t0: &t0 };
-        let (next, v1) = advance(g, field, speed, (&qs, &v0), &lost, scales, dt, &mut dt_next);
+        let (next, v1, taken) =
+            advance(g, field, speed, (&qs, &v0), &lost, scales, dt, &mut dt_next);
         if next == qs {
             rested = true;
             break;
         }
-        t += dt;
+        t += taken;
         qs = next;
         v0 = v1;
         for i in 0..n {
@@ -343,7 +344,8 @@ struct Scales<'a> {
 /// One accepted step of [`run_many`] from poses `qs` with velocities `v0` (the pair `now`):
 /// Heun's method with the contacts resolved after each stage, the step `dt` shrunk on an
 /// overshoot or an error over [`STEP_TOL`] (at most 30 times), and `dt_next` set for the
-/// next step. Returns the new poses and their velocities; the same poses when the bodies
+/// next step. Returns the new poses, their velocities and the step taken (s: the clock must
+/// advance by what was integrated, not by what was offered); the same poses when the bodies
 /// chatter in place (at rest against a contact).
 #[allow(clippy::too_many_arguments)]
 fn advance(
@@ -355,7 +357,7 @@ fn advance(
     scales: Scales<'_>,
     mut dt: f64,
     dt_next: &mut f64,
-) -> (Vec<Pose>, Vec<[f64; 3]>) {
+) -> (Vec<Pose>, Vec<[f64; 3]>, f64) {
     let (qs, v0) = now;
     let (n, r, t0) = (qs.len(), scales.r, scales.t0);
     let vel = |qs: &[Pose]| g.twists(field, speed, qs, lost).1;
@@ -392,7 +394,7 @@ fn advance(
             err = err.max(e / (STEP_TOL * r[i]));
         }
         if overshoot && chatter {
-            return (qs.to_vec(), v0.to_vec());
+            return (qs.to_vec(), v0.to_vec(), dt);
         }
         if (overshoot || err > 1.0) && tries < 30 {
             dt *= if overshoot { 0.5 } else { (0.9 * (1.0 / err).sqrt()).clamp(0.2, 0.5) };
@@ -405,7 +407,7 @@ fn advance(
             .collect();
         let q = step(qs, &mean, dt);
         let v = vel(&q);
-        return (q, v);
+        return (q, v, dt);
     }
 }
 
@@ -457,6 +459,45 @@ mod tests {
         let r = run_many(&g, field, 10.0, 1e4, false, start, &vec![false; start.len()]);
         let worst = (r.trace.iter()).map(|(_, q)| g.max_overlap(q, &r.lost)).fold(0.0, f64::max);
         (r, worst)
+    }
+
+    #[test]
+    fn parts_far_apart_move_as_each_alone_however_the_time_is_cut() {
+        // Two parts far apart on a horizontal sign-law node at y = 120:
+        // the group's run must put each where its lone run does, in one run or in ten pieces
+        // (the clock counts the steps taken, not those offered and then shrunk).
+        let m = crate::motion::testkit::mode(
+            "freq_hz = 60\nfield = \"sign\"\nnode = { kind = \"line\", angle_deg = 0.0, offset_mm = 20.0 }",
+        );
+        let field = FieldModel::new(&m, &crate::motion::testkit::plate(&m));
+        let (a, b) = (Body::new(&crate::motion::testkit::holed_part()), Body::new(&quad()));
+        let start =
+            [Pose { x: 90.0, y: 70.0, theta: 0.3 }, Pose { x: 220.0, y: 150.0, theta: 1.0 }];
+        let pieces = [Pieces::of(&a), Pieces::of(&b)];
+        let refs: Vec<&Pieces> = pieces.iter().collect();
+        let bodies = [&a, &b];
+        let g = Group { bodies: &bodies, pieces: &refs, rim: Some(rim(0.0)), friction: 0.0 };
+        let alone = |body: &Body, q: Pose| {
+            let p = crate::motion::integrate::SimParams {
+                speed: 15.0,
+                t_limit: 1.5,
+                run_to_limit: true,
+                rim: Some(rim(0.0)),
+            };
+            crate::motion::integrate::run(body, &field, p, q).pose
+        };
+        let want = [alone(&a, start[0]), alone(&b, start[1])];
+        for pieces_of_time in [1, 10] {
+            let mut qs = start.to_vec();
+            for _ in 0..pieces_of_time {
+                let dt = 1.5 / pieces_of_time as f64;
+                qs = run_many(&g, &field, 15.0, dt, true, &qs, &[false, false]).poses;
+            }
+            for (q, w) in qs.iter().zip(&want) {
+                let d = (q.x - w.x).hypot(q.y - w.y);
+                assert!(d < 0.05, "{pieces_of_time} pieces: {q:?} against {w:?} ({d} mm)");
+            }
+        }
     }
 
     #[test]
