@@ -1,8 +1,8 @@
 //! Every way the loop fails, each with a name for `--json` and a message naming the value and
 //! the fix. Whatever the failure, the drive was stopped before it is reported.
 
-use chladni_device::client::DeviceError;
 use crate::camera::CameraError;
+use chladni_device::client::DeviceError;
 use chladni_media::vision::LocateError;
 
 /// A failure of the closed loop.

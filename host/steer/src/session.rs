@@ -11,10 +11,10 @@
 
 use std::time::{Duration, Instant, SystemTime};
 
+use crate::camera::{Camera, Frame};
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::Mode;
 use chladni_device::client::DeviceClient;
-use crate::camera::{Camera, Frame};
 use chladni_media::vision::track::{Near, track};
 use chladni_media::vision::{self, Levels, Located, Template};
 use chladni_shared::icd::link::{DriveState, StatusReport};

@@ -49,11 +49,13 @@ fn learn_plan_steer_and_fail_on_the_virtual_rig() {
     learns_the_true_plate(&port, &plate, &tri, &true_file, &learned);
     drive_is_idle(&emu);
 
-    // A sensorless plan on the learned plate, as on any plate.
-    let out = tmp("steer", "plan.json");
-    let planned =
-        chladni(&["plan", &tri, "--plate", &arg(&learned), "--out", &arg(&out), "--json"]);
-    ok_json(&planned);
+    // A sensorless plan on the learned plate, as on any plate (the rectangle from a feed
+    // strip along the left edge: on the free plate's modes no plan holds from everywhere).
+    let (out, rect) = (arg(&tmp("steer", "plan.json")), ex("parts/rectangle.json"));
+    let l = arg(&learned);
+    let feed = ["--feed", "21", "21", "50", "179"];
+    let planned = chladni(&[&["plan", &rect, "--plate", &l][..], &feed, &["--out", &out]].concat());
+    assert!(planned.status.success(), "{}", String::from_utf8_lossy(&planned.stderr));
 
     steers_one_part(&port, &tri, &true_file, &learned);
     drive_is_idle(&emu);
