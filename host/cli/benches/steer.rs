@@ -1,7 +1,8 @@
 //! Steering in the in-process rig (`chladni_core::steer::sim`): a true plate that is the
 //! given plate with each mode's field shifted 4–8 mm (random direction) and its speed off by
-//! ×0.4–×2.5 (log-uniform), parts moved by the same motion model plus noise (0.2 mm, 0.5° per
-//! burst, a bounce of up to 8 mm in one burst of 50).
+//! ×0.4–×2.5 (log-uniform), parts moved by the same motion model plus noise
+//! (`steer::sim::Noise::default()`: 0.2 mm and 0.5° per √s of drive, a bounce of up to 8 mm
+//! every 50 s of drive, 0.05 mm of camera error).
 //!
 //! Sections (stdout, one line per result):
 //! - `choose`: the cost of one cycle's choice, 3 parts × 12 modes × 6 bursts, look-ahead over
@@ -34,7 +35,7 @@ use chladni_core::rng::Rng;
 use chladni_core::steer::cost::{Piece, distance_mm};
 use chladni_core::steer::policy::{LearnStep, Rules, next_learning_step};
 use chladni_core::steer::sim::{Noise, TrialOptions, Truth, steer_trial};
-use chladni_core::steer::{Burst, Correction, Menu, Model, PartGoal, choose, learn};
+use chladni_core::steer::{Burst, Correction, Corrector, Menu, Model, PartGoal, choose, learn};
 
 /// The given plate's settle speed (mm/s). With the true factors of ×0.4–×2.5, parts cross
 /// 100 mm in the 3–10 s of the rig (measured by the `speed` section).
@@ -186,13 +187,17 @@ fn main() {
 }
 
 /// Bursts recorded by the learning policy until each mode has `per_mode`.
+/// The policy's predictions come from a model corrected online from the recorded bursts (as
+/// the steering loop corrects its own), so later bursts and recoveries are chosen on a
+/// plate closer to the true one; the fit itself starts from the given plate.
 fn record(
     truth: &mut Truth,
-    model: &Model,
+    model: &mut Model,
     pieces: &[Piece],
     per_mode: usize,
 ) -> (Vec<Burst>, f64, usize) {
-    let menu = Menu { bursts_s: vec![0.2, 0.4, 0.7, 1.0, 1.5], lookahead: 0 };
+    let menu = Menu { bursts_s: vec![0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.5], lookahead: 0 };
+    let mut corrector = Corrector::new(model.mode_count());
     let rules = Rules::default();
     let mut poses: Vec<Pose> = pieces.iter().map(|p| truth.random_pose(&p.body, 10.0)).collect();
     let mut counts = vec![0usize; model.mode_count()];
@@ -210,7 +215,9 @@ fn record(
             counts[mode] += 1;
             let seen =
                 poses.iter().zip(&after).enumerate().map(|(i, (b, a))| (i, *b, *a)).collect();
-            bursts.push(Burst { mode, burst_s, parts: seen });
+            let burst = Burst { mode, burst_s, parts: seen };
+            corrector.observe(model, pieces, burst.clone()).unwrap();
+            bursts.push(burst);
         } else {
             recovers += 1;
         }
@@ -225,8 +232,8 @@ fn learn_section(plate: &PlateModel, pieces: &[Piece]) {
     let truth_c = true_corrections(&mut rng, plate.modes.len());
     let mut truth =
         Truth::new(Model::with_corrections(plate.clone(), &truth_c).unwrap(), Noise::default(), 7);
-    let given = Model::new(plate.clone());
-    let (bursts, drive_s, recovers) = record(&mut truth, &given, pieces, 12);
+    let mut online = Model::new(plate.clone());
+    let (bursts, drive_s, recovers) = record(&mut truth, &mut online, pieces, 12);
     let t = Instant::now();
     let learned = learn(plate, pieces, &bursts, Default::default()).unwrap();
     println!(
