@@ -1,5 +1,5 @@
 //! The one fit of a mode's [`Correction`] to observed bursts, shared by the offline learning
-//! ([`crate::steer::learn`]) and the online correction ([`crate::steer::correct`]).
+//! ([`learn`](mod@crate::steer::learn)) and the online correction ([`crate::steer::correct`]).
 //!
 //! Parameters p = (dx mm, dy mm, ln factor). Residuals: for every part of every burst of the
 //! mode, the predicted pose after the burst minus the observed one, (Δx, Δy) in mm and the

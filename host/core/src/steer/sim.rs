@@ -3,14 +3,14 @@
 //! against it (assign, choose, drive, observe, correct), with no camera and no controller.
 //!
 //! Goals are poses a part can hold: a random drop run to rest under a random mode of the true
-//! plate ([`random_goal`]), so every goal is a rest of some mode near where it lies.
+//! plate ([`Truth::random_goal`]), so every goal is a rest of some mode near where it lies.
 
 use crate::model::pose::Pose;
 use crate::motion::body::Body;
 use crate::rng::Rng;
 use crate::steer::SteerError;
 use crate::steer::assign::assign_goals;
-use crate::steer::choose::{Menu, choose};
+use crate::steer::choose::{Menu, Stall, choose};
 use crate::steer::correct::Corrector;
 use crate::steer::cost::{MM_PER_DEG, PartGoal, Piece, angle_error_deg, distance_mm};
 use crate::steer::fit::Burst;
@@ -163,7 +163,8 @@ pub struct TrialResult {
 }
 
 /// The closed loop against `truth`: identical parts (`piece` at each of `starts`), each
-/// cycle assigned to `goals` ([`assign_goals`]), then choose → drive
+/// cycle assigned to `goals` ([`assign_goals`]), weighed by the loop's progress ([`Stall`]),
+/// then choose → drive
 /// → observe (→ correct `model`) until every part is within tolerance or the drive time is
 /// spent.
 pub fn steer_trial(
@@ -182,13 +183,14 @@ pub fn steer_trial(
     let mut corrector = Corrector::new(model.mode_count());
     let (mut cycles, mut drive_s) = (0, 0.0);
     let within = |parts: &[PartGoal]| parts.iter().all(|p| p.within(p.pose, opt.tol_mm, tol_deg));
+    let mut stall = Stall::new();
     loop {
         // Identical parts: each cycle, the goals go to the parts that are nearest them now.
         parts = assign_goals(&parts, goals)?;
         if within(&parts) || drive_s >= opt.time_limit_s || cycles >= opt.max_cycles {
             break;
         }
-        let cmd = choose(model, &parts, &opt.menu)?;
+        let cmd = choose(model, &stall.weigh(&parts), &opt.menu)?;
         let before: Vec<(&Body, Pose)> = parts.iter().map(|p| (&p.piece.body, p.pose)).collect();
         let after = truth.burst(&before, cmd.mode, cmd.burst_s)?;
         if opt.correct {

@@ -451,3 +451,23 @@ fn costs_take_the_symmetry_period() {
     assert!((turned.error_mm(q) - crate::steer::cost::MM_PER_DEG).abs() < 1e-9);
     assert!(g.within(Pose { x: 13.0, y: 3.0, theta: 0.0 }, 1.0, 1.0));
 }
+
+#[test]
+fn a_stalled_loop_turns_to_its_worst_part_for_a_while() {
+    use crate::steer::choose::{FOCUS_CYCLES, FOCUS_OTHERS, STALL_CYCLES, Stall};
+    let p = piece("u-channel");
+    let at = |x| Pose { x, y: 100.0, theta: 0.0 };
+    let parts = [PartGoal::new(&p, at(100.0), at(101.0)), PartGoal::new(&p, at(200.0), at(150.0))];
+    let mut stall = Stall::new();
+    let weights = |w: &[PartGoal]| w.iter().map(|p| p.weight).collect::<Vec<_>>();
+    for _ in 0..STALL_CYCLES {
+        assert_eq!(weights(&stall.weigh(&parts)), [1.0, 1.0]);
+    }
+    for _ in 0..FOCUS_CYCLES {
+        assert_eq!(weights(&stall.weigh(&parts)), [FOCUS_OTHERS, 1.0], "the far part first");
+    }
+    assert_eq!(weights(&stall.weigh(&parts)), [1.0, 1.0]);
+    // Progress resets the count.
+    let nearer = [parts[0], PartGoal { pose: at(190.0), ..parts[1] }];
+    assert_eq!(weights(&stall.weigh(&nearer)), [1.0, 1.0]);
+}
