@@ -116,3 +116,61 @@ fn best_second(model: &Model, parts: &[PartGoal], poses: &[Pose], bursts: &[f64]
         .min_by(|a, b| a.cost.total_cmp(&b.cost))
         .map(|c| Then { mode: c.mode, burst_s: bursts[c.burst], cost: c.cost })
 }
+
+/// Cycles without a new lowest total cost after which the loop turns to its worst part
+/// ([`Stall`]).
+pub const STALL_CYCLES: usize = 12;
+
+/// Cycles a turn to the worst part lasts.
+pub const FOCUS_CYCLES: usize = 8;
+
+/// The weight of the other parts while the loop turns to the worst one.
+pub const FOCUS_OTHERS: f64 = 0.2;
+
+/// A loop's memory of its progress, for the one case a cycle's choice cannot see: several parts
+/// where one is far from its goal and every command that brings it nearer takes the others
+/// off theirs by more (a local minimum of the total cost). When the total cost has not reached
+/// a new low for [`STALL_CYCLES`] cycles, the next [`FOCUS_CYCLES`] choices weigh the worst
+/// part 1 and the others [`FOCUS_OTHERS`]: it is brought nearer, and the others are brought
+/// back afterwards.
+#[derive(Debug, Clone, Default)]
+pub struct Stall {
+    best: Option<f64>,
+    since: usize,
+    focus: Option<(usize, usize)>,
+}
+
+impl Stall {
+    /// No progress seen yet.
+    pub fn new() -> Stall {
+        Stall::default()
+    }
+
+    /// The parts to choose for this cycle: `parts` as they are, or re-weighted towards the
+    /// worst while a turn to it lasts.
+    pub fn weigh<'a>(&mut self, parts: &[PartGoal<'a>]) -> Vec<PartGoal<'a>> {
+        let now: f64 = parts.iter().map(|p| p.cost_at(p.pose)).sum();
+        if self.best.is_none_or(|b| now < b - 1e-6) {
+            (self.best, self.since) = (Some(now), 0);
+        } else {
+            self.since += 1;
+        }
+        if self.focus.is_none() && self.since >= STALL_CYCLES && parts.len() > 1 {
+            let worst = (0..parts.len()).max_by(|&a, &b| {
+                parts[a].cost_at(parts[a].pose).total_cmp(&parts[b].cost_at(parts[b].pose))
+            });
+            self.focus = worst.map(|k| (k, FOCUS_CYCLES));
+            self.since = 0;
+        }
+        let Some((k, left)) = self.focus else { return parts.to_vec() };
+        self.focus = (left > 1).then_some((k, left - 1));
+        parts
+            .iter()
+            .enumerate()
+            .map(|(i, p)| PartGoal {
+                weight: if i == k { p.weight } else { p.weight * FOCUS_OTHERS },
+                ..*p
+            })
+            .collect()
+    }
+}

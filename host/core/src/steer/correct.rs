@@ -1,9 +1,9 @@
 //! Online correction: after each burst, the driven mode's [`Correction`] is refitted to that
 //! mode's last bursts, so the loop's predictions follow what the plate really does.
 //!
-//! The rule: each mode keeps its last [`Corrector::window`] bursts (default 8). After a burst
+//! The rule: each mode keeps its last [`Corrector::window`] bursts (default 6). After a burst
 //! of mode m, m's correction is fitted to m's window by the shared fit
-//! ([`crate::steer::fit`]: Levenberg–Marquardt, a few iterations from the current
+//! ([`crate::steer::fit`]: Levenberg–Marquardt, two iterations from the current
 //! correction) with a prior centred on the given plate (shift 0, factor 1; spreads 6 mm and
 //! 0.7 in ln factor, about ×2): with one burst of one part the three parameters are not all
 //! determined, and the prior keeps the undetermined ones where the plate file put them; with
@@ -37,11 +37,12 @@ pub const ONLINE_PRIOR: Prior = Prior {
 };
 
 impl Corrector {
-    /// A corrector for `modes` modes: window 8, 4 iterations per update, [`ONLINE_PRIOR`].
+    /// A corrector for `modes` modes: window 6, 2 iterations per update (each update starts
+    /// from the last, so they add up), [`ONLINE_PRIOR`].
     pub fn new(modes: usize) -> Corrector {
         Corrector {
-            window: 8,
-            iterations: 4,
+            window: 6,
+            iterations: 2,
             prior: ONLINE_PRIOR,
             recent: vec![VecDeque::new(); modes],
         }
@@ -70,13 +71,8 @@ impl Corrector {
         while queue.len() > self.window.max(1) {
             queue.pop_front();
         }
-        let problem = Problem {
-            given: model.given(),
-            mode,
-            pieces,
-            bursts: queue.iter().collect(),
-            prior: Some(self.prior),
-        };
+        let problem =
+            Problem::new(model.given(), mode, pieces, queue.iter().collect(), Some(self.prior));
         let (c, _) = problem.fit(model.correction(mode)?, self.iterations);
         model.set_correction(mode, c)?;
         Ok(c)

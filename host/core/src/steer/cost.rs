@@ -1,6 +1,7 @@
 //! How far a part is from its goal: one number in millimetres, the distance of the centroids
 //! plus [`MM_PER_DEG`] per degree of orientation error, the error taken modulo the part's
-//! rotational symmetry period (a square at 90° is a square at 0°).
+//! rotational symmetry period (a square at 90° is a square at 0°); its cost is that error,
+//! squared near the goal ([`near_quadratic`]).
 
 use crate::model::angle::cdist;
 use crate::model::part::Part;
@@ -46,6 +47,17 @@ pub fn distance_mm(pose: Pose, goal: Pose) -> f64 {
     (pose.x - goal.x).hypot(pose.y - goal.y)
 }
 
+/// Errors (mm) below which a part's cost grows as the square of its error ([`near_quadratic`]).
+pub const NEAR_MM: f64 = 4.0;
+
+/// The cost of an error `e` (mm): the error itself far from the goal (e − [`NEAR_MM`]/2), its
+/// square near it (e²/(2·[`NEAR_MM`])), joined smoothly (Huber's function). Near the goals the
+/// square prefers every part a little off to one part far off (all parts within tolerance at
+/// once is what placing several parts needs); far from them each millimetre counts alike.
+pub fn near_quadratic(e: f64) -> f64 {
+    if e < NEAR_MM { e * e / (2.0 * NEAR_MM) } else { e - NEAR_MM / 2.0 }
+}
+
 /// One part to steer: its body, where it is, where it should go and how much it counts.
 #[derive(Debug, Clone, Copy)]
 pub struct PartGoal<'a> {
@@ -70,9 +82,14 @@ impl<'a> PartGoal<'a> {
 
     /// The weighted cost (mm) of this part at `pose`.
     pub fn cost_at(&self, pose: Pose) -> f64 {
-        self.weight
-            * (distance_mm(pose, self.goal)
-                + self.mm_per_deg * angle_error_deg(pose, self.goal, self.piece.period_deg))
+        self.weight * near_quadratic(self.error_mm(pose))
+    }
+
+    /// The part's error (mm) at `pose`: its distance from the goal plus
+    /// [`PartGoal::mm_per_deg`] per degree of orientation error.
+    pub fn error_mm(&self, pose: Pose) -> f64 {
+        distance_mm(pose, self.goal)
+            + self.mm_per_deg * angle_error_deg(pose, self.goal, self.piece.period_deg)
     }
 
     /// Is the part at `pose` within `tol_mm` and `tol_deg` of its goal?

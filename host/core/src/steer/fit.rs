@@ -1,5 +1,5 @@
 //! The one fit of a mode's [`Correction`] to observed bursts, shared by the offline learning
-//! ([`crate::steer::learn`]) and the online correction ([`crate::steer::correct`]).
+//! ([`learn`](mod@crate::steer::learn)) and the online correction ([`crate::steer::correct`]).
 //!
 //! Parameters p = (dx mm, dy mm, ln factor). Residuals: for every part of every burst of the
 //! mode, the predicted pose after the burst minus the observed one, (Δx, Δy) in mm and the
@@ -11,6 +11,8 @@
 //! enough). Robust to one outlier: after a fit, the part whose residual is largest is dropped
 //! and the fit rerun from there when that residual exceeds both 3 × the median of the others'
 //! and [`OUTLIER_MM`] (a part that bounced or was mislocated).
+
+use std::cell::RefCell;
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -58,6 +60,9 @@ pub(crate) struct Problem<'a> {
     pub pieces: &'a [Piece],
     pub bursts: Vec<&'a Burst>,
     pub prior: Option<Prior>,
+    /// The last shift's field: a field is rebuilt only when the shift changes (a change of
+    /// speed alone reuses it).
+    cache: RefCell<Option<([f64; 2], FieldModel)>>,
 }
 
 pub(crate) type Params = [f64; 3];
@@ -75,7 +80,18 @@ fn clamp(p: Params) -> Params {
     [p[0].clamp(-40.0, 40.0), p[1].clamp(-40.0, 40.0), p[2].clamp(0.05f64.ln(), 20f64.ln())]
 }
 
-impl Problem<'_> {
+impl<'a> Problem<'a> {
+    /// A mode's bursts to fit or score.
+    pub fn new(
+        given: &'a PlateModel,
+        mode: usize,
+        pieces: &'a [Piece],
+        bursts: Vec<&'a Burst>,
+        prior: Option<Prior>,
+    ) -> Problem<'a> {
+        Problem { given, mode, pieces, bursts, prior, cache: RefCell::new(None) }
+    }
+
     /// Number of (burst, part) items.
     pub fn items(&self) -> usize {
         self.bursts.iter().map(|b| b.parts.len()).sum()
@@ -83,14 +99,19 @@ impl Problem<'_> {
 
     /// Each item's predicted pose after its burst under correction `c`.
     pub fn predictions(&self, c: Correction) -> Vec<Pose> {
-        let mode = corrected_mode(&self.given.modes[self.mode], c);
-        let field = FieldModel::new(&mode, self.given);
+        let Some(given_mode) = self.given.modes.get(self.mode) else { return Vec::new() };
+        let mode = corrected_mode(given_mode, c);
+        let mut cache = self.cache.borrow_mut();
+        let field = match &*cache {
+            Some((shift, field)) if *shift == c.shift_mm => field,
+            _ => &cache.insert((c.shift_mm, FieldModel::new(&mode, self.given))).1,
+        };
         let mut out = Vec::with_capacity(self.items());
         for b in &self.bursts {
             let p = SimParams::under(&mode, self.given, b.burst_s);
             for (i, before, _) in &b.parts {
                 out.push(
-                    self.pieces.get(*i).map_or(*before, |q| run(&q.body, &field, p, *before).pose),
+                    self.pieces.get(*i).map_or(*before, |q| run(&q.body, field, p, *before).pose),
                 );
             }
         }
@@ -151,14 +172,14 @@ impl Problem<'_> {
         let mut cost = sq(&r);
         let mut lambda = 1e-2;
         for _ in 0..iterations {
-            let cols: Vec<Vec<f64>> = (0..3)
-                .map(|k| {
-                    let mut q = p;
-                    q[k] += H[k];
-                    let rq = self.residuals(q, keep);
-                    rq.iter().zip(&r).map(|(a, b)| (a - b) / H[k]).collect()
-                })
-                .collect();
+            // The factor's column first: it reuses the field at p (same shift, cached).
+            let mut cols: Vec<Vec<f64>> = vec![Vec::new(); 3];
+            for k in [2, 0, 1] {
+                let mut q = p;
+                q[k] += H[k];
+                let rq = self.residuals(q, keep);
+                cols[k] = rq.iter().zip(&r).map(|(a, b)| (a - b) / H[k]).collect();
+            }
             let a = Matrix3::from_fn(|i, j| cols[i].iter().zip(&cols[j]).map(|(x, y)| x * y).sum());
             let g = Vector3::from_fn(|i, _| cols[i].iter().zip(&r).map(|(x, y)| x * y).sum());
             let mut improved = false;

@@ -109,10 +109,10 @@ const LEARN_PRIOR: Prior = Prior {
 
 /// Fits every mode of `plate` to `bursts` (parts by index into `pieces`), holding out every
 /// `hold_out_every`-th burst of each mode to score the given and the learned plate.
-pub fn learn<'a>(
-    plate: &'a PlateModel,
-    pieces: &'a [Piece],
-    bursts: &'a [Burst],
+pub fn learn(
+    plate: &PlateModel,
+    pieces: &[Piece],
+    bursts: &[Burst],
     opt: LearnOptions,
 ) -> Result<Learned, SteerError> {
     let mut model = Model::new(plate.clone());
@@ -121,44 +121,51 @@ pub fn learn<'a>(
     }
     let mut reports = Vec::with_capacity(plate.modes.len());
     for mode in 0..plate.modes.len() {
-        let (used, held): (Vec<(usize, &Burst)>, Vec<(usize, &Burst)>) = bursts
-            .iter()
-            .filter(|b| b.mode == mode)
-            .enumerate()
-            .partition(|(k, _)| opt.hold_out_every == 0 || (k + 1) % opt.hold_out_every != 0);
-        let problem = |set: &[(usize, &'a Burst)], prior| Problem {
-            given: plate,
-            mode,
-            pieces,
-            bursts: set.iter().map(|(_, b)| *b).collect(),
-            prior,
-        };
-        let fit_problem = problem(&used, Some(LEARN_PRIOR));
-        let (correction, keep) = if used.is_empty() {
-            (Correction::default(), Vec::new())
-        } else {
-            fit_from_starts(&fit_problem, opt.iterations)
-        };
-        model.set_correction(mode, correction)?;
-        let scored = problem(&held, None);
-        let scored_keep = scored_items(&scored, correction);
-        let before = rms(&scored, Correction::default(), &scored_keep);
-        let after = rms(&scored, correction, &scored_keep);
-        reports.push(ModeReport {
-            mode,
-            name: plate.modes[mode].name.clone(),
-            bursts_used: used.len(),
-            held_out: held.len(),
-            outliers: keep.iter().filter(|k| !**k).count(),
-            held_out_outliers: scored_keep.iter().filter(|k| !**k).count(),
-            before_mm: before.map(|r| r.0),
-            before_deg: before.map(|r| r.1),
-            after_mm: after.map(|r| r.0),
-            after_deg: after.map(|r| r.1),
-            correction,
-        });
+        let report = learn_mode(plate, pieces, bursts, mode, opt);
+        model.set_correction(mode, report.correction)?;
+        reports.push(report);
     }
     Ok(Learned { model, reports })
+}
+
+/// One mode's fit and scores.
+fn learn_mode(
+    plate: &PlateModel,
+    pieces: &[Piece],
+    bursts: &[Burst],
+    mode: usize,
+    opt: LearnOptions,
+) -> ModeReport {
+    let mine = bursts.iter().filter(|b| b.mode == mode).enumerate();
+    let (mut used, mut held) = (Vec::new(), Vec::new());
+    for (k, b) in mine {
+        let hold = opt.hold_out_every > 0 && (k + 1) % opt.hold_out_every == 0;
+        if hold { held.push(b) } else { used.push(b) }
+    }
+    let (used_n, held_n) = (used.len(), held.len());
+    let fit = Problem::new(plate, mode, pieces, used, Some(LEARN_PRIOR));
+    let (correction, keep) = if used_n == 0 {
+        (Correction::default(), Vec::new())
+    } else {
+        fit_from_starts(&fit, opt.iterations)
+    };
+    let scored = Problem::new(plate, mode, pieces, held, None);
+    let scored_keep = scored_items(&scored, correction);
+    let before = rms(&scored, Correction::default(), &scored_keep);
+    let after = rms(&scored, correction, &scored_keep);
+    ModeReport {
+        mode,
+        name: plate.modes.get(mode).map_or_else(String::new, |m| m.name.clone()),
+        bursts_used: used_n,
+        held_out: held_n,
+        outliers: keep.iter().filter(|k| !**k).count(),
+        held_out_outliers: scored_keep.iter().filter(|k| !**k).count(),
+        before_mm: before.map(|r| r.0),
+        before_deg: before.map(|r| r.1),
+        after_mm: after.map(|r| r.0),
+        after_deg: after.map(|r| r.1),
+        correction,
+    }
 }
 
 /// The fit from the best of the starts the module doc names.

@@ -163,7 +163,7 @@ impl Model {
     /// (s): `[part][burst]`. One run per part to the longest burst, read at each length
     /// ([`pose_at`]). Parts are predicted independently: the motion model of one part in the
     /// field, no part–part contact (parts closer than their radii are the caller's to keep
-    /// apart, see [`crate::steer::learn::needs_recover`]).
+    /// apart, see [`crate::steer::policy::needs_recover`]).
     pub fn predict_all(
         &self,
         parts: &[(&Body, Pose)],

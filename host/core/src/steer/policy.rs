@@ -7,8 +7,8 @@
 //! rim, to move no more than [`Rules::max_move_mm`], and not to come within
 //! [`Rules::gap_mm`] of another; among modes recorded equally often, one that moves some part
 //! by [`Rules::min_move_mm`] comes first (a part that stays put shows where the node is, not
-//! the speed). When no mode has such a burst, or the parts already gathered or reached the
-//! rim ([`needs_recover`]), the step is [`LearnStep::Recover`]: the command that brings them
+//! the speed). When no mode has such a burst, or parts already touch each other or the rim
+//! ([`needs_recover`]), the step is [`LearnStep::Recover`]: the command that brings them
 //! towards spread home positions ([`recover`]).
 
 use crate::model::geometry::bounds;
@@ -57,16 +57,26 @@ pub enum LearnStep {
     Recover(Command),
 }
 
-/// Are the parts (bodies at poses) too near the rim or each other to record a burst?
-pub fn needs_recover(plate: &PlateModel, parts: &[(&Piece, Pose)], rules: &Rules) -> bool {
+/// Parts this close (mm) to the rim or to each other touch it: their motion is no longer the
+/// motion of one free part that the fit predicts.
+pub const TOUCH_MM: f64 = 0.5;
+
+/// Must the parts (at their poses) be brought home before a burst is recorded: does one touch
+/// the rim or another part ([`TOUCH_MM`])? Parts merely near each other are not: a burst is
+/// recorded from there if it is predicted to part them ([`Rules`]).
+pub fn needs_recover(plate: &PlateModel, parts: &[(&Piece, Pose)]) -> bool {
+    too_close(plate, parts, TOUCH_MM, TOUCH_MM)
+}
+
+/// Does a part come within `rim` (mm) of the plate's edge or within `gap` of another part?
+pub(crate) fn too_close(plate: &PlateModel, parts: &[(&Piece, Pose)], rim: f64, gap: f64) -> bool {
     let [w, h] = plate.size_mm;
     let near_rim = parts.iter().any(|(p, q)| {
         let placed = p.body.placed(*q);
         let (lo, hi) = bounds(placed.iter().flatten());
-        let m = rules.rim_mm;
-        lo[0] < m || lo[1] < m || hi[0] > w - m || hi[1] > h - m
+        lo[0] < rim || lo[1] < rim || hi[0] > w - rim || hi[1] > h - rim
     });
-    near_rim || gathered(parts, &parts.iter().map(|p| p.1).collect::<Vec<_>>(), rules.gap_mm)
+    near_rim || gathered(parts, &parts.iter().map(|p| p.1).collect::<Vec<_>>(), gap)
 }
 
 /// Do any two parts at `poses` come within `gap` (mm) of touching?
@@ -93,7 +103,7 @@ pub fn next_learning_step(
     if parts.is_empty() {
         return Err(SteerError::NoParts);
     }
-    if needs_recover(model.given(), parts, rules) {
+    if needs_recover(model.given(), parts) {
         return Ok(LearnStep::Recover(recover(model, parts, menu)?));
     }
     let count = |m: usize| counts.get(m).copied().unwrap_or(0);
@@ -139,7 +149,7 @@ fn safe_burst(
         let moves: Vec<f64> = parts.iter().zip(&after).map(|(p, q)| distance_mm(p.1, *q)).collect();
         let moved: Vec<(&Piece, Pose)> = parts.iter().zip(&after).map(|(p, q)| (p.0, *q)).collect();
         let safe = moves.iter().all(|d| *d <= rules.max_move_mm)
-            && !needs_recover(model.given(), &moved, rules);
+            && !too_close(model.given(), &moved, rules.rim_mm, rules.gap_mm);
         if !safe {
             continue;
         }

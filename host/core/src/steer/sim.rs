@@ -3,36 +3,43 @@
 //! against it (assign, choose, drive, observe, correct), with no camera and no controller.
 //!
 //! Goals are poses a part can hold: a random drop run to rest under a random mode of the true
-//! plate ([`random_goal`]), so every goal is a rest of some mode near where it lies.
+//! plate ([`Truth::random_goal`]), so every goal is a rest of some mode near where it lies.
 
 use crate::model::pose::Pose;
 use crate::motion::body::Body;
 use crate::rng::Rng;
 use crate::steer::SteerError;
 use crate::steer::assign::assign_goals;
-use crate::steer::choose::{Menu, choose};
+use crate::steer::choose::{Menu, Stall, choose};
 use crate::steer::correct::Corrector;
 use crate::steer::cost::{MM_PER_DEG, PartGoal, Piece, angle_error_deg, distance_mm};
 use crate::steer::fit::Burst;
 use crate::steer::model::Model;
 
-/// How the true plate's parts stray from the motion model in one burst.
+/// How the true plate's parts stray from the motion model: a diffusion over the time driven
+/// (a burst of t s moves a part off its predicted pose by σ·√t along each axis), bounces at
+/// random times (a Poisson process), and a camera-sized error on every burst (added to the
+/// pose the loop is shown, which is the pose the next burst starts from).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Noise {
-    /// Standard deviation of each coordinate's error (mm) after a burst.
+    /// Diffusion: standard deviation of each coordinate's error after 1 s of drive (mm).
     pub mm: f64,
-    /// Standard deviation of the orientation error (deg) after a burst.
+    /// Diffusion: standard deviation of the orientation error after 1 s of drive (deg).
     pub deg: f64,
-    /// Probability that a part bounces in a burst.
-    pub bounce_p: f64,
+    /// Bounces per second of drive, per part.
+    pub bounces_per_s: f64,
     /// A bounce moves the part by up to this (mm, uniform direction).
     pub bounce_mm: f64,
+    /// Standard deviation of each coordinate's error per burst whatever its length (mm):
+    /// about `locate`'s on rendered photos (0.04 mm).
+    pub camera_mm: f64,
 }
 
 impl Default for Noise {
-    /// 0.2 mm and 0.5° per burst; one burst in 50 bounces a part by up to 8 mm.
+    /// 0.2 mm and 0.5° per √s, a bounce of up to 8 mm every 50 s of drive per part, 0.05 mm
+    /// from the camera.
     fn default() -> Self {
-        Noise { mm: 0.2, deg: 0.5, bounce_p: 0.02, bounce_mm: 8.0 }
+        Noise { mm: 0.2, deg: 0.5, bounces_per_s: 0.02, bounce_mm: 8.0, camera_mm: 0.05 }
     }
 }
 
@@ -70,8 +77,9 @@ impl Truth {
         for (body, pose) in parts {
             let q = self.model.predict(body, *pose, mode, burst_s)?;
             let n = self.noise;
-            let (mut dx, mut dy) = (n.mm * normal(&mut self.rng), n.mm * normal(&mut self.rng));
-            if self.rng.uniform() < n.bounce_p {
+            let s = (n.mm * n.mm * burst_s + n.camera_mm * n.camera_mm).sqrt();
+            let (mut dx, mut dy) = (s * normal(&mut self.rng), s * normal(&mut self.rng));
+            if self.rng.uniform() < 1.0 - (-n.bounces_per_s * burst_s).exp() {
                 let (a, r) =
                     (self.rng.range(0.0, std::f64::consts::TAU), self.rng.range(0.0, n.bounce_mm));
                 (dx, dy) = (dx + r * a.cos(), dy + r * a.sin());
@@ -79,7 +87,7 @@ impl Truth {
             let moved = Pose {
                 x: q.x + dx,
                 y: q.y + dy,
-                theta: q.theta + n.deg.to_radians() * normal(&mut self.rng),
+                theta: q.theta + n.deg.to_radians() * burst_s.sqrt() * normal(&mut self.rng),
             };
             out.push(crate::motion::contact::Rim::of(self.model.given()).project(body, moved));
         }
@@ -155,7 +163,8 @@ pub struct TrialResult {
 }
 
 /// The closed loop against `truth`: identical parts (`piece` at each of `starts`), each
-/// cycle assigned to `goals` ([`assign_goals`]), then choose → drive
+/// cycle assigned to `goals` ([`assign_goals`]), weighed by the loop's progress ([`Stall`]),
+/// then choose → drive
 /// → observe (→ correct `model`) until every part is within tolerance or the drive time is
 /// spent.
 pub fn steer_trial(
@@ -174,13 +183,14 @@ pub fn steer_trial(
     let mut corrector = Corrector::new(model.mode_count());
     let (mut cycles, mut drive_s) = (0, 0.0);
     let within = |parts: &[PartGoal]| parts.iter().all(|p| p.within(p.pose, opt.tol_mm, tol_deg));
+    let mut stall = Stall::new();
     loop {
         // Identical parts: each cycle, the goals go to the parts that are nearest them now.
         parts = assign_goals(&parts, goals)?;
         if within(&parts) || drive_s >= opt.time_limit_s || cycles >= opt.max_cycles {
             break;
         }
-        let cmd = choose(model, &parts, &opt.menu)?;
+        let cmd = choose(model, &stall.weigh(&parts), &opt.menu)?;
         let before: Vec<(&Body, Pose)> = parts.iter().map(|p| (&p.piece.body, p.pose)).collect();
         let after = truth.burst(&before, cmd.mode, cmd.burst_s)?;
         if opt.correct {
