@@ -1,14 +1,17 @@
 //! `chladni steer`: parts to goal poses in closed loop (docs/steer.md).
 //!
 //! Each cycle: a frame → the parts located and followed → the model's correction of the mode
-//! just driven refitted from what it did ([`Corrector`]) → the command (mode, burst) predicted
-//! to bring all parts nearest their goals ([`choose`], with look-ahead) → the burst. Until
-//! every part is within tolerance, or the time limit. Identical parts are assigned to goals
-//! once, on the first frame, by least total cost ([`assign_goals`]).
+//! just driven refitted from what it did ([`Corrector`]) → identical parts given the goals
+//! nearest them now ([`assign_goals`]) → the command (mode, burst) predicted to bring all
+//! parts nearest their goals ([`choose`], with look-ahead; [`Stall`] turns to the worst part
+//! when the total stops falling) → the burst. Until every part is within tolerance, or the
+//! time limit. The same cycle as the in-process rig's (`chladni_core::steer::sim`), which the
+//! benches measure.
 
 use std::time::{Duration, Instant, UNIX_EPOCH};
 
 use chladni_core::model::pose::Pose;
+use chladni_core::steer::choose::Stall;
 use chladni_core::steer::cost::{PartGoal, angle_error_deg, distance_mm};
 use chladni_core::steer::{
     Burst, Corrector, Menu, Model, assign_goals, choose, reachable_orientation,
@@ -129,8 +132,9 @@ pub fn steer(
     let (mut sighting, _) = session.look()?;
     let given: Vec<usize> = job.parts.iter().map(|p| p.0).collect();
     let mut tracked = parts::first(&job.kinds, &given, &sighting.parts)?;
-    let goals = goals_assigned(job, &tracked)?;
+    let mut goals = goals_assigned(job, &tracked)?;
     let unheld_goals = unheld(model, job, &tracked, &goals)?;
+    let mut stall = Stall::new();
     let mut corrector = Corrector::new(model.mode_count());
     let mut last: Option<(Burst, Vec<Pose>)> = None;
     let mut cycles = 0u32;
@@ -146,6 +150,7 @@ pub fn steer(
             let pieces = pieces_of(job, &tracked);
             corrector.observe(model, &pieces, burst).map_err(LoopError::Steer)?;
         }
+        goals = goals_assigned(job, &tracked)?;
         let goal_of = |i: usize| part_goal(job, &tracked[i], goals[i]);
         let within =
             (0..tracked.len()).all(|i| goal_of(i).within(tracked[i].pose, job.tol_mm, job.tol_deg));
@@ -155,7 +160,7 @@ pub fn steer(
         }
         let chosen = Instant::now();
         let pg: Vec<PartGoal> = (0..tracked.len()).map(goal_of).collect();
-        let command = choose(model, &pg, &job.menu).map_err(LoopError::Steer)?;
+        let command = choose(model, &stall.weigh(&pg), &job.menu).map_err(LoopError::Steer)?;
         record.choose_ms = chosen.elapsed().as_secs_f64() * 1e3;
         let mode = model.mode(command.mode).map_err(LoopError::Steer)?.clone();
         let driven = session.burst(&mode, command.burst_s)?;
