@@ -5,7 +5,7 @@
 //! long as keeps the parts on the plate and apart: [`next_learning_step`]), brings the parts
 //! home when they gather or near the rim, and records every burst with each part's pose before
 //! and after. Recovery bursts are recorded too: a burst is a burst. At the end, every mode's
-//! correction is fitted to its bursts with every 4th held out to score it ([`learn`]).
+//! correction is fitted to its bursts with every 4th held out to score it ([`learn()`]).
 
 use std::time::{Duration, Instant};
 

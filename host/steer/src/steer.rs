@@ -3,7 +3,7 @@
 //! Each cycle: a frame → the parts located and followed → the model's correction of the mode
 //! just driven refitted from what it did ([`Corrector`]) → identical parts given the goals
 //! nearest them now ([`assign_goals`]) → the command (mode, burst) predicted to bring all
-//! parts nearest their goals ([`choose`], with look-ahead; [`Stall`] turns to the worst part
+//! parts nearest their goals ([`choose()`], with look-ahead; [`Stall`] turns to the worst part
 //! when the total stops falling) → the burst. Until every part is within tolerance, or the
 //! time limit. The same cycle as the in-process rig's (`chladni_core::steer::sim`), which the
 //! benches measure.
