@@ -21,13 +21,11 @@
 //! Goals are poses the part can hold: a random drop run to rest under a random mode of the
 //! true plate (`Truth::random_goal`).
 //!
-//! The modes: the free plate's first 12 solver modes, written once by the binary
-//! (`chladni plate modes examples/plate-free.toml --count 12 --write-modes FILE`), at
-//! [`SPEED_MM_S`]. `cargo bench -p chladni --bench steer`; `STEER_SECTIONS=choose,one`
+//! The modes: the free plate's first 12 solver modes (`examples/plates/free-12-modes.toml`),
+//! at [`SPEED_MM_S`]. `cargo bench -p chladni --bench steer`; `STEER_SECTIONS=choose,one`
 //! picks sections, `STEER_TRIALS=5` sets the trials per section.
 
 use std::path::Path;
-use std::process::Command as Process;
 use std::time::Instant;
 
 use chladni_core::model::part::Part;
@@ -61,19 +59,12 @@ const LEARNING_SET: [&str; 3] = [
     "examples/parts/ordinary/spring-clip.json",
 ];
 
-/// The free plate's first 12 solver modes, written by the `chladni` binary, at `SPEED_MM_S`.
+/// The free plate's first 12 solver modes (`examples/plates/free-12-modes.toml`), at
+/// `SPEED_MM_S`.
 fn twelve_modes(root: &Path) -> PlateModel {
-    let out = std::env::temp_dir().join(format!("chladni-steer-{}.toml", std::process::id()));
-    let status = Process::new(env!("CARGO_BIN_EXE_chladni"))
-        .current_dir(root)
-        .args(["plate", "modes", "examples/plate-free.toml", "--count", "12", "--write-modes"])
-        .arg(&out)
-        .output()
-        .expect("the chladni binary runs");
-    assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
-    let mut plate = PlateModel::load(&out).expect("the written modes load");
-    let _ = std::fs::remove_file(&out);
-    assert_eq!(plate.modes.len(), 12, "12 modes written");
+    let mut plate = PlateModel::load(&root.join("examples/plates/free-12-modes.toml"))
+        .expect("the example plate loads");
+    assert_eq!(plate.modes.len(), 12, "12 modes");
     for m in &mut plate.modes {
         m.speed_mm_s = SPEED_MM_S;
     }

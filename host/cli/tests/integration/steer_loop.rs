@@ -30,6 +30,21 @@ fn arg(p: &std::path::Path) -> String {
     p.display().to_string()
 }
 
+/// `chladni steer` of one triangle to `goal` on `rig`'s camera, with `more` arguments.
+fn steer(
+    port: &str,
+    rig: &RigProcess,
+    learned: &std::path::Path,
+    tri: &str,
+    goal: [&str; 3],
+    more: &[&str],
+) -> std::process::Output {
+    let camera = format!("{}/frame.png", rig.url);
+    let l = arg(learned);
+    let args = ["steer", "--port", port, "--camera", &camera, "--plate", &l, "--part", tri];
+    chladni(&[&args[..], &["--goal"], &goal, more].concat())
+}
+
 /// The controller's drive is idle (stopped by whoever drove it).
 fn drive_is_idle(emu: &Emulator) {
     let mut client = emu.connect("steer test").unwrap();
@@ -171,26 +186,8 @@ fn steers_one_part(port: &str, tri: &str, true_file: &std::path::Path, learned: 
         format!("{:.3}", goal.y),
         format!("{:.3}", goal.theta.to_degrees()),
     );
-    let out = chladni(&[
-        "steer",
-        "--port",
-        port,
-        "--camera",
-        &format!("{}/frame.png", rig.url),
-        "--plate",
-        &arg(learned),
-        "--part",
-        tri,
-        "--goal",
-        &gx,
-        &gy,
-        &gt,
-        "--json",
-        "--log",
-        &arg(&log),
-        "--time-limit-s",
-        LIMIT_S,
-    ]);
+    let more = ["--json", "--log", &arg(&log), "--time-limit-s", LIMIT_S];
+    let out = steer(port, &rig, learned, tri, [&gx, &gy, &gt], &more);
     let v = json(&out);
     eprintln!("steer: {v}");
     assert_eq!((out.status.code(), &v["reached"]), (Some(0), &Value::Bool(true)), "{v}");
@@ -224,22 +221,7 @@ fn camera_failing_mid_run_stops_the_drive(
         "--fail-mode",
         "garbage",
     ]);
-    let out = chladni(&[
-        "steer",
-        "--port",
-        port,
-        "--camera",
-        &format!("{}/frame.png", rig.url),
-        "--plate",
-        &arg(learned),
-        "--part",
-        tri,
-        "--goal",
-        "220",
-        "50",
-        "0",
-        "--json",
-    ]);
+    let out = steer(port, &rig, learned, tri, ["220", "50", "0"], &["--json"]);
     let v = json(&out);
     assert_eq!((out.status.code(), v["error"].as_str()), (Some(1), Some("not_an_image")), "{v}");
     assert!(v["message"].as_str().unwrap().contains("the drive was stopped"), "{v}");
