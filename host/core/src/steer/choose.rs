@@ -127,12 +127,13 @@ pub const FOCUS_CYCLES: usize = 8;
 /// The weight of the other parts while the loop turns to the worst one.
 pub const FOCUS_OTHERS: f64 = 0.2;
 
-/// A loop's memory of its progress, for the one case a cycle's choice cannot see: several parts
-/// where one is far from its goal and every command that brings it nearer takes the others
-/// off theirs by more (a local minimum of the total cost). When the total cost has not reached
-/// a new low for [`STALL_CYCLES`] cycles, the next [`FOCUS_CYCLES`] choices weigh the worst
-/// part 1 and the others [`FOCUS_OTHERS`]: it is brought nearer, and the others are brought
-/// back afterwards.
+/// A loop's memory of its progress, for what a cycle's choice cannot see: a local minimum of
+/// the total cost, where every command that brings a far part nearer costs more elsewhere (the
+/// other parts taken off their goals, or the part's own orientation turned off the goal's on
+/// the way). When the total cost has not reached a new low for [`STALL_CYCLES`] cycles, the
+/// next [`FOCUS_CYCLES`] choices weigh the worst part's position alone (its orientation at 0)
+/// and the other parts at [`FOCUS_OTHERS`]: it is brought nearer, and the rest put right
+/// afterwards.
 #[derive(Debug, Clone, Default)]
 pub struct Stall {
     best: Option<f64>,
@@ -155,7 +156,7 @@ impl Stall {
         } else {
             self.since += 1;
         }
-        if self.focus.is_none() && self.since >= STALL_CYCLES && parts.len() > 1 {
+        if self.focus.is_none() && self.since >= STALL_CYCLES {
             let worst = (0..parts.len()).max_by(|&a, &b| {
                 parts[a].cost_at(parts[a].pose).total_cmp(&parts[b].cost_at(parts[b].pose))
             });
@@ -167,9 +168,12 @@ impl Stall {
         parts
             .iter()
             .enumerate()
-            .map(|(i, p)| PartGoal {
-                weight: if i == k { p.weight } else { p.weight * FOCUS_OTHERS },
-                ..*p
+            .map(|(i, p)| {
+                if i == k {
+                    PartGoal { mm_per_deg: 0.0, ..*p }
+                } else {
+                    PartGoal { weight: p.weight * FOCUS_OTHERS, ..*p }
+                }
             })
             .collect()
     }

@@ -466,7 +466,9 @@ fn a_stalled_loop_turns_to_its_worst_part_for_a_while() {
         assert_eq!(weights(&stall.weigh(&parts)), [1.0, 1.0]);
     }
     for _ in 0..FOCUS_CYCLES {
-        assert_eq!(weights(&stall.weigh(&parts)), [FOCUS_OTHERS, 1.0], "the far part first");
+        let w = stall.weigh(&parts);
+        assert_eq!(weights(&w), [FOCUS_OTHERS, 1.0], "the far part first");
+        assert_eq!((w[0].mm_per_deg, w[1].mm_per_deg), (crate::steer::cost::MM_PER_DEG, 0.0));
     }
     assert_eq!(weights(&stall.weigh(&parts)), [1.0, 1.0]);
     // Progress resets the count.
