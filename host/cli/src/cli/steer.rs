@@ -3,7 +3,7 @@
 //! after the link opened has stopped the drive.
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
@@ -260,35 +260,48 @@ impl SteerArgs {
         if self.rig.json {
             return print_json(r);
         }
-        for (i, rest) in &r.unheld_goals {
-            println!(
-                "note: no mode holds part {i} at its goal; the nearest rest held there is x {:.1} y {:.1} θ {:.1}°",
-                rest[0], rest[1], rest[2]
-            );
+        for line in steer_lines(r) {
+            println!("{line}");
         }
-        for p in &r.parts {
-            let verdict = if p.reached { "reached" } else { "off" };
-            println!(
-                "{:<16} goal ({:.1}, {:.1}, {:.1}°)  at ({:.1}, {:.1}, {:.1}°)  off {:.2} mm {:.2}°  {verdict}",
-                p.part,
-                p.goal[0],
-                p.goal[1],
-                p.goal[2],
-                p.x_mm,
-                p.y_mm,
-                p.theta_deg,
-                p.error_mm,
-                p.error_deg
-            );
-        }
-        let what = if r.reached {
-            "every part reached its goal"
-        } else {
-            "time limit: not every part reached its goal"
-        };
-        println!("{what} in {} cycles, {:.1} s", r.cycles, r.elapsed_s);
         Ok(())
     }
+}
+
+/// The end of a steering run for people: goals no mode holds, each part against its goal, and
+/// whether all reached them (`chladni steer`, `chladni demo --steer`).
+pub(crate) fn steer_lines(r: &SteerReport) -> Vec<String> {
+    let mut lines: Vec<String> = (r.unheld_goals.iter())
+        .map(|(i, rest)| {
+            format!(
+                "note: no mode holds part {i} at its goal; the nearest rest held there is x {:.1} \
+                 y {:.1} θ {:.1}°",
+                rest[0], rest[1], rest[2]
+            )
+        })
+        .collect();
+    lines.extend(r.parts.iter().map(|p| {
+        let verdict = if p.reached { "reached" } else { "off" };
+        format!(
+            "{:<16} goal ({:.1}, {:.1}, {:.1}°)  at ({:.1}, {:.1}, {:.1}°)  off {:.2} mm {:.2}°  \
+             {verdict}",
+            p.part,
+            p.goal[0],
+            p.goal[1],
+            p.goal[2],
+            p.x_mm,
+            p.y_mm,
+            p.theta_deg,
+            p.error_mm,
+            p.error_deg
+        )
+    }));
+    let what = if r.reached {
+        "every part reached its goal"
+    } else {
+        "time limit: not every part reached its goal"
+    };
+    lines.push(format!("{what} in {} cycles, {:.1} s", r.cycles, r.elapsed_s));
+    lines
 }
 
 /// Learn what each mode really does from bursts seen by the camera; write a learned plate.
@@ -324,15 +337,12 @@ impl LearnArgs {
         let text = std::fs::read_to_string(&self.rig.plate)
             .map_err(|e| bad(format!("--plate {}: {e}", self.rig.plate.display())))?;
         let loaded = self.rig.load()?;
-        let job = LearnJob {
-            kinds: loaded.kinds.clone(),
-            parts: loaded.parts.clone(),
-            bursts_per_mode: self.bursts_per_mode,
-            time_limit: Duration::from_secs_f64(self.rig.time_limit_s.unwrap_or(600.0)),
-            menu: Menu { bursts_s: vec![0.15, 0.3, 0.5, 0.8, 1.2], lookahead: 1 },
-            rules: Rules::default(),
-            fit: LearnOptions::default(),
-        };
+        let job = learn_job(
+            loaded.kinds.clone(),
+            loaded.parts.clone(),
+            self.bursts_per_mode,
+            Duration::from_secs_f64(self.rig.time_limit_s.unwrap_or(600.0)),
+        );
         let model = Model::new(loaded.plate.clone());
         let mut session = self.rig.session(&loaded, "plate learn")?;
         let bar = message_bar(self.rig.json);
@@ -347,25 +357,13 @@ impl LearnArgs {
             Err(e) => return loop_end(e, self.rig.json),
         };
         drop(session);
-        let table = self.table(&outcome);
+        let table = learned_table(&outcome, &self.rig.plate, &self.rig.camera);
         let written =
             set_learned(&text, &table).map_err(|e| Failure { kind: "failed", error: e.into() })?;
         write_atomic(&self.out, written.as_bytes())
             .map_err(|e| Failure { kind: "failed", error: output_error(e) })?;
         self.print(&outcome, &table).map_err(|error| Failure { kind: "failed", error })?;
         Ok(ExitCode::SUCCESS)
-    }
-
-    fn table(&self, o: &LearnOutcome) -> LearnedTable {
-        let rows = o.learned.rows();
-        LearnedTable {
-            given: self.rig.plate.display().to_string(),
-            at: utc_now(),
-            camera: self.rig.camera.clone(),
-            bursts: rows.iter().map(|r| r.bursts).sum(),
-            held_out: rows.iter().map(|r| r.held_out).sum(),
-            mode: rows,
-        }
     }
 
     fn print(&self, o: &LearnOutcome, t: &LearnedTable) -> anyhow::Result<()> {
@@ -378,30 +376,8 @@ impl LearnArgs {
                 "modes": modes,
             }));
         }
-        println!(
-            "{:>9} {:>7} {:>5} {:>7} {:>14} {:>17} {:>17}",
-            "freq (Hz)",
-            "bursts",
-            "held",
-            "speed×",
-            "shift (mm)",
-            "before (mm, °)",
-            "after (mm, °)"
-        );
-        for m in &t.mode {
-            println!(
-                "{:>9.2} {:>7} {:>5} {:>7.2} {:>6.1} {:>6.1} {:>8.2} {:>7.1} {:>8.2} {:>7.1}",
-                m.freq_hz,
-                m.bursts,
-                m.held_out,
-                m.speed_factor,
-                m.shift_mm[0],
-                m.shift_mm[1],
-                m.before_mm,
-                m.before_deg,
-                m.after_mm,
-                m.after_deg
-            );
+        for line in learned_lines(t) {
+            println!("{line}");
         }
         let note = if o.timed_out { " (time limit: some modes have fewer bursts)" } else { "" };
         println!(
@@ -413,6 +389,64 @@ impl LearnArgs {
         );
         Ok(())
     }
+}
+
+/// The learning job of `chladni plate learn` (and `chladni demo --steer`): every mode in
+/// bursts of 0.15–1.2 s, one step of look-ahead when bringing parts home, the default rules
+/// and fit.
+pub(crate) fn learn_job(
+    kinds: Vec<Kind>,
+    parts: Vec<usize>,
+    bursts_per_mode: usize,
+    time_limit: Duration,
+) -> LearnJob {
+    LearnJob {
+        kinds,
+        parts,
+        bursts_per_mode,
+        time_limit,
+        menu: Menu { bursts_s: vec![0.15, 0.3, 0.5, 0.8, 1.2], lookahead: 1 },
+        rules: Rules::default(),
+        fit: LearnOptions::default(),
+    }
+}
+
+/// The `[learned]` table of a learning run from the plate file `given`, seen by `camera`.
+pub(crate) fn learned_table(o: &LearnOutcome, given: &Path, camera: &str) -> LearnedTable {
+    let rows = o.learned.rows();
+    LearnedTable {
+        given: given.display().to_string(),
+        at: utc_now(),
+        camera: camera.to_string(),
+        bursts: rows.iter().map(|r| r.bursts).sum(),
+        held_out: rows.iter().map(|r| r.held_out).sum(),
+        mode: rows,
+    }
+}
+
+/// The per-mode table for people, header first: bursts, the measured speed factor and node
+/// shift, and the held-out error of a burst's prediction before and after.
+pub(crate) fn learned_lines(t: &LearnedTable) -> Vec<String> {
+    let mut lines = vec![format!(
+        "{:>9} {:>7} {:>5} {:>7} {:>14} {:>17} {:>17}",
+        "freq (Hz)", "bursts", "held", "speed×", "shift (mm)", "before (mm, °)", "after (mm, °)"
+    )];
+    lines.extend(t.mode.iter().map(|m| {
+        format!(
+            "{:>9.2} {:>7} {:>5} {:>7.2} {:>6.1} {:>6.1} {:>8.2} {:>7.1} {:>8.2} {:>7.1}",
+            m.freq_hz,
+            m.bursts,
+            m.held_out,
+            m.speed_factor,
+            m.shift_mm[0],
+            m.shift_mm[1],
+            m.before_mm,
+            m.before_deg,
+            m.after_mm,
+            m.after_deg
+        )
+    }));
+    lines
 }
 
 /// Now, UTC, RFC 3339 to the second.
