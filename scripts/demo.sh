@@ -9,7 +9,13 @@
 #   3. from plate dimensions alone (the paper's setup 2, hinged and driven by a rod): solve its
 #      modes, draw its Chladni figures, and plan for a rectangle on them;
 #   4. the controller again on the same flash file: the plan stored in 1 is still there, and a
-#      calibration sweep finds the (simulated) plate's resonance.
+#      calibration sweep finds the (simulated) plate's resonance;
+#   5. `chladni demo --steer`: the feeder with a camera, without hardware. A virtual rig (three
+#      triangles on the free plate, its modes warped) follows a new QEMU controller; the tool
+#      learns what each mode really does from bursts seen by the rig's camera, steers the three
+#      parts to three goals, plans sensorless on the learned plate, runs the plan and checks the
+#      part it was made for in one frame (about 10 minutes; files named steer-*, learned.toml,
+#      true-plate.toml).
 # Outputs (plan files, figures, logs) go to target/demo/. `scripts/demo.sh --fast` runs the plan
 # in 1 time-scaled (about 25 s instead of 71 s).
 set -euo pipefail
@@ -49,6 +55,14 @@ $chladni device plans --port "$port"
 say chladni device sweep --port $port --from 100 --to 300 --points 41 --plot $out/sweep.png --out $out/sweep.csv
 $chladni device sweep --port "$port" --from 100 --to 300 --points 41 --plot "$out/sweep.png" --out "$out/sweep.csv"
 
+# The sweep's controller is done: stopped, so the next one (in QEMU, timed) has the cores.
+kill $emu 2>/dev/null; wait $emu 2>/dev/null || true
+emu=""
+
+say chladni demo --steer --out $out
+$chladni demo --steer --out $out
+
 echo
 echo "figures: $out/plan.png $out/traces.png $out/traces-plan.png $out/analysis.png $out/modes/ $out/sweep.png"
 echo "plan files: $out/plan.json (as planned) $out/device-plan.json (as stored); firmware log: $out/firmware.log"
+echo "camera story: $out/learned.toml (learned) $out/true-plate.toml (the rig's truth) $out/steer-plan.json $out/steer-verify.png"

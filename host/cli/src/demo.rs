@@ -24,6 +24,7 @@
 //! have time to settle); the factor is in the output and the summary.
 
 pub mod run;
+pub mod steer;
 
 use std::path::{Path, PathBuf};
 
@@ -46,6 +47,11 @@ use chladni_device::firmware;
 use chladni_device::json::FaultJson;
 use chladni_media::plot::PlotError;
 use chladni_media::plot::plan as plan_plot;
+use chladni_media::vision::LocateError;
+use chladni_media::vision::verify::VerifyError;
+use chladni_rig::RigError;
+use chladni_steer::LoopError;
+use chladni_steer::camera::CameraError;
 
 pub use run::{RunReport, watch};
 
@@ -154,6 +160,55 @@ pub enum DemoError {
         /// Why it failed.
         source: DeviceError,
     },
+    /// `--steer`: the virtual rig could not start, or stopped.
+    #[error("the virtual rig: {0}")]
+    Rig(RigError),
+    /// `--steer`: the virtual rig did not listen in time.
+    #[error(
+        "the virtual rig did not listen within {within_s} s: the controller in QEMU did not \
+         answer it; run the demo again"
+    )]
+    RigSilent {
+        /// How long it was waited for.
+        within_s: u64,
+    },
+    /// `--steer`: the virtual rig's thread ended without an error.
+    #[error(
+        "the virtual rig's thread ended without saying why (a bug): run the demo again, and \
+         report it if it repeats"
+    )]
+    RigEnded,
+    /// `--steer`: the camera loop failed; the drive was stopped.
+    #[error("{stage}: {source}")]
+    Loop {
+        /// What the demo was doing.
+        stage: &'static str,
+        /// Why it failed.
+        source: LoopError,
+    },
+    /// `--steer`: the frame to verify the plan by did not come.
+    #[error("the frame after the plan: {0}")]
+    Camera(CameraError),
+    /// `--steer`: the parts could not be located in that frame.
+    #[error("locating the parts after the plan: {0}")]
+    Locate(LocateError),
+    /// `--steer`: the plan's prediction cannot be checked.
+    #[error("the plan's prediction: {0}")]
+    Verify(VerifyError),
+    /// `--steer`: the learned plate could not be made from the given one.
+    #[error("the learned plate: {0}")]
+    Learned(String),
+    /// `--steer`: no plan on the learned plate for parts fed into the box.
+    #[error(
+        "no plan on the learned plate for parts fed into {region}: {source} (what was learned \
+         varies with the rig's timing: run the demo again)"
+    )]
+    FedPlan {
+        /// The feed box, as said.
+        region: String,
+        /// Why.
+        source: PlanFailure,
+    },
 }
 
 impl DemoError {
@@ -170,7 +225,21 @@ impl DemoError {
             DemoError::Output(_) => "output",
             DemoError::FaultLatched { .. } => "fault_latched",
             DemoError::Device { .. } => "device",
+            DemoError::Rig(_) => "rig",
+            DemoError::RigSilent { .. } => "rig_silent",
+            DemoError::RigEnded => "rig_ended",
+            DemoError::Loop { source, .. } => source.name(),
+            DemoError::Camera(e) => e.name(),
+            DemoError::Locate(e) => e.name(),
+            DemoError::Verify(e) => e.name(),
+            DemoError::Learned(_) => "learned_plate",
+            DemoError::FedPlan { .. } => "plan_failed",
         }
+    }
+
+    /// Ctrl-C ended the camera loop (the drive was stopped).
+    pub fn is_interrupted(&self) -> bool {
+        matches!(self, DemoError::Loop { source: LoopError::Interrupted, .. })
     }
 
     /// Exit code: 2 for bad input, 1 for everything else.
@@ -179,6 +248,7 @@ impl DemoError {
             DemoError::Input(_) => 2,
             DemoError::Output(e) if e.is_bad_input() => 2,
             DemoError::Figure(e) if e.is_bad_input() => 2,
+            DemoError::Rig(e) if e.is_bad_input() => 2,
             _ => 1,
         }
     }
@@ -202,12 +272,18 @@ pub fn find_program(program: &str) -> Option<PathBuf> {
     std::env::split_paths(&path).map(|dir| dir.join(program)).find(|p| p.is_file())
 }
 
-/// Checks, before any work, that the QEMU controller can start (without `--port`): QEMU, the
-/// log decoder and coreutils `timeout` (which keeps QEMU from outliving a killed demo).
+/// Checks, before any work, that the QEMU controller can start (without `--port`): see
+/// [`preflight_qemu`].
 pub fn preflight(config: &DemoConfig) -> Result<(), DemoError> {
     if config.port.is_some() {
         return Ok(());
     }
+    preflight_qemu()
+}
+
+/// Checks that QEMU, the log decoder and coreutils `timeout` (which keeps QEMU from outliving
+/// a killed demo) are on `PATH`.
+pub fn preflight_qemu() -> Result<(), DemoError> {
     for program in ["qemu-system-arm", "defmt-print", "timeout"] {
         if find_program(program).is_none() {
             return Err(DemoError::QemuMissing { program });
@@ -488,10 +564,22 @@ pub fn connect(config: &DemoConfig, prepared: &Prepared) -> Result<Controller, D
         return Ok(Controller { client, port: port.clone(), emulator: None });
     }
     let limit = prepared.device_plan.total_ms() / 1000 + EMULATOR_SLACK_S;
+    let files = &prepared.files;
+    start_emulator(&files.flash, &files.firmware_log, limit, &name)
+}
+
+/// Starts the QEMU controller with its flash bank and decoded log in these files, killed
+/// after `limit_s` whatever happens, and opens a session named `name` on it.
+pub fn start_emulator(
+    flash: &Path,
+    log: &Path,
+    limit_s: u64,
+    name: &str,
+) -> Result<Controller, DemoError> {
     let emulator_config = EmulatorConfig {
-        log_file: Some(prepared.files.firmware_log.clone()),
-        flash_file: Some(prepared.files.flash.clone()),
-        time_limit: Some(std::time::Duration::from_secs(limit)),
+        log_file: Some(log.to_path_buf()),
+        flash_file: Some(flash.to_path_buf()),
+        time_limit: Some(std::time::Duration::from_secs(limit_s)),
         ..EmulatorConfig::default()
     };
     let emulator = Emulator::start(&emulator_config).map_err(|e| match e {
@@ -500,21 +588,21 @@ pub fn connect(config: &DemoConfig, prepared: &Prepared) -> Result<Controller, D
     })?;
     let port = emulator.address();
     let client = emulator
-        .connect(&name)
+        .connect(name)
         .map_err(|source| DemoError::PortUnreachable { port: port.clone(), source })?;
     Ok(Controller { client, port, emulator: Some(emulator) })
 }
 
-/// Stores the plan under [`STORED_NAME`] (the slot of a plan of that name, else the first
-/// free one); `progress(steps_sent, steps_total)` after each chunk.
+/// Stores `plan` (the slot of a plan of its name, else the first free one);
+/// `progress(steps_sent, steps_total)` after each chunk.
 pub fn upload(
     controller: &mut Controller,
-    prepared: &Prepared,
+    plan: &Plan,
     progress: impl FnMut(usize, usize),
 ) -> Result<PlanSummary, DemoError> {
     controller
         .client
-        .upload(&prepared.device_plan, None, progress)
+        .upload(plan, None, progress)
         .map_err(|source| DemoError::Device { stage: "uploading the plan", source })
 }
 
@@ -639,10 +727,10 @@ fn controller_info(info: &DeviceInfo, controller: &Controller) -> ControllerInfo
     }
 }
 
-/// Starts the stored plan and watches it to its end (see [`run::watch`]).
+/// Starts the stored `plan` and watches it to its end (see [`run::watch`]).
 pub fn run_plan(
     controller: &mut Controller,
-    prepared: &Prepared,
+    plan: &Plan,
     on_sample: impl FnMut(&chladni_shared::icd::link::Telemetry) -> std::ops::ControlFlow<()>,
 ) -> Result<RunReport, DemoError> {
     let status = controller
@@ -655,7 +743,7 @@ pub fn run_plan(
             port: controller.port.clone(),
         });
     }
-    watch(&mut controller.client, &prepared.device_plan, on_sample)
+    watch(&mut controller.client, plan, on_sample)
 }
 
 #[cfg(test)]

@@ -21,6 +21,8 @@ use super::device::render::{FaultJson, print_json, telemetry_line};
 use super::device::watch::{EXIT_INTERRUPTED, interrupt_flag};
 use super::parse::f64_where;
 
+mod steer;
+
 /// Plan a part, simulate it, and run it on the controller (QEMU, or a real one with --port).
 #[derive(Debug, Args)]
 pub struct DemoArgs {
@@ -46,6 +48,11 @@ pub struct DemoArgs {
     /// most 25 s.
     #[arg(long)]
     fast: bool,
+    /// The camera story without hardware: a virtual rig (three triangles on the free plate,
+    /// warped) follows the controller in QEMU; learn the plate, steer the parts to three goals,
+    /// plan on the learned plate, run the plan and verify it from a frame (docs/demo.md).
+    #[arg(long, conflicts_with_all = ["part", "plate", "port", "accel", "fast"])]
+    steer: bool,
     /// Print the summary as one JSON object (progress goes to stderr).
     #[arg(long)]
     json: bool,
@@ -53,12 +60,12 @@ pub struct DemoArgs {
 
 /// Where the lines for people go: stdout, or stderr with `--json`.
 #[derive(Debug, Clone, Copy)]
-struct Say {
+pub(super) struct Say {
     json: bool,
 }
 
 impl Say {
-    fn line(self, text: impl AsRef<str>) {
+    pub(super) fn line(self, text: impl AsRef<str>) {
         if self.json {
             eprintln!("{}", text.as_ref());
         } else {
@@ -69,6 +76,9 @@ impl Say {
 
 impl DemoArgs {
     pub fn run(&self) -> anyhow::Result<ExitCode> {
+        if self.steer {
+            return self.ended(steer::run(&self.out, self.json));
+        }
         let config = DemoConfig {
             part: demo::resolve_input(&self.part),
             plate: demo::resolve_input(&self.plate),
@@ -77,13 +87,22 @@ impl DemoArgs {
             accel_mps2: self.accel,
             fast: self.fast,
         };
-        match self.demo(&config) {
+        self.ended(self.demo(&config))
+    }
+
+    /// The exit code; an error printed (`--json`: its object too). Ctrl-C in the camera loop
+    /// is 130.
+    fn ended(&self, result: Result<ExitCode, DemoError>) -> anyhow::Result<ExitCode> {
+        match result {
             Ok(code) => Ok(code),
             Err(e) => {
                 if self.json {
                     print_json(&FailureJson { error: e.name(), message: e.to_string() })?;
                 }
                 eprintln!("error: {e}");
+                if e.is_interrupted() {
+                    return Ok(ExitCode::from(EXIT_INTERRUPTED));
+                }
                 Ok(ExitCode::from(e.exit_code()))
             }
         }
@@ -120,7 +139,7 @@ impl DemoArgs {
             return Ok(ExitCode::from(EXIT_INTERRUPTED));
         }
         let mut progress = Progress::new(say, &prepared);
-        let report = demo::run_plan(&mut controller, &prepared, |t| {
+        let report = demo::run_plan(&mut controller, &prepared.device_plan, |t| {
             progress.show(t);
             if is_set(interrupted) { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
         });
@@ -146,7 +165,8 @@ fn upload(
 ) -> Result<chladni_shared::icd::store::PlanSummary, DemoError> {
     let bar = ProgressBar::new(prepared.device_plan.steps.len() as u64);
     bar.set_style(style("uploading {bar:40.cyan/blue} {pos}/{len} steps"));
-    let stored = demo::upload(controller, prepared, |done, _| bar.set_position(done as u64));
+    let stored =
+        demo::upload(controller, &prepared.device_plan, |done, _| bar.set_position(done as u64));
     bar.finish_and_clear();
     stored
 }

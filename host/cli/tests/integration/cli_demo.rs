@@ -142,6 +142,14 @@ fn errors_name_their_fix() {
     assert_eq!((run.status.code(), e["error"].as_str()), (Some(1), Some("qemu_missing")), "{e}");
     assert!(e["message"].as_str().unwrap().contains("scripts/install-deps.sh"), "{e}");
     assert!(!out.join("plan.json").exists(), "nothing planned before the check");
+    let run = chladni(&["demo", "--steer", "--json", "--out", out_s], Some(&empty));
+    let e = json_of(&run);
+    assert_eq!((run.status.code(), e["error"].as_str()), (Some(1), Some("qemu_missing")), "{e}");
+    assert!(!out.join("true-plate.toml").exists(), "--steer: no rig before the check");
+    // --steer brings its own controller, part and plate.
+    let run = chladni(&["demo", "--steer", "--port", "tcp://127.0.0.1:1", "--out", out_s], None);
+    assert_eq!(run.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&run.stderr).contains("cannot be used with"));
     // A port where no controller listens.
     let run = chladni(&["demo", "--json", "--port", "tcp://127.0.0.1:1", "--out", out_s], None);
     let e = json_of(&run);
