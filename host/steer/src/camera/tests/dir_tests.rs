@@ -55,6 +55,8 @@ fn a_file_written_later_is_waited_for() {
     let not_before = SystemTime::now();
     let (dir, bytes) = (tmp.path().to_path_buf(), fresh.clone());
     let writer = thread::spawn(move || {
+        // The delay is the stimulus, not a wait: the camera must find the folder without a
+        // new file first and keep polling (the test waits on the frame, not on time).
         thread::sleep(Duration::from_millis(150));
         // Written under another name and renamed, as cameras do, so it is never half-seen.
         fs::write(dir.join("new.tmp"), &bytes).expect("writable");
