@@ -112,7 +112,11 @@ fn true_corrections(rng: &mut Rng, n: usize, factors: (f64, f64)) -> Vec<Correct
 /// Bursts recorded by the learning policy until each mode has `per_mode` (the steer bench's
 /// `record`: its predictions from a model corrected online, the fit from the given plate).
 fn record(truth: &mut Truth, model: &mut Model, pieces: &[Piece], per_mode: usize) -> Vec<Burst> {
-    let menu = Menu { bursts_s: vec![0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.5], lookahead: 0 };
+    let menu = Menu {
+        bursts_s: vec![0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.5],
+        lookahead: 0,
+        to_go_mm_per_s: None,
+    };
     let mut corrector = Corrector::new(model.mode_count());
     let rules = Rules::default();
     let mut poses: Vec<Pose> = pieces.iter().map(|p| truth.random_pose(&p.body, 10.0)).collect();

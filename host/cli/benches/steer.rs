@@ -5,8 +5,9 @@
 //! every 50 s of drive, 0.05 mm of camera error).
 //!
 //! Sections (stdout, one line per result):
-//! - `choose`: the cost of one cycle's choice, 3 parts × 12 modes × 6 bursts, look-ahead over
-//!   the best 3 and without (median and worst of 30 calls, one thread);
+//! - `choose`: the cost of one cycle's choice, 3 parts × 12 modes × 8 bursts, by what is left
+//!   to do (the default), by cost with a look-ahead over the best 3 and without (median and
+//!   worst of 30 calls, one thread);
 //! - `learn`: bursts chosen by the learning policy (recovering home between when needed) until
 //!   each mode has 12, then the fit, with every 4th burst held out: per mode the held-out
 //!   RMS error before and after, the fitted and the true correction;
@@ -16,14 +17,18 @@
 //!   positions within 3 mm;
 //! - `one-learned`, `three-learned`: the same on the rig `learn` learned (its true plate, 20
 //!   new starts and goals), the loop starting from the learned plate (`learn`'s model as the
-//!   given plate, as `steer --plate LEARNED.toml` would): learn once, then steer.
+//!   given plate, as `steer --plate LEARNED.toml` would): learn once, then steer;
+//! - `ten-learned` (not in the default run: minutes per trial): ten u-channels to goals 40 mm
+//!   apart, positions within 3 mm, on the learned rig.
 //!
 //! Goals are poses the part can hold: a random drop run to rest under a random mode of the
 //! true plate (`Truth::random_goal`).
 //!
 //! The modes: the free plate's first 12 solver modes (`examples/plates/free-12-modes.toml`),
 //! at [`SPEED_MM_S`]. `cargo bench -p chladni --bench steer`; `STEER_SECTIONS=choose,one`
-//! picks sections, `STEER_TRIALS=5` sets the trials per section.
+//! picks sections, `STEER_TRIALS=5` sets the trials per section, `STEER_FIRST=10` the first
+//! trial's seed, `STEER_TOGO=off` (or a price in mm/s) the loop's choice
+//! (`chladni_core::steer::Menu::to_go_mm_per_s`).
 
 use std::path::Path;
 use std::time::Instant;
@@ -135,8 +140,12 @@ fn choose_cost(plate: &PlateModel, pieces: &[Piece]) {
     ];
     let parts: Vec<PartGoal> =
         pieces.iter().zip(poses).zip(goals).map(|((p, q), g)| PartGoal::new(p, q, g)).collect();
-    for lookahead in [3, 0] {
-        let menu = Menu { lookahead, ..Menu::default() };
+    let by_cost = |lookahead| Menu { lookahead, to_go_mm_per_s: None, ..Menu::default() };
+    for (what, menu) in [
+        ("by what is left", Menu::default()),
+        ("by cost, look-ahead 3", by_cost(3)),
+        ("by cost, no look-ahead", by_cost(0)),
+    ] {
         let mut ms: Vec<f64> = (0..30)
             .map(|_| {
                 let t = Instant::now();
@@ -146,7 +155,7 @@ fn choose_cost(plate: &PlateModel, pieces: &[Piece]) {
             .collect();
         let worst = ms.iter().copied().fold(0.0, f64::max);
         println!(
-            "choose: 3 parts x 12 modes x {} bursts, look-ahead {lookahead}: median {:.1} ms, worst {worst:.1} ms",
+            "choose: 3 parts x 12 modes x {} bursts, {what}: median {:.1} ms, worst {worst:.1} ms",
             menu.bursts_s.len(),
             median(&mut ms)
         );
@@ -169,7 +178,7 @@ fn main() {
         let set: Vec<Piece> = CHOOSE_SET.iter().map(|p| load(p)).collect();
         choose_cost(&plate, &set);
     }
-    let learned = (on("learn") || on("one-learned") || on("three-learned"))
+    let learned = (on("learn") || on("one-learned") || on("three-learned") || on("ten-learned"))
         .then(|| learn_section(&plate, &pieces));
     if on("one") {
         trials_section(&plate, &load(HEX_KEY), 1, trials, None);
@@ -183,6 +192,9 @@ fn main() {
     if on("three-learned") {
         trials_section(&plate, &load(U_CHANNEL), 3, trials, learned.as_ref());
     }
+    if on("ten-learned") {
+        trials_section(&plate, &load(U_CHANNEL), 10, trials, learned.as_ref());
+    }
 }
 
 /// Bursts recorded by the learning policy until each mode has `per_mode`.
@@ -195,7 +207,11 @@ fn record(
     pieces: &[Piece],
     per_mode: usize,
 ) -> (Vec<Burst>, f64, usize) {
-    let menu = Menu { bursts_s: vec![0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.5], lookahead: 0 };
+    let menu = Menu {
+        bursts_s: vec![0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.5],
+        lookahead: 0,
+        to_go_mm_per_s: None,
+    };
     let mut corrector = Corrector::new(model.mode_count());
     let rules = Rules::default();
     let mut poses: Vec<Pose> = pieces.iter().map(|p| truth.random_pose(&p.body, 10.0)).collect();
@@ -289,11 +305,12 @@ fn trials_section(
         time_limit_s: 300.0,
         max_cycles: 5000,
         orientation,
-        menu: Menu::default(),
+        menu: menu(),
         correct: true,
     };
     let (mut ok, mut times, mut cycle_ms) = (0, Vec::new(), Vec::new());
-    for seed in 0..trials {
+    let first: u64 = std::env::var("STEER_FIRST").ok().and_then(|v| v.parse().ok()).unwrap_or(0);
+    for seed in first..first + trials {
         let mut rng = Rng::seeded(1000 + seed);
         let truth_c =
             rig.map_or_else(|| true_corrections(&mut rng, plate.modes.len()), |r| r.0.clone());
@@ -332,8 +349,18 @@ fn trials_section(
     );
 }
 
+/// The loop's menu: the default, its price of drive time set by `STEER_TOGO` (mm/s; `off`:
+/// the choice by cost with its look-ahead, as before the choice by what is left to do).
+fn menu() -> Menu {
+    match std::env::var("STEER_TOGO").as_deref() {
+        Ok("off") => Menu { to_go_mm_per_s: None, ..Menu::default() },
+        Ok(v) => Menu { to_go_mm_per_s: v.parse().ok(), ..Menu::default() },
+        Err(_) => Menu::default(),
+    }
+}
+
 /// Random starts and reachable goals: each goal at least 80 mm from its start (one part) or
-/// the goals at least 60 mm apart (several).
+/// the goals at least 60 mm apart (two or three parts; 40 mm for more).
 fn setup(truth: &mut Truth, piece: &Piece, n: usize) -> Option<(Vec<Pose>, Vec<Pose>)> {
     for _ in 0..100 {
         let goals: Vec<Pose> =
@@ -342,7 +369,9 @@ fn setup(truth: &mut Truth, piece: &Piece, n: usize) -> Option<(Vec<Pose>, Vec<P
         let apart =
             |v: &[Pose], d: f64| (0..n).all(|i| (i + 1..n).all(|j| distance_mm(v[i], v[j]) >= d));
         let far = n > 1 || distance_mm(starts[0], goals[0]) >= 80.0;
-        if far && apart(&goals, 60.0) && apart(&starts, 2.0 * piece.body.radius + 5.0) {
+        // Ten goals 60 mm apart do not fit on a 300 × 200 mm plate's rests: 40 mm there.
+        let gap = if n > 3 { 40.0 } else { 60.0 };
+        if far && apart(&goals, gap) && apart(&starts, 2.0 * piece.body.radius + 5.0) {
             return Some((starts, goals));
         }
     }

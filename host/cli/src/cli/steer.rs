@@ -405,7 +405,7 @@ pub(crate) fn learn_job(
         parts,
         bursts_per_mode,
         time_limit,
-        menu: Menu { bursts_s: vec![0.15, 0.3, 0.5, 0.8, 1.2], lookahead: 1 },
+        menu: Menu { bursts_s: vec![0.15, 0.3, 0.5, 0.8, 1.2], lookahead: 1, to_go_mm_per_s: None },
         rules: Rules::default(),
         fit: LearnOptions::default(),
     }

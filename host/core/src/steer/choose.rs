@@ -1,28 +1,47 @@
-//! The command of one control cycle: the mode and burst length whose predicted outcome most
-//! reduces the parts' total cost ([`crate::steer::cost`]), with a look-ahead of one more
-//! command over the best few first commands.
+//! The command of one control cycle: the mode and burst length that leaves the least to do
+//! ([`crate::steer::togo`]: the cost no combination of modes removes from where it leaves
+//! the parts, plus the drive time it and that combination take), or, by choice, the one
+//! whose predicted outcome most reduces the parts' total cost ([`crate::steer::cost`]), with
+//! a look-ahead of one more command over the best few first commands.
 
 use crate::model::pose::Pose;
 use crate::steer::SteerError;
 use crate::steer::cost::{PartGoal, total_cost};
 use crate::steer::model::{Model, check_bursts};
+use crate::steer::togo::Velocities;
 
 /// The commands one cycle chooses from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Menu {
     /// Burst lengths (s), each > 0.
     pub bursts_s: Vec<f64>,
-    /// Look-ahead: how many of the best first commands (by their own predicted cost) are
-    /// tried with every second command; 0: none.
+    /// Look-ahead of the choice by cost: how many of the best first commands (by their own
+    /// predicted cost) are tried with every second command; 0: none.
     pub lookahead: usize,
+    /// Value commands by what they leave to do ([`crate::steer::togo`]), counting this
+    /// many mm of cost per second of drive; `None`: by their cost (and the look-ahead). One
+    /// part is always chosen by cost: its cost falls towards its goal wherever it is, and
+    /// near a rest the velocities cannot see the turn a detour gives (on the 6-mode plate a
+    /// part held 0.1 mm from its goal stayed 13° off for 3000 cycles).
+    pub to_go_mm_per_s: Option<f64>,
 }
+
+/// The price of drive time in the choice by what is left to do: 0.5 mm of cost per second.
+/// Chosen over 0.1, 0.25 and 2 on the steer bench's three-part trials (docs/evidence/steer.md):
+/// a higher price takes the quick command that leaves the parts where no combination helps;
+/// a lower one spends minutes of drive on small gains.
+pub const TO_GO_MM_PER_S: f64 = 0.5;
 
 impl Default for Menu {
     /// Eight bursts from 0.03 to 2 s (short ones to nudge parts near their goals, a long one
-    /// to cross the plate: a part moves at most speed × burst), a look-ahead over the best 3
-    /// first commands.
+    /// to cross the plate: a part moves at most speed × burst), chosen by what they leave to
+    /// do at [`TO_GO_MM_PER_S`] (the look-ahead of 3 applies when that is turned off).
     fn default() -> Self {
-        Menu { bursts_s: vec![0.03, 0.06, 0.1, 0.2, 0.4, 0.7, 1.2, 2.0], lookahead: 3 }
+        Menu {
+            bursts_s: vec![0.03, 0.06, 0.1, 0.2, 0.4, 0.7, 1.2, 2.0],
+            lookahead: 3,
+            to_go_mm_per_s: Some(TO_GO_MM_PER_S),
+        }
     }
 }
 
@@ -56,7 +75,7 @@ pub struct Command {
 /// A first command and its prediction.
 struct Candidate {
     mode: usize,
-    burst: usize,
+    burst_s: f64,
     poses: Vec<Pose>,
     cost: f64,
 }
@@ -73,18 +92,20 @@ fn candidates(model: &Model, parts: &[PartGoal], poses: &[Pose], bursts: &[f64])
         for burst in 0..bursts.len() {
             let poses: Vec<Pose> = per_part.iter().map(|p| p[burst]).collect();
             let cost = total_cost(parts, &poses);
-            out.push(Candidate { mode, burst, poses, cost });
+            out.push(Candidate { mode, burst_s: bursts[burst], poses, cost });
         }
     }
     out
 }
 
-/// The command that most reduces the total cost of `parts` (at their `pose`s) under
-/// `model`, choosing among every mode and burst of `menu`. With a look-ahead, each of the
-/// `menu.lookahead` best first commands is valued at the lower of its own cost and the best
-/// cost any second command reaches after it; the first command of lowest value wins (ties:
-/// the lower cost of its own). "Do nothing" is never an option: the best command is
-/// returned even when every command raises the cost (each cycle moves the parts).
+/// The command of `menu` to drive next for `parts` (at their `pose`s) under `model`: with
+/// [`Menu::to_go_mm_per_s`] and several parts, the command that leaves the least to do
+/// ([`crate::steer::togo`]); without, the command that most reduces the total cost, with the
+/// look-ahead: each of the `menu.lookahead` best first commands is valued at the lower of its
+/// own cost and the best cost any second command reaches after it; the first command of
+/// lowest value wins (ties: the lower cost of its own). "Do nothing" is never an option: the
+/// best command is returned even when every command raises the cost (each cycle moves the
+/// parts).
 pub fn choose(model: &Model, parts: &[PartGoal], menu: &Menu) -> Result<Command, SteerError> {
     if parts.is_empty() {
         return Err(SteerError::NoParts);
@@ -93,6 +114,14 @@ pub fn choose(model: &Model, parts: &[PartGoal], menu: &Menu) -> Result<Command,
     let bursts = &menu.bursts_s;
     let start: Vec<Pose> = parts.iter().map(|p| p.pose).collect();
     let mut first = candidates(model, parts, &start, bursts);
+    if let Some(rate) = menu.to_go_mm_per_s.filter(|_| parts.len() > 1) {
+        let v = velocities(parts, &first, bursts);
+        let left = |c: &Candidate| v.value(parts, &c.poses, rate) + rate * c.burst_s;
+        let c = first.iter().min_by(|a, b| left(a).total_cmp(&left(b)));
+        let c = c.ok_or(SteerError::NoParts)?;
+        let (mode, burst_s, cost) = (c.mode, c.burst_s, c.cost);
+        return Ok(Command { mode, burst_s, predicted: c.poses.clone(), cost, then: None });
+    }
     first.sort_by(|a, b| a.cost.total_cmp(&b.cost));
     let mut best: Option<(f64, usize, Option<Then>)> = None;
     for (k, c) in first.iter().enumerate().take(menu.lookahead.max(1)) {
@@ -106,7 +135,15 @@ pub fn choose(model: &Model, parts: &[PartGoal], menu: &Menu) -> Result<Command,
     }
     let (_, k, then) = best.ok_or(SteerError::NoParts)?;
     let c = first.swap_remove(k);
-    Ok(Command { mode: c.mode, burst_s: bursts[c.burst], predicted: c.poses, cost: c.cost, then })
+    Ok(Command { mode: c.mode, burst_s: c.burst_s, predicted: c.poses, cost: c.cost, then })
+}
+
+/// Each mode's velocities at the parts, from its candidate of the shortest burst.
+fn velocities(parts: &[PartGoal], first: &[Candidate], bursts: &[f64]) -> Velocities {
+    let shortest = (0..bursts.len()).min_by(|&a, &b| bursts[a].total_cmp(&bursts[b])).unwrap_or(0);
+    let after: Vec<Vec<Pose>> =
+        first.iter().filter(|c| c.burst_s == bursts[shortest]).map(|c| c.poses.clone()).collect();
+    Velocities::from_short_burst(parts, &after, bursts[shortest])
 }
 
 /// The second command of lowest cost from `poses`.
@@ -114,7 +151,7 @@ fn best_second(model: &Model, parts: &[PartGoal], poses: &[Pose], bursts: &[f64]
     candidates(model, parts, poses, bursts)
         .into_iter()
         .min_by(|a, b| a.cost.total_cmp(&b.cost))
-        .map(|c| Then { mode: c.mode, burst_s: bursts[c.burst], cost: c.cost })
+        .map(|c| Then { mode: c.mode, burst_s: c.burst_s, cost: c.cost })
 }
 
 /// Cycles without a new lowest total cost after which the loop turns to its worst part

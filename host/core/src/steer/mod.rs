@@ -28,6 +28,7 @@ pub mod model;
 pub mod policy;
 pub mod reach;
 pub mod sim;
+pub mod togo;
 
 pub use assign::{assign, assign_goals};
 pub use choose::{Command, Menu, choose};

@@ -126,7 +126,7 @@ fn the_choice_is_the_best_command_and_a_look_ahead_only_when_it_pays() {
             Pose { x: 110.0, y: 120.0, theta: 0.1 },
         ),
     ];
-    let menu = Menu { bursts_s: vec![0.2, 0.7, 2.0], lookahead: 0 };
+    let menu = Menu { bursts_s: vec![0.2, 0.7, 2.0], lookahead: 0, to_go_mm_per_s: None };
     let cmd = choose(&model, &parts, &menu).unwrap();
     // Every command's cost, each part predicted alone: none lower than the one chosen.
     for mode in 0..4 {
@@ -209,7 +209,8 @@ fn assignment_is_the_least_total_cost() {
 /// Bursts of the true plate recorded by the learning policy until each mode has `per_mode`.
 fn record(truth: &mut Truth, pieces: &[Piece], per_mode: usize, seed: u64) -> Vec<Burst> {
     let model = Model::new(truth.model.given().clone());
-    let menu = Menu { bursts_s: vec![0.05, 0.1, 0.2, 0.4, 0.7, 1.0], lookahead: 0 };
+    let menu =
+        Menu { bursts_s: vec![0.05, 0.1, 0.2, 0.4, 0.7, 1.0], lookahead: 0, to_go_mm_per_s: None };
     let mut rng = Rng::seeded(seed);
     let homes = home_positions(model.given(), pieces.len());
     let mut poses: Vec<Pose> = homes
@@ -330,7 +331,7 @@ fn the_learning_policy_records_each_mode_safely_and_recovers_gathered_parts() {
     let model = Model::new(free_plate(3, 120.0));
     let pieces = [piece("u-channel"), piece("keyed-gear")];
     let rules = Rules::default();
-    let menu = Menu { bursts_s: vec![0.2, 0.5, 1.0], lookahead: 0 };
+    let menu = Menu { bursts_s: vec![0.2, 0.5, 1.0], lookahead: 0, to_go_mm_per_s: None };
     let homes = home_positions(model.given(), 2);
     let spread: Vec<(&Piece, Pose)> = pieces
         .iter()
