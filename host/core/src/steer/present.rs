@@ -15,7 +15,9 @@
 
 use crate::model::pose::Pose;
 use crate::steer::SteerError;
-use crate::steer::cost::{KeepOut, MM_PER_DEG, PartGoal, Piece, angle_error_deg, distance_mm};
+use crate::steer::cost::{
+    KeepOut, MM_PER_DEG, NEAR_MM, PartGoal, Piece, angle_error_deg, distance_mm,
+};
 use crate::steer::model::Model;
 use crate::steer::reach::{Reach, reachable_orientation};
 
@@ -23,10 +25,17 @@ use crate::steer::reach::{Reach, reachable_orientation};
 /// of the default menu and twice more, long enough to see where a mode's flow takes a part.
 pub const SOONEST_HORIZON_S: f64 = 6.0;
 
-/// Mm of cost per mm a part not presented lies inside the pick zone ([`KeepOut::per_mm`]):
-/// twice a goal's pull, so that pushing a part out of the zone is worth more than the
-/// presented part's progress by the same distance.
+/// Mm of cost per mm a part not presented lies inside the pick zone ([`KeepOut::per_mm`]) once
+/// the presented part is near the pick pose (its error within [`NEAR_MM`]): twice a goal's
+/// pull, so that clearing the zone is worth more than the presented part's progress by the
+/// same distance.
 pub const KEEP_OUT_PER_MM: f64 = 2.0;
+
+/// The same while the presented part is still on its way: a quarter of a goal's pull. The mode
+/// that holds a part at the pick pose draws its neighbours there too; a strong keep-out all the
+/// way stalls the presented part tens of mm short (measured in `benches/present.rs`), a weak
+/// one lets it come and only keeps the others from following for nothing.
+pub const KEEP_OUT_APPROACH_PER_MM: f64 = 0.25;
 
 /// The typical speed (mm/s) a part closes on a goal when the runs give none (all parts at
 /// rest under every mode): a slow plate's.
@@ -274,9 +283,15 @@ fn closing_speed(runs: &[Vec<Vec<(f64, Pose)>>]) -> f64 {
 }
 
 /// One cycle's objective: part `chosen` to the pick pose (its cost as any goal's); every other
-/// part weighs nothing where it is, but pays [`KEEP_OUT_PER_MM`] per mm its centroid lies
-/// within the pick zone plus its own bounding radius. The command is [`crate::steer::choose()`]'s.
+/// part weighs nothing where it is, but pays per mm its centroid lies within the pick zone plus
+/// its own bounding radius: [`KEEP_OUT_APPROACH_PER_MM`] while the chosen part comes,
+/// [`KEEP_OUT_PER_MM`] once it is near (first bring it, then clear the zone around it). The
+/// command is [`crate::steer::choose()`]'s.
 pub fn objective<'a>(parts: &[OnPlate<'a>], chosen: usize, pick: &Pick) -> Vec<PartGoal<'a>> {
+    let near = parts
+        .get(chosen)
+        .is_some_and(|c| PartGoal::new(c.piece, c.pose, pick.pose).error_mm(c.pose) <= NEAR_MM);
+    let per_mm = if near { KEEP_OUT_PER_MM } else { KEEP_OUT_APPROACH_PER_MM };
     parts
         .iter()
         .enumerate()
@@ -286,7 +301,7 @@ pub fn objective<'a>(parts: &[OnPlate<'a>], chosen: usize, pick: &Pick) -> Vec<P
             } else {
                 PartGoal {
                     weight: 0.0,
-                    keep_out: Some(keep_out(p.piece, pick)),
+                    keep_out: Some(KeepOut { per_mm, ..keep_out(p.piece, pick) }),
                     ..PartGoal::new(p.piece, p.pose, p.pose)
                 }
             }
@@ -433,14 +448,20 @@ mod tests {
         let k = goals[1].keep_out.unwrap();
         assert_eq!(goals[1].weight, 0.0);
         assert!((k.radius_mm - (20.0 + q.body.radius)).abs() < 1e-12, "{k:?}");
-        // 10 mm from the centre: (radius − 10) mm inside, at KEEP_OUT_PER_MM each.
-        let expected = KEEP_OUT_PER_MM * (k.radius_mm - 10.0);
+        // 10 mm from the centre: (radius − 10) mm inside, weakly while the chosen part comes.
+        let expected = KEEP_OUT_APPROACH_PER_MM * (k.radius_mm - 10.0);
         assert!((goals[1].cost_at(inside) - expected).abs() < 1e-9);
         let outside = at(150.0 + k.radius_mm + 0.1, 100.0, 0.0);
         assert_eq!(goals[1].cost_at(outside), 0.0);
         // The other part's cost is its keep-out's alone, wherever it goes outside the zone.
         let poses = [parts[0].pose, outside];
         assert!((total_cost(&goals, &poses) - goals[0].cost_at(parts[0].pose)).abs() < 1e-9);
+        // The chosen part near the pick pose (3 mm off): the zone is cleared in earnest.
+        let near = [OnPlate { pose: at(153.0, 100.0, 0.0), ..parts[0] }, parts[1]];
+        let k = objective(&near, 0, &pick)[1].keep_out.unwrap();
+        assert_eq!(k.per_mm, KEEP_OUT_PER_MM);
+        let far = [OnPlate { pose: at(155.0, 100.0, 0.0), ..parts[0] }, parts[1]];
+        assert_eq!(objective(&far, 0, &pick)[1].keep_out.unwrap().per_mm, KEEP_OUT_APPROACH_PER_MM);
     }
 
     /// Present cycles against `truth` until part 0 is presented with the zone clear, or
