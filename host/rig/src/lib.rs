@@ -26,7 +26,7 @@ pub mod serve;
 pub mod truth;
 
 pub use rig::{DEFAULT_NOISE, Noise, Rig, RigConfig, Truth};
-pub use serve::{Fail, FailMode, ServeOptions, serve};
+pub use serve::{DEFAULT_PICK_TIME, Fail, FailMode, PickRequest, ServeOptions, serve};
 pub use truth::{DEFAULT_WARP, ModeTruth, TruePlate, Warp};
 
 /// Everything that stops a rig.

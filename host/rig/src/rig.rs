@@ -306,6 +306,34 @@ impl Rig {
         }
     }
 
+    /// The robot's pick: the part (not lost) whose centroid lies nearest `[x, y]` (mm), within
+    /// `radius_mm`, leaves the plate; its state just before. `None`: no part there.
+    pub fn pick(&mut self, x: f64, y: f64, radius_mm: f64) -> Option<PartTruth> {
+        let d = |q: &Pose| (q.x - x).hypot(q.y - y);
+        let k = (0..self.poses.len())
+            .filter(|&i| !self.lost[i] && d(&self.poses[i]) <= radius_mm)
+            .min_by(|&a, &b| d(&self.poses[a]).total_cmp(&d(&self.poses[b])))?;
+        let picked = self.part_truth(k);
+        self.kind_of.remove(k);
+        self.bodies.remove(k);
+        self.pieces.remove(k);
+        self.poses.remove(k);
+        self.lost.remove(k);
+        Some(picked)
+    }
+
+    /// Part `k`'s state, as `/truth` reports it.
+    fn part_truth(&self, k: usize) -> PartTruth {
+        let q = self.poses[k];
+        PartTruth {
+            lost: self.lost[k],
+            part: self.kinds[self.kind_of[k]].name.clone(),
+            theta_deg: q.theta.to_degrees().rem_euclid(360.0),
+            x_mm: q.x,
+            y_mm: q.y,
+        }
+    }
+
     /// The parts in the picture (those on the plate), as the camera draws them.
     pub fn placed(&self) -> Vec<Placed> {
         (self.poses.iter().zip(&self.kind_of).zip(&self.lost))
@@ -321,15 +349,7 @@ impl Rig {
 
     /// The state as `/truth` reports it.
     pub fn truth(&self) -> Truth {
-        let parts = (self.poses.iter().zip(&self.kind_of).zip(&self.lost))
-            .map(|((q, &kind), &lost)| PartTruth {
-                lost,
-                part: self.kinds[kind].name.clone(),
-                theta_deg: q.theta.to_degrees().rem_euclid(360.0),
-                x_mm: q.x,
-                y_mm: q.y,
-            })
-            .collect();
+        let parts = (0..self.poses.len()).map(|k| self.part_truth(k)).collect();
         Truth { clock: self.clock, drive_s: self.drive_s, modes: self.plate.modes.clone(), parts }
     }
 

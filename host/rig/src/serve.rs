@@ -3,9 +3,10 @@
 //! an HTTP server (axum on tokio) that answers each frame with the state of a poll made after
 //! the request arrived.
 //!
-//! Routes, GET only: `/frame.png`, `/frame.jpg` (a photo; header `X-Frame-Time`: the wall
-//! time of the state shown, unix seconds), `/truth` ([`Truth`] with `time`). At most
-//! [`MAX_REQUESTS`] requests are answered at once (more: 503). With [`Fail`], frame requests
+//! Routes: GET `/frame.png`, `/frame.jpg` (a photo; header `X-Frame-Time`: the wall time of
+//! the state shown, unix seconds), `/truth` ([`Truth`] with `time`); POST `/pick` (the robot:
+//! after the pick time, the part at the pose given leaves the plate, [`PickRequest`]). At most
+//! [`MAX_REQUESTS`] frames and truths are answered at once (more: 503), one pick at a time. With [`Fail`], frame requests
 //! after the first N fail on purpose, for tests of cameras that break.
 
 use std::net::SocketAddr;
@@ -14,19 +15,20 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
 use axum::Router;
-use axum::extract::State;
+use axum::body::Bytes;
+use axum::extract::{DefaultBodyLimit, State};
 use axum::http::{HeaderName, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use axum::routing::get;
+use axum::routing::{get, post};
 use chladni_device::client::{DeviceClient, DeviceError};
 use chladni_media::vision::synth::Placed;
 use chladni_shared::icd::link::StatusReport;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use tokio::sync::{Semaphore, mpsc, oneshot, watch};
 
 use crate::RigError;
 use crate::camera::{Camera, Format};
-use crate::rig::{Rig, Truth};
+use crate::rig::{PartTruth, Rig, Truth};
 
 /// How often the controller's status is polled.
 pub const POLL: Duration = Duration::from_millis(20);
@@ -38,6 +40,12 @@ pub const MAX_REQUESTS: usize = 4;
 pub const CLIENT_NAME: &str = "rig";
 /// The header carrying the wall time of the state a frame shows.
 pub const FRAME_TIME: &str = "x-frame-time";
+/// The largest `/pick` body (bytes): a pick is three numbers.
+pub const PICK_BODY_LIMIT: usize = 1024;
+/// The robot's default pick time: from the request to the part gone.
+pub const DEFAULT_PICK_TIME: Duration = Duration::from_secs(2);
+/// The longest pick time `--pick-time-s` takes (s).
+pub const MAX_PICK_TIME_S: f64 = 600.0;
 
 /// How a failing camera fails.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -72,6 +80,58 @@ pub struct ServeOptions {
     pub fail: Option<Fail>,
     /// Seed of the frames' sensor noise (each frame its own).
     pub seed: u64,
+    /// How long a pick takes: the part leaves the plate this long after `POST /pick`.
+    pub pick_time: Duration,
+}
+
+/// `POST /pick`'s body: the robot picks the part whose centroid lies nearest (`x_mm`,
+/// `y_mm`) within `radius_mm`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PickRequest {
+    /// Where the gripper closes (mm, plate frame).
+    pub x_mm: f64,
+    /// Where the gripper closes (mm).
+    pub y_mm: f64,
+    /// How far from it a centroid may lie (mm, > 0).
+    pub radius_mm: f64,
+}
+
+impl PickRequest {
+    /// The request parsed from JSON and checked: finite numbers, a radius > 0. Errors are
+    /// `(name, message)`.
+    pub fn parse(body: &[u8]) -> Result<PickRequest, (&'static str, String)> {
+        let r: PickRequest = serde_json::from_slice(body).map_err(|e| {
+            (
+                "bad_json",
+                format!("the pick is not {{\"x_mm\": X, \"y_mm\": Y, \"radius_mm\": R}}: {e}"),
+            )
+        })?;
+        let fields = [("x_mm", r.x_mm), ("y_mm", r.y_mm), ("radius_mm", r.radius_mm)];
+        if let Some((name, v)) = fields.iter().find(|(_, v)| !v.is_finite()) {
+            return Err(("bad_value", format!("{name} = {v}: give a finite number (mm)")));
+        }
+        if r.radius_mm <= 0.0 {
+            let m =
+                format!("radius_mm = {}: give a radius > 0 mm (the gripper's reach)", r.radius_mm);
+            return Err(("bad_value", m));
+        }
+        Ok(r)
+    }
+}
+
+/// A pick waiting for its time, and where its answer goes.
+struct PickJob {
+    due: Instant,
+    request: PickRequest,
+    reply: oneshot::Sender<Option<PartTruth>>,
+}
+
+/// `/pick`'s answer when a part was picked.
+#[derive(Debug, Serialize)]
+struct Picked<'a> {
+    picked: &'a PartTruth,
+    pick_time_s: f64,
 }
 
 /// The state after one poll.
@@ -114,6 +174,9 @@ struct App {
     last: Mutex<Option<(Vec<u8>, Format)>>,
     slots: Semaphore,
     seed: u64,
+    picks: std::sync::mpsc::Sender<PickJob>,
+    picking: AtomicBool,
+    pick_time: Duration,
 }
 
 /// Follows the controller at `options.port` and serves the rig's camera on `options.listen`
@@ -136,6 +199,7 @@ pub fn serve(
         .build()
         .map_err(RigError::Runtime)?;
     let (tx, rx) = watch::channel(Arc::new(Snapshot::of(&rig, started)));
+    let (picks, pick_rx) = std::sync::mpsc::channel();
     let app = App {
         camera: rig.camera(),
         snapshots: rx,
@@ -144,13 +208,16 @@ pub fn serve(
         last: Mutex::new(None),
         slots: Semaphore::new(MAX_REQUESTS),
         seed: options.seed,
+        picks,
+        picking: AtomicBool::new(false),
+        pick_time: options.pick_time,
     };
     let halt = Arc::new(AtomicBool::new(false));
     let (ended_tx, ended_rx) = oneshot::channel();
     let follower = {
         let halt = halt.clone();
         std::thread::spawn(move || {
-            let _ = ended_tx.send(follow(client, rig, first, &tx, &halt));
+            let _ = ended_tx.send(follow(client, rig, first, (&tx, &pick_rx), &halt));
         })
     };
     let result = runtime.block_on(run(app, options.listen, announce, stop, ended_rx));
@@ -187,6 +254,7 @@ async fn run(
         .route("/frame.png", get(png))
         .route("/frame.jpg", get(jpg))
         .route("/truth", get(truth))
+        .route("/pick", post(pick).layer(DefaultBodyLimit::max(PICK_BODY_LIMIT)))
         .fallback(not_found)
         .with_state(Arc::new(app));
     tokio::select! {
@@ -205,19 +273,33 @@ async fn run(
 }
 
 /// The follower: polls the status every [`POLL`], moves the parts for what was driven since
-/// the last poll, and publishes the state; until `halt` or a link error.
+/// the last poll, removes the parts picked whose time has come, and publishes the state (then
+/// answers those picks: a `/truth` asked after the answer shows the part gone); until `halt`
+/// or a link error.
 fn follow(
     mut client: DeviceClient,
     mut rig: Rig,
     mut before: StatusReport,
-    tx: &watch::Sender<Arc<Snapshot>>,
+    (tx, picks): (&watch::Sender<Arc<Snapshot>>, &std::sync::mpsc::Receiver<PickJob>),
     halt: &AtomicBool,
 ) -> Result<(), DeviceError> {
+    let mut waiting: Vec<PickJob> = Vec::new();
     while !halt.load(Ordering::Relaxed) {
         let started = Instant::now();
         let after = client.status()?;
         rig.step(&before, &after);
+        waiting.extend(picks.try_iter());
+        let (due, later): (Vec<PickJob>, Vec<PickJob>) =
+            waiting.drain(..).partition(|j| j.due <= started);
+        waiting = later;
+        let done: Vec<_> = due
+            .into_iter()
+            .map(|j| (rig.pick(j.request.x_mm, j.request.y_mm, j.request.radius_mm), j.reply))
+            .collect();
         tx.send_replace(Arc::new(Snapshot::of(&rig, started)));
+        for (picked, reply) in done {
+            let _ = reply.send(picked);
+        }
         before = after;
         std::thread::sleep(POLL.saturating_sub(started.elapsed()));
     }
@@ -347,6 +429,84 @@ async fn truth(State(app): State<Arc<App>>) -> Response {
 async fn not_found() -> Response {
     text(
         StatusCode::NOT_FOUND,
-        "no such route: the rig serves GET /frame.png, /frame.jpg, /truth\n",
+        "no such route: the rig serves GET /frame.png, /frame.jpg, /truth and POST /pick\n",
     )
+}
+
+/// A JSON failure `{"error": NAME, "message"}` with `status`.
+fn failure(status: StatusCode, name: &str, message: String) -> Response {
+    let body = serde_json::json!({ "error": name, "message": message });
+    (status, [(header::CONTENT_TYPE, "application/json")], body.to_string()).into_response()
+}
+
+/// Clears the one-pick-at-a-time flag when the pick's answer is done (or dropped).
+struct PickSlot<'a>(&'a AtomicBool);
+
+impl Drop for PickSlot<'_> {
+    fn drop(&mut self) {
+        self.0.store(false, Ordering::Release);
+    }
+}
+
+/// `POST /pick`: after the pick time, the part nearest the pose within the radius leaves the
+/// plate. 200 `{"picked": {part, x_mm, y_mm, theta_deg, lost}, "pick_time_s"}`; 404
+/// `no_part` when none lies there; 400 `bad_json` / `bad_value`; 409 `busy` while another
+/// pick is under way; 413 for a body over [`PICK_BODY_LIMIT`]; 503 when the link is lost.
+async fn pick(State(app): State<Arc<App>>, body: Bytes) -> Response {
+    let request = match PickRequest::parse(&body) {
+        Ok(r) => r,
+        Err((name, message)) => return failure(StatusCode::BAD_REQUEST, name, message),
+    };
+    if app.picking.swap(true, Ordering::AcqRel) {
+        let m = "another pick is under way: ask again when it has answered".to_owned();
+        return failure(StatusCode::CONFLICT, "busy", m);
+    }
+    let _slot = PickSlot(&app.picking);
+    let (reply, answer) = oneshot::channel();
+    let job = PickJob { due: Instant::now() + app.pick_time, request, reply };
+    let lost = || text(StatusCode::SERVICE_UNAVAILABLE, "the controller link is lost\n");
+    if app.picks.send(job).is_err() {
+        return lost();
+    }
+    // The follower answers at its first poll after the pick time; none: the link is gone.
+    let Ok(picked) = answer.await else { return lost() };
+    let pick_time_s = app.pick_time.as_secs_f64();
+    match picked {
+        Some(p) => match serde_json::to_vec(&Picked { picked: &p, pick_time_s }) {
+            Ok(body) => ([(header::CONTENT_TYPE, "application/json")], body).into_response(),
+            Err(_) => text(StatusCode::INTERNAL_SERVER_ERROR, "the pick could not be written\n"),
+        },
+        None => failure(
+            StatusCode::NOT_FOUND,
+            "no_part",
+            format!(
+                "no part's centroid lies within {} mm of ({}, {}) mm: nothing was picked (GET \
+                 /truth shows where the parts are)",
+                request.radius_mm, request.x_mm, request.y_mm
+            ),
+        ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_pick_body_is_three_finite_numbers_and_a_positive_radius() {
+        let ok = PickRequest::parse(br#"{"x_mm": 150, "y_mm": 100.5, "radius_mm": 4}"#);
+        assert_eq!(ok, Ok(PickRequest { x_mm: 150.0, y_mm: 100.5, radius_mm: 4.0 }));
+        for (body, name, says) in [
+            (&br#"{"x_mm": 1, "y_mm": 2}"#[..], "bad_json", "missing field `radius_mm`"),
+            (br#"{"x_mm": 1, "y_mm": 2, "radius_mm": 3, "theta": 0}"#, "bad_json", "`theta`"),
+            (br#"{"x_mm": "1", "y_mm": 2, "radius_mm": 3}"#, "bad_json", "invalid type"),
+            (br#"{"x_mm": 1, "y_mm": 2, "radius_mm": 0}"#, "bad_value", "radius_mm = 0"),
+            (br#"{"x_mm": 1, "y_mm": 2, "radius_mm": 1e999}"#, "bad_json", "x_mm"),
+            (b"", "bad_json", "EOF"),
+        ] {
+            let (n, message) = PickRequest::parse(body).unwrap_err();
+            assert_eq!(n, name, "{message}");
+            assert!(message.contains(says), "{message}");
+        }
+    }
 }

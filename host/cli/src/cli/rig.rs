@@ -8,14 +8,16 @@ use std::io::Write as _;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::time::Duration;
 
 use chladni_core::model::plate_file::PlateFile;
 use chladni_core::model::pose::Pose;
 use chladni_core::output::write_atomic;
 use chladni_core::rng::Rng;
+use chladni_rig::serve::MAX_PICK_TIME_S;
 use chladni_rig::{
-    DEFAULT_NOISE, DEFAULT_WARP, Fail, FailMode, ListeningJson, Noise, Rig, RigConfig, RigError,
-    ServeOptions, TruePlate, TruePlateJson, Warp,
+    DEFAULT_NOISE, DEFAULT_PICK_TIME, DEFAULT_WARP, Fail, FailMode, ListeningJson, Noise, Rig,
+    RigConfig, RigError, ServeOptions, TruePlate, TruePlateJson, Warp,
 };
 use clap::{Args, ValueEnum};
 
@@ -78,9 +80,25 @@ pub struct RigArgs {
     /// How the camera fails after --fail-after-frames frames.
     #[arg(long, value_enum, requires = "fail_after_frames")]
     fail_mode: Option<FailArg>,
+    /// The robot's pick time (s): a part leaves the plate this long after `POST /pick`
+    /// (0 to 600).
+    #[arg(long, value_name = "S", default_value_t = DEFAULT_PICK_TIME.as_secs_f64(),
+          value_parser = pick_time)]
+    pick_time_s: f64,
     /// Print the listening line as JSON.
     #[arg(long)]
     json: bool,
+}
+
+/// `--pick-time-s`: finite, 0 to [`MAX_PICK_TIME_S`] s.
+fn pick_time(s: &str) -> Result<f64, String> {
+    s.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite() && (0.0..=MAX_PICK_TIME_S).contains(v))
+        .ok_or_else(|| {
+            format!("--pick-time-s must be seconds from 0 to {MAX_PICK_TIME_S}, e.g. 2, got {s}")
+        })
 }
 
 /// `--fail-mode`.
@@ -174,8 +192,13 @@ impl RigArgs {
                 FailArg::Status500 => FailMode::Status500,
             },
         });
-        let options =
-            ServeOptions { port: self.port.clone(), listen: self.listen, fail, seed: frame_seed };
+        let options = ServeOptions {
+            port: self.port.clone(),
+            listen: self.listen,
+            fail,
+            seed: frame_seed,
+            pick_time: Duration::from_secs_f64(self.pick_time_s),
+        };
         let (stop_tx, stop_rx) = tokio::sync::mpsc::unbounded_channel();
         ctrlc::set_handler(move || {
             let _ = stop_tx.send(());

@@ -24,7 +24,7 @@ use serde_json::Value;
 
 use crate::support;
 use support::cli::{ex, keys, tmp};
-use support::rig::{RigProcess, get};
+use support::rig::{RigProcess, get, post};
 
 /// Start poses of the triangle and the L-shape: apart, on either side of the vertical node at
 /// x = 150 of the four-lines plate (its 60 Hz mode, amplitude 0.8).
@@ -160,6 +160,8 @@ fn the_rig_moves_parts_as_the_controller_drives_and_fails_as_asked() {
     }
     frame_matches_truth(&rig, plate.size_mm);
 
+    picks(&rig);
+
     fail_modes(&port);
 
     // Ctrl-C: exit 0.
@@ -177,6 +179,49 @@ fn the_rig_moves_parts_as_the_controller_drives_and_fails_as_asked() {
     let failure: Value = serde_json::from_str(&out).unwrap();
     assert_eq!(failure["error"], "failed");
     assert!(failure["message"].as_str().unwrap().contains(&lost), "{out}");
+}
+
+/// The robot: a pick at a part's centroid removes it after the pick time (2 s by default); one
+/// where no part lies says so; bad bodies are named.
+fn picks(rig: &RigProcess) {
+    let url = format!("{}/pick", rig.url);
+    let before = truth(rig);
+    let first = &before["parts"][0];
+    let (x, y) = (first["x_mm"].as_f64().unwrap(), first["y_mm"].as_f64().unwrap());
+    let asked = std::time::Instant::now();
+    let body = format!(r#"{{"x_mm": {}, "y_mm": {}, "radius_mm": 5}}"#, x + 2.0, y - 1.0);
+    let a = post(&url, body.as_bytes(), PATIENT).expect("an answer to /pick");
+    assert!(asked.elapsed() >= Duration::from_secs(2), "{:?}", asked.elapsed());
+    assert_eq!(a.status, 200, "{}", String::from_utf8_lossy(&a.body));
+    let picked: Value = serde_json::from_slice(&a.body).unwrap();
+    assert_eq!(keys(&picked), ["pick_time_s", "picked"]);
+    assert_eq!(
+        (&picked["picked"]["part"], picked["pick_time_s"].as_f64()),
+        (&first["part"], Some(2.0))
+    );
+    let after = truth(rig);
+    assert_eq!(after["parts"].as_array().unwrap(), &before["parts"].as_array().unwrap()[1..]);
+    // Where the picked part was, nothing is left to pick.
+    let a = post(&url, body.as_bytes(), PATIENT).unwrap();
+    assert_eq!(a.status, 404, "{}", String::from_utf8_lossy(&a.body));
+    let e: Value = serde_json::from_slice(&a.body).unwrap();
+    assert_eq!(e["error"], "no_part", "{e}");
+    assert!(e["message"].as_str().unwrap().contains("within 5 mm of"), "{e}");
+    for (bad, name, says) in [
+        (r#"{"x_mm": 1, "y_mm": 2}"#, "bad_json", "radius_mm"),
+        (r#"{"x_mm": 1, "y_mm": 2, "radius_mm": 5, "z_mm": 0}"#, "bad_json", "z_mm"),
+        (r#"{"x_mm": 1, "y_mm": 2, "radius_mm": -5}"#, "bad_value", "radius_mm = -5"),
+        ("not json", "bad_json", "x_mm"),
+    ] {
+        let a = post(&url, bad.as_bytes(), PATIENT).unwrap();
+        let e: Value = serde_json::from_slice(&a.body).unwrap();
+        assert_eq!((a.status, e["error"].as_str()), (400, Some(name)), "{bad}: {e}");
+        assert!(e["message"].as_str().unwrap().contains(says), "{bad}: {e}");
+    }
+    let huge =
+        format!(r#"{{"x_mm": 1, "y_mm": 2, "radius_mm": 5, "pad": "{}"}}"#, "x".repeat(4000));
+    assert_eq!(post(&url, huge.as_bytes(), PATIENT).unwrap().status, 413);
+    assert_eq!(get(&url, PATIENT).unwrap().status, 405, "GET /pick");
 }
 
 /// Each failure mode after one good frame.

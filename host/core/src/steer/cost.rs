@@ -58,6 +58,28 @@ pub fn near_quadratic(e: f64) -> f64 {
     if e < NEAR_MM { e * e / (2.0 * NEAR_MM) } else { e - NEAR_MM / 2.0 }
 }
 
+/// A circle a part is to stay out of (a robot's pick zone), counted in its cost: [`KeepOut::per_mm`]
+/// mm of cost per mm its centroid lies inside the circle's radius (the zone's radius plus the
+/// part's bounding radius, so that no point of the part enters the zone), 0 outside. Linear,
+/// so that the part is pushed out from anywhere inside as hard as a goal pulls a far part.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KeepOut {
+    /// The circle's centre (mm).
+    pub centre: [f64; 2],
+    /// Its radius for this part's centroid (mm).
+    pub radius_mm: f64,
+    /// Cost per mm inside (mm/mm).
+    pub per_mm: f64,
+}
+
+impl KeepOut {
+    /// The cost (mm) of a centroid at `pose`: `per_mm` × how far inside the circle it is.
+    pub fn cost_at(&self, pose: Pose) -> f64 {
+        let d = (pose.x - self.centre[0]).hypot(pose.y - self.centre[1]);
+        self.per_mm * (self.radius_mm - d).max(0.0)
+    }
+}
+
 /// One part to steer: its body, where it is, where it should go and how much it counts.
 #[derive(Debug, Clone, Copy)]
 pub struct PartGoal<'a> {
@@ -72,17 +94,21 @@ pub struct PartGoal<'a> {
     /// Millimetres per degree of orientation error ([`MM_PER_DEG`] normally; 0 when only
     /// the position matters, as when parts are brought home).
     pub mm_per_deg: f64,
+    /// A circle the part is to stay out of, its cost added to the goal's whatever the weight
+    /// (none normally; a present cycle keeps the parts not presented out of the pick zone).
+    pub keep_out: Option<KeepOut>,
 }
 
 impl<'a> PartGoal<'a> {
     /// A part at `pose` to be steered to `goal`, weight 1, orientation at [`MM_PER_DEG`].
     pub fn new(piece: &'a Piece, pose: Pose, goal: Pose) -> PartGoal<'a> {
-        PartGoal { piece, pose, goal, weight: 1.0, mm_per_deg: MM_PER_DEG }
+        PartGoal { piece, pose, goal, weight: 1.0, mm_per_deg: MM_PER_DEG, keep_out: None }
     }
 
-    /// The weighted cost (mm) of this part at `pose`.
+    /// The weighted cost (mm) of this part at `pose`, plus its keep-out's (unweighted).
     pub fn cost_at(&self, pose: Pose) -> f64 {
         self.weight * near_quadratic(self.error_mm(pose))
+            + self.keep_out.map_or(0.0, |k| k.cost_at(pose))
     }
 
     /// The part's error (mm) at `pose`: its distance from the goal plus

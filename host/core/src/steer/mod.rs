@@ -12,6 +12,9 @@
 //!   bursts, online from the last bursts and offline with held-out bursts.
 //! - [`policy`]: which burst to record next while learning; bringing parts home.
 //! - [`reach`]: whether a goal pose is a rest some mode holds.
+//! - [`present`]: presenting parts to a robot: which part to steer to a pick pose (the one
+//!   predicted there soonest), and the cycle's objective that keeps the others out of the
+//!   pick zone.
 //! - [`sim`]: an in-process rig (a true plate and the closed loop) for tests and benches.
 //!
 //! Parts are predicted independently of each other (one part in the field, no part–part
@@ -26,6 +29,7 @@ pub mod fit;
 pub mod learn;
 pub mod model;
 pub mod policy;
+pub mod present;
 pub mod reach;
 pub mod sim;
 pub mod togo;

@@ -281,3 +281,28 @@ fn a_shifted_mode_moves_parts_as_the_unshifted_one_moves_them_shifted() {
     assert!((q.x - p.x - 6.0).abs() < 0.02 && (q.y - p.y + 3.0).abs() < 1e-9, "{p:?} {q:?}");
     assert_eq!(b.truth().modes[0].shift_mm, [6.0, -3.0]);
 }
+
+#[test]
+fn a_pick_removes_the_part_nearest_within_the_radius_and_nothing_elsewhere() {
+    let q = |x, y| Pose { x, y, theta: 0.0 };
+    let mut r = rig(vec![q(60.0, 50.0), q(100.0, 60.0), q(220.0, 150.0)], QUIET, 1);
+    assert_eq!(r.pick(160.0, 100.0, 20.0), None, "no centroid within 20 mm");
+    assert_eq!(r.truth().parts.len(), 3);
+    // Both of the first two within 40 mm of (80, 55): the nearer, the ell at (100, 60), goes.
+    let picked = r.pick(85.0, 57.0, 40.0).unwrap();
+    assert_eq!((picked.part.as_str(), picked.x_mm, picked.y_mm), ("ell", 100.0, 60.0));
+    let t = r.truth();
+    let left: Vec<(&str, f64)> = t.parts.iter().map(|p| (p.part.as_str(), p.x_mm)).collect();
+    assert_eq!(left, [("triangle", 60.0), ("triangle", 220.0)]);
+    assert_eq!(r.placed().len(), 2);
+    // The rest still move as driven: the vertical node at x = 150 pulls both towards it.
+    let before = r.poses().to_vec();
+    follow(&mut r, &polls(60_000, Q15::from_fraction(0.8).unwrap().0, 100_000, 1_000, 160_000));
+    let after = r.poses().to_vec();
+    assert!((after[0].x - 150.0).abs() < (before[0].x - 150.0).abs() - 1.0, "{after:?}");
+    assert!((after[1].x - 150.0).abs() < (before[1].x - 150.0).abs() - 1.0, "{after:?}");
+    // A part exactly at the radius is picked; beyond it not.
+    assert!(r.pick(after[0].x + 5.0, after[0].y, 5.0 - 1e-9).is_none());
+    assert!(r.pick(after[0].x + 5.0, after[0].y, 5.0 + 1e-9).is_some());
+    assert_eq!(r.truth().parts.len(), 1);
+}

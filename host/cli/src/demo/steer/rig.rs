@@ -13,8 +13,8 @@ use chladni_core::model::plate_file::PlateFile;
 use chladni_core::model::pose::Pose;
 use chladni_core::rng::Rng;
 use chladni_rig::{
-    DEFAULT_NOISE, DEFAULT_WARP, ModeTruth, Rig, RigConfig, RigError, ServeOptions, TruePlate,
-    serve,
+    DEFAULT_NOISE, DEFAULT_PICK_TIME, DEFAULT_WARP, ModeTruth, Rig, RigConfig, RigError,
+    ServeOptions, TruePlate, serve,
 };
 
 use crate::demo::DemoError;
@@ -70,6 +70,7 @@ impl VirtualRig {
             listen: SocketAddr::from(([127, 0, 0, 1], 0)),
             fail: None,
             seed: seeds.1,
+            pick_time: DEFAULT_PICK_TIME,
         };
         let (addr_tx, addr_rx) = mpsc::channel();
         let (stop, stop_rx) = tokio::sync::mpsc::unbounded_channel();

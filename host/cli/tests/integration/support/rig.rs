@@ -76,11 +76,28 @@ impl Answer {
 
 /// `GET url` over HTTP/1.1 with `Connection: close`; `None` when no answer comes in `wait`.
 pub fn get(url: &str, wait: Duration) -> Option<Answer> {
+    request("GET", url, None, wait)
+}
+
+/// `POST url` with a JSON `body`, as [`get`].
+pub fn post(url: &str, body: &[u8], wait: Duration) -> Option<Answer> {
+    request("POST", url, Some(body), wait)
+}
+
+fn request(method: &str, url: &str, body: Option<&[u8]>, wait: Duration) -> Option<Answer> {
     let rest = url.strip_prefix("http://").unwrap();
     let (addr, path) = rest.split_at(rest.find('/').unwrap());
     let mut s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(wait)).unwrap();
-    write!(s, "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n").unwrap();
+    write!(s, "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n").unwrap();
+    if let Some(body) = body {
+        let len = body.len();
+        write!(s, "Content-Type: application/json\r\nContent-Length: {len}\r\n\r\n").unwrap();
+        // A body the server refuses early (too large) may close the connection mid-write.
+        let _ = s.write_all(body);
+    } else {
+        write!(s, "\r\n").unwrap();
+    }
     let mut raw = Vec::new();
     if s.read_to_end(&mut raw).is_err() || raw.is_empty() {
         return None;
