@@ -50,6 +50,9 @@ pub fn centroid<'a>(rings: impl IntoIterator<Item = &'a [[f64; 2]]>) -> [f64; 2]
 }
 
 /// Point strictly inside a ring (even–odd rule).
+// Inlined into its callers' code: the photo renderer (chladni-media, optimised in debug
+// builds) asks it for every pixel.
+#[inline]
 pub fn inside(p: [f64; 2], ring: &[[f64; 2]]) -> bool {
     let n = ring.len();
     let mut c = false;

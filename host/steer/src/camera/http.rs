@@ -50,11 +50,16 @@ impl Snapshots {
     ) -> Result<Fetched, CameraError> {
         let mut newest: Option<SystemTime> = None;
         loop {
-            if self.stamps == Some(false) {
-                // An unstamped frame is from (request sent) − max_age at the earliest.
-                let due = not_before.checked_add(options.max_age).unwrap_or(not_before);
-                sleep_until(due, deadline, || self.late(newest, not_before, options))?;
-            }
+            // A snapshot camera answers with a frame taken about when it was asked (a stamped
+            // one says when; an unstamped one's may be up to max_age older): a request sent
+            // before `not_before` fetches a frame to throw away, and its exposure, encoding
+            // and transfer delay the one that counts (on the virtual rig such a frame after
+            // every burst took a third of a learning session's time).
+            let due = match self.stamps {
+                Some(false) => not_before.checked_add(options.max_age).unwrap_or(not_before),
+                _ => not_before,
+            };
+            sleep_until(due, deadline, || self.late(newest, not_before, options))?;
             let sent = SystemTime::now();
             let got = match self.get(deadline, options) {
                 // The time ran out while asking again: the stale frames are the cause.

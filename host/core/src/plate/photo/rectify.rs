@@ -65,6 +65,8 @@ impl Homography {
     }
 
     /// Maps a point.
+    // Inlined: the photo renderer and the locator map every pixel (see `geometry::inside`).
+    #[inline]
     pub fn map(&self, [u, v]: [f64; 2]) -> [f64; 2] {
         let h = &self.0;
         let w = h[6] * u + h[7] * v + 1.0;

@@ -10,6 +10,8 @@ use crate::plate::contour::{Polyline, distance_to};
 pub struct Rng(pub u64);
 impl Rng {
     /// Next 64 random bits.
+    // Inlined: a rendered photo draws three per pixel (see `geometry::inside`).
+    #[inline]
     pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
@@ -18,6 +20,7 @@ impl Rng {
         z ^ (z >> 31)
     }
     /// Uniform in [0, 1).
+    #[inline]
     pub fn uniform(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }

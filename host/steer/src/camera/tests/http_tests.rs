@@ -147,6 +147,21 @@ fn a_stamped_png_is_served_with_its_own_time_and_exact_pixels() {
 }
 
 #[test]
+fn a_stamped_camera_is_not_asked_before_not_before() {
+    let server = serve(|n| {
+        Reply::ok(encoded(&photo(n as u64), ImageFormat::Png)).stamped(SystemTime::now())
+    });
+    let mut cam = open(&server.url, CameraOptions::default());
+    cam.frame_after(SystemTime::now()).expect("the first frame: the camera stamps");
+    // The drive settles 150 ms from now: one request, sent then, not one before to discard.
+    let not_before = SystemTime::now() + Duration::from_millis(150);
+    let f = cam.frame_after(not_before).expect("a frame after the settle");
+    let log = server.log();
+    assert_eq!(log.len(), 2, "{log:?}");
+    assert!(log[1].at >= not_before && f.taken >= not_before, "{log:?}");
+}
+
+#[test]
 fn an_unstamped_jpeg_is_asked_for_no_earlier_than_not_before_plus_max_age() {
     let server = serve(|n| Reply::ok(encoded(&photo(n as u64), ImageFormat::Jpeg)));
     let options = CameraOptions { max_age: Duration::from_millis(60), ..CameraOptions::default() };
