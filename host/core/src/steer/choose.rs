@@ -20,7 +20,8 @@ pub struct Menu {
     pub lookahead: usize,
     /// Value commands by what they leave to do ([`crate::steer::togo`]), counting this
     /// many mm of cost per second of drive; `None`: by their cost (and the look-ahead). One
-    /// part is always chosen by cost: its cost falls towards its goal wherever it is, and
+    /// part steered (one of weight > 0: presenting a part, the others only kept out of its
+    /// way) is always chosen by cost: its cost falls towards its goal wherever it is, and
     /// near a rest the velocities cannot see the turn a detour gives (on the 6-mode plate a
     /// part held 0.1 mm from its goal stayed 13° off for 3000 cycles).
     pub to_go_mm_per_s: Option<f64>,
@@ -99,7 +100,7 @@ fn candidates(model: &Model, parts: &[PartGoal], poses: &[Pose], bursts: &[f64])
 }
 
 /// The command of `menu` to drive next for `parts` (at their `pose`s) under `model`: with
-/// [`Menu::to_go_mm_per_s`] and several parts, the command that leaves the least to do
+/// [`Menu::to_go_mm_per_s`] and several parts steered, the command that leaves the least to do
 /// ([`crate::steer::togo`]); without, the command that most reduces the total cost, with the
 /// look-ahead: each of the `menu.lookahead` best first commands is valued at the lower of its
 /// own cost and the best cost any second command reaches after it; the first command of
@@ -114,7 +115,8 @@ pub fn choose(model: &Model, parts: &[PartGoal], menu: &Menu) -> Result<Command,
     let bursts = &menu.bursts_s;
     let start: Vec<Pose> = parts.iter().map(|p| p.pose).collect();
     let mut first = candidates(model, parts, &start, bursts);
-    if let Some(rate) = menu.to_go_mm_per_s.filter(|_| parts.len() > 1) {
+    let steered = parts.iter().filter(|p| p.weight > 0.0).count();
+    if let Some(rate) = menu.to_go_mm_per_s.filter(|_| steered > 1) {
         let v = velocities(parts, &first, bursts);
         let left = |c: &Candidate| v.value(parts, &c.poses, rate) + rate * c.burst_s;
         let c = first.iter().min_by(|a, b| left(a).total_cmp(&left(b)));

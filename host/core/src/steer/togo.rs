@@ -84,7 +84,8 @@ impl Velocities {
     }
 
     /// What the parts at `poses` leave to do: the cost (mm) of the residual no combination
-    /// of modes removes plus `mm_per_s` per second of the drive the combination needs.
+    /// of modes removes plus `mm_per_s` per second of the drive the combination needs, plus
+    /// the keep-out costs at `poses` (a zone a part is in now is no combination's to mend).
     pub fn value(&self, parts: &[PartGoal], poses: &[Pose], mm_per_s: f64) -> f64 {
         let (t, r) = self.solve(parts, poses);
         let left: f64 = parts
@@ -98,7 +99,9 @@ impl Velocities {
                     )
             })
             .sum();
-        left + mm_per_s * t.iter().sum::<f64>()
+        let kept_out: f64 =
+            parts.iter().zip(poses).filter_map(|(p, q)| p.keep_out.map(|k| k.cost_at(*q))).sum();
+        left + kept_out + mm_per_s * t.iter().sum::<f64>()
     }
 }
 
@@ -116,7 +119,7 @@ mod tests {
     use super::{MODE_TIME_CAP_S, Velocities};
     use crate::model::part::Part;
     use crate::model::pose::Pose;
-    use crate::steer::cost::{PartGoal, Piece};
+    use crate::steer::cost::{KeepOut, PartGoal, Piece};
 
     fn piece() -> Piece {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
@@ -148,6 +151,18 @@ mod tests {
         assert!(r.iter().all(|e| e.abs() < 1e-2), "{r:?}");
         // Nothing left but the drive: 3.5 s at 1 mm/s, the residual's cost nearly 0.
         assert!((v.value(&parts, &poses, 1.0) - 3.5).abs() < 1e-2);
+    }
+
+    #[test]
+    fn a_part_left_in_a_keep_out_zone_counts() {
+        let p = piece();
+        let (mut parts, v) = setup(&p, [[15.0, 10.0], [115.0, 0.0]]);
+        let poses: Vec<Pose> = parts.iter().map(|g| g.pose).collect();
+        let free = v.value(&parts, &poses, 1.0);
+        // The second part's centroid 3 mm inside a zone around it, at 2 mm per mm.
+        let zone = KeepOut { centre: [100.0, 0.0], radius_mm: 3.0, per_mm: 2.0 };
+        parts[1].keep_out = Some(zone);
+        assert!((v.value(&parts, &poses, 1.0) - free - 6.0).abs() < 1e-9);
     }
 
     #[test]
