@@ -18,8 +18,8 @@
 //! - `one-learned`, `three-learned`: the same on the rig `learn` learned (its true plate, 20
 //!   new starts and goals), the loop starting from the learned plate (`learn`'s model as the
 //!   given plate, as `steer --plate LEARNED.toml` would): learn once, then steer;
-//! - `ten-learned` (not in the default run: minutes per trial): ten u-channels to goals 40 mm
-//!   apart, positions within 3 mm, on the learned rig.
+//! - `ten-learned` (not in the default run: minutes per trial): ten u-channels from a 5 × 2
+//!   grid to goals 40 mm apart, positions within 3 mm, on the learned rig.
 //!
 //! Goals are poses the part can hold: a random drop run to rest under a random mode of the
 //! true plate (`Truth::random_goal`).
@@ -360,8 +360,11 @@ fn menu() -> Menu {
 }
 
 /// Random starts and reachable goals: each goal at least 80 mm from its start (one part) or
-/// the goals at least 60 mm apart (two or three parts; 40 mm for more).
+/// the goals at least 60 mm apart (two or three parts); more parts: [`setup_many`].
 fn setup(truth: &mut Truth, piece: &Piece, n: usize) -> Option<(Vec<Pose>, Vec<Pose>)> {
+    if n > 3 {
+        return setup_many(truth, piece, n);
+    }
     for _ in 0..100 {
         let goals: Vec<Pose> =
             (0..n).map(|_| truth.random_goal(&piece.body, 5.0)).collect::<Option<_>>()?;
@@ -369,11 +372,38 @@ fn setup(truth: &mut Truth, piece: &Piece, n: usize) -> Option<(Vec<Pose>, Vec<P
         let apart =
             |v: &[Pose], d: f64| (0..n).all(|i| (i + 1..n).all(|j| distance_mm(v[i], v[j]) >= d));
         let far = n > 1 || distance_mm(starts[0], goals[0]) >= 80.0;
-        // Ten goals 60 mm apart do not fit on a 300 × 200 mm plate's rests: 40 mm there.
-        let gap = if n > 3 { 40.0 } else { 60.0 };
-        if far && apart(&goals, gap) && apart(&starts, 2.0 * piece.body.radius + 5.0) {
+        if far && apart(&goals, 60.0) && apart(&starts, 2.0 * piece.body.radius + 5.0) {
             return Some((starts, goals));
         }
     }
     None
+}
+
+/// Many parts: goals 40 mm apart, each drawn until it keeps its distance from those already
+/// drawn (a whole set drawn at once almost never does: rests gather along the node lines);
+/// starts on a grid of 5 × 2 across the plate (random ones clear of each other rarely fit ten
+/// parts), each turned at random.
+fn setup_many(truth: &mut Truth, piece: &Piece, n: usize) -> Option<(Vec<Pose>, Vec<Pose>)> {
+    let clear = |v: &[Pose], q: Pose| v.iter().all(|p| distance_mm(*p, q) >= 40.0);
+    let mut goals = Vec::new();
+    for _ in 0..2000 {
+        match truth.random_goal(&piece.body, 5.0) {
+            Some(g) if clear(&goals, g) => goals.push(g),
+            _ => {}
+        }
+        if goals.len() == n {
+            break;
+        }
+    }
+    let [w, h] = truth.model.given().size_mm;
+    let r = piece.body.radius + 5.0;
+    let starts: Vec<Pose> = (0..n)
+        .map(|k| {
+            let (i, j) = ((k % 5) as f64, (k / 5 % 2) as f64);
+            let theta = truth.random_pose(&piece.body, 5.0).theta;
+            let x = (w * (2.0 * i + 1.0) / 10.0).clamp(r, w - r);
+            Pose { x, y: (h * (2.0 * j + 1.0) / 4.0).clamp(r, h - r), theta }
+        })
+        .collect();
+    (goals.len() == n).then_some((starts, goals))
 }
