@@ -54,9 +54,10 @@ use chladni_core::steer::policy::{LearnStep, Rules, next_learning_step};
 use chladni_core::steer::sim::{Noise, Truth};
 use chladni_core::steer::{Burst, Correction, Corrector, Menu, Model, learn};
 
-/// The given plate's settle speed (mm/s), as in the steer bench: parts cross 100 mm in 3–10 s
-/// on the true plates.
-const SPEED_MM_S: f64 = 120.0;
+#[path = "support/steer_rig.rs"]
+mod steer_rig;
+use steer_rig::{SPEED_MM_S, true_corrections_in, twelve_modes};
+
 /// Drops per face and plan.
 const TRIALS: u32 = 200;
 /// A drop ends as planned within this of the predicted orientation (`simulate`'s default).
@@ -86,28 +87,6 @@ const FEEDS: [(&str, [f64; 4]); 3] = [
     ("corner", [60.0, 40.0, 100.0, 80.0]),
     ("right", [210.0, 50.0, 260.0, 150.0]),
 ];
-
-/// The free plate's first 12 solver modes at `SPEED_MM_S`.
-fn twelve_modes(root: &Path) -> PlateModel {
-    let mut plate = PlateModel::load(&root.join("examples/plates/free-12-modes.toml"))
-        .expect("the example plate loads");
-    for m in &mut plate.modes {
-        m.speed_mm_s = SPEED_MM_S;
-    }
-    plate
-}
-
-/// A true correction per mode: a shift of 4–8 mm in a random direction, a factor log-uniform
-/// in `factors` (the steer bench's draw with ×0.4–×2.5).
-fn true_corrections(rng: &mut Rng, n: usize, factors: (f64, f64)) -> Vec<Correction> {
-    (0..n)
-        .map(|_| {
-            let (r, a) = (rng.range(4.0, 8.0), rng.range(0.0, std::f64::consts::TAU));
-            let speed_factor = rng.range(factors.0.ln(), factors.1.ln()).exp();
-            Correction { shift_mm: [r * a.cos(), r * a.sin()], speed_factor }
-        })
-        .collect()
-}
 
 /// Bursts recorded by the learning policy until each mode has `per_mode` (the steer bench's
 /// `record`: its predictions from a model corrected online, the fit from the given plate).
@@ -158,7 +137,7 @@ fn rig(name: &str, given: &PlateModel) -> Rig {
     let (slow, seed) = name.strip_prefix("slow").map_or((false, name), |s| (true, s));
     let seed: u64 = seed.parse().expect("a rig is a seed, or slow and a seed");
     let factors = if slow { (0.4, 0.6) } else { (0.4, 2.5) };
-    let corrections = true_corrections(&mut Rng::seeded(seed), given.modes.len(), factors);
+    let corrections = true_corrections_in(&mut Rng::seeded(seed), given.modes.len(), factors);
     let truth = Model::with_corrections(given.clone(), &corrections).expect("corrections").plate();
     Rig { name: name.to_string(), truth, corrections, learned: None }
 }

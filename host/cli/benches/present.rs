@@ -48,8 +48,10 @@ use chladni_core::steer::present::{
 use chladni_core::steer::sim::{Noise, Truth};
 use chladni_core::steer::{Burst, Correction, Corrector, Menu, Model, choose};
 
-/// The given plate's settle speed (mm/s), as the steer bench's: parts cross 100 mm in 3–10 s.
-const SPEED_MM_S: f64 = 120.0;
+#[path = "support/steer_rig.rs"]
+mod steer_rig;
+use steer_rig::{SPEED_MM_S, true_corrections, twelve_modes};
+
 /// The robot's pick: the part is gone this long after "ready" (s).
 const PICK_S: f64 = 2.0;
 /// What a live cycle costs besides its burst (s): on the rig a cycle took 2.9 s for a 2.0 s
@@ -65,28 +67,6 @@ const ZONE_MM: f64 = 15.0;
 
 const U_CHANNEL: &str = "examples/parts/ordinary/u-channel.json";
 const KEYED_GEAR: &str = "examples/parts/ordinary/keyed-gear.json";
-
-/// The free plate's first 12 solver modes at [`SPEED_MM_S`].
-fn twelve_modes(root: &Path) -> PlateModel {
-    let mut plate = PlateModel::load(&root.join("examples/plates/free-12-modes.toml"))
-        .expect("the example plate loads");
-    for m in &mut plate.modes {
-        m.speed_mm_s = SPEED_MM_S;
-    }
-    plate
-}
-
-/// A true correction per mode: a shift of 4–8 mm in a random direction, a factor
-/// log-uniform in ×0.4–×2.5 (the steer bench's).
-fn true_corrections(rng: &mut Rng, n: usize) -> Vec<Correction> {
-    (0..n)
-        .map(|_| {
-            let (r, a) = (rng.range(4.0, 8.0), rng.range(0.0, std::f64::consts::TAU));
-            let speed_factor = rng.range(0.4f64.ln(), 2.5f64.ln()).exp();
-            Correction { shift_mm: [r * a.cos(), r * a.sin()], speed_factor }
-        })
-        .collect()
-}
 
 /// The `q` quantile of `v` (nearest rank); NaN when empty.
 fn quantile(v: &[f64], q: f64) -> f64 {

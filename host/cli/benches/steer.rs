@@ -43,9 +43,9 @@ use chladni_core::steer::policy::{LearnStep, Rules, next_learning_step};
 use chladni_core::steer::sim::{Noise, TrialOptions, Truth, steer_trial};
 use chladni_core::steer::{Burst, Correction, Corrector, Menu, Model, PartGoal, choose, learn};
 
-/// The given plate's settle speed (mm/s). With the true factors of ×0.4–×2.5, parts cross
-/// 100 mm in the 3–10 s of the rig (measured by the `speed` section).
-const SPEED_MM_S: f64 = 120.0;
+#[path = "support/steer_rig.rs"]
+mod steer_rig;
+use steer_rig::{SPEED_MM_S, true_corrections, twelve_modes};
 
 /// The parts: the hex key steers alone (85 mm long, across the plate), three u-channels
 /// (40 × 30 mm) together; the u-channel, the keyed gear and the spring clip are the learning
@@ -63,30 +63,6 @@ const LEARNING_SET: [&str; 3] = [
     "examples/parts/ordinary/keyed-gear.json",
     "examples/parts/ordinary/spring-clip.json",
 ];
-
-/// The free plate's first 12 solver modes (`examples/plates/free-12-modes.toml`), at
-/// `SPEED_MM_S`.
-fn twelve_modes(root: &Path) -> PlateModel {
-    let mut plate = PlateModel::load(&root.join("examples/plates/free-12-modes.toml"))
-        .expect("the example plate loads");
-    assert_eq!(plate.modes.len(), 12, "12 modes");
-    for m in &mut plate.modes {
-        m.speed_mm_s = SPEED_MM_S;
-    }
-    plate
-}
-
-/// A true correction per mode: a shift of 4–8 mm in a random direction, a factor
-/// log-uniform in ×0.4–×2.5.
-fn true_corrections(rng: &mut Rng, n: usize) -> Vec<Correction> {
-    (0..n)
-        .map(|_| {
-            let (r, a) = (rng.range(4.0, 8.0), rng.range(0.0, std::f64::consts::TAU));
-            let speed_factor = rng.range(0.4f64.ln(), 2.5f64.ln()).exp();
-            Correction { shift_mm: [r * a.cos(), r * a.sin()], speed_factor }
-        })
-        .collect()
-}
 
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
