@@ -3,7 +3,7 @@
 //! ≥ 95 % of drops, where plans made on the given plate do not"; docs/evidence/steer.md).
 //!
 //! A rig (a seed) is a true plate: the given plate (the free plate's first 12 solver modes,
-//! `examples/plates/free-12-modes.toml`, at [`SPEED_MM_S`]) with each mode's nodes moved 4–8 mm
+//! `examples/plates/free-12-modes.toml`, at `steer_rig::SPEED_MM_S` (120 mm/s)) with each mode's nodes moved 4–8 mm
 //! in a random direction and its speed ×0.4–×2.5 (log-uniform), drawn as the steer bench draws
 //! them; a `slow` rig draws its factors from ×0.4–×0.6 (every mode slower than given). The true
 //! plate is that plate with the true `shift_mm` and `speed_mm_s` in its modes
@@ -56,7 +56,7 @@ use chladni_core::steer::{Burst, Correction, Corrector, Menu, Model, learn};
 
 #[path = "support/steer_rig.rs"]
 mod steer_rig;
-use steer_rig::{SPEED_MM_S, true_corrections_in, twelve_modes};
+use steer_rig::{true_corrections_in, twelve_modes};
 
 /// Drops per face and plan.
 const TRIALS: u32 = 200;

@@ -46,11 +46,11 @@ use chladni_core::steer::present::{
     Estimate, OnPlate, Pick, choose_part, in_zone, objective, presented,
 };
 use chladni_core::steer::sim::{Noise, Truth};
-use chladni_core::steer::{Burst, Correction, Corrector, Menu, Model, choose};
+use chladni_core::steer::{Burst, Corrector, Menu, Model, choose};
 
 #[path = "support/steer_rig.rs"]
 mod steer_rig;
-use steer_rig::{SPEED_MM_S, true_corrections, twelve_modes};
+use steer_rig::{true_corrections, twelve_modes};
 
 /// The robot's pick: the part is gone this long after "ready" (s).
 const PICK_S: f64 = 2.0;

@@ -25,7 +25,7 @@
 //! true plate (`Truth::random_goal`).
 //!
 //! The modes: the free plate's first 12 solver modes (`examples/plates/free-12-modes.toml`),
-//! at [`SPEED_MM_S`]. `cargo bench -p chladni --bench steer`; `STEER_SECTIONS=choose,one`
+//! at `steer_rig::SPEED_MM_S` (120 mm/s). `cargo bench -p chladni --bench steer`; `STEER_SECTIONS=choose,one`
 //! picks sections, `STEER_TRIALS=5` sets the trials per section, `STEER_FIRST=10` the first
 //! trial's seed, `STEER_TOGO=off` (or a price in mm/s) the loop's choice
 //! (`chladni_core::steer::Menu::to_go_mm_per_s`).
@@ -45,7 +45,7 @@ use chladni_core::steer::{Burst, Correction, Corrector, Menu, Model, PartGoal, c
 
 #[path = "support/steer_rig.rs"]
 mod steer_rig;
-use steer_rig::{SPEED_MM_S, true_corrections, twelve_modes};
+use steer_rig::{true_corrections, twelve_modes};
 
 /// The parts: the hex key steers alone (85 mm long, across the plate), three u-channels
 /// (40 × 30 mm) together; the u-channel, the keyed gear and the spring clip are the learning
