@@ -50,13 +50,12 @@ use chladni_core::planner::{PlanOptions, Synthesis};
 use chladni_core::progress::Silent;
 use chladni_core::rng::Rng;
 use chladni_core::steer::cost::Piece;
-use chladni_core::steer::policy::{LearnStep, Rules, next_learning_step};
 use chladni_core::steer::sim::{Noise, Truth};
-use chladni_core::steer::{Burst, Correction, Corrector, Menu, Model, learn};
+use chladni_core::steer::{Correction, Model, learn};
 
 #[path = "support/steer_rig.rs"]
 mod steer_rig;
-use steer_rig::{true_corrections_in, twelve_modes};
+use steer_rig::{record, true_corrections_in, twelve_modes};
 
 /// Drops per face and plan.
 const TRIALS: u32 = 200;
@@ -88,42 +87,6 @@ const FEEDS: [(&str, [f64; 4]); 3] = [
     ("right", [210.0, 50.0, 260.0, 150.0]),
 ];
 
-/// Bursts recorded by the learning policy until each mode has `per_mode` (the steer bench's
-/// `record`: its predictions from a model corrected online, the fit from the given plate).
-fn record(truth: &mut Truth, model: &mut Model, pieces: &[Piece], per_mode: usize) -> Vec<Burst> {
-    let menu = Menu {
-        bursts_s: vec![0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.5],
-        lookahead: 0,
-        to_go_mm_per_s: None,
-    };
-    let mut corrector = Corrector::new(model.mode_count());
-    let rules = Rules::default();
-    let mut poses: Vec<Pose> = pieces.iter().map(|p| truth.random_pose(&p.body, 10.0)).collect();
-    let mut counts = vec![0usize; model.mode_count()];
-    let (mut bursts, mut drive_s) = (Vec::new(), 0.0);
-    while counts.iter().any(|c| *c < per_mode) && drive_s < 3600.0 {
-        let parts: Vec<(&Piece, Pose)> = pieces.iter().zip(&poses).map(|(p, q)| (p, *q)).collect();
-        let bodies: Vec<(&Body, Pose)> = parts.iter().map(|(p, q)| (&p.body, *q)).collect();
-        let (mode, burst_s, recorded) =
-            match next_learning_step(model, &parts, &counts, &menu, &rules).expect("a step") {
-                LearnStep::Burst { mode, burst_s } => (mode, burst_s, true),
-                LearnStep::Recover(cmd) => (cmd.mode, cmd.burst_s, false),
-            };
-        let after = truth.burst(&bodies, mode, burst_s).expect("a burst");
-        if recorded {
-            counts[mode] += 1;
-            let seen =
-                poses.iter().zip(&after).enumerate().map(|(i, (b, a))| (i, *b, *a)).collect();
-            let burst = Burst { mode, burst_s, parts: seen };
-            corrector.observe(model, pieces, burst.clone()).expect("observed");
-            bursts.push(burst);
-        }
-        drive_s += burst_s;
-        poses = after;
-    }
-    bursts
-}
-
 /// One rig: its name, the true plate, its speed factors and (once learned) the learned plate.
 struct Rig {
     name: String,
@@ -154,7 +117,7 @@ impl Rig {
             self.name.bytes().fold(7u64, |h, b| h.wrapping_mul(31).wrapping_add(u64::from(b)));
         let mut t = Truth::new(true_model, Noise::default(), seed);
         let t0 = Instant::now();
-        let bursts = record(&mut t, &mut Model::new(given.clone()), pieces, 12);
+        let (bursts, _, _) = record(&mut t, &mut Model::new(given.clone()), pieces, 12);
         let learned = learn(given, pieces, &bursts, Default::default()).expect("learned");
         let err = |f: &dyn Fn(&Correction, &Correction) -> f64| {
             (learned.reports.iter().zip(&self.corrections))

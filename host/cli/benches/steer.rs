@@ -36,16 +36,14 @@ use std::time::Instant;
 use chladni_core::model::part::Part;
 use chladni_core::model::plate::PlateModel;
 use chladni_core::model::pose::Pose;
-use chladni_core::motion::body::Body;
 use chladni_core::rng::Rng;
 use chladni_core::steer::cost::{Piece, distance_mm};
-use chladni_core::steer::policy::{LearnStep, Rules, next_learning_step};
 use chladni_core::steer::sim::{Noise, TrialOptions, Truth, steer_trial};
-use chladni_core::steer::{Burst, Correction, Corrector, Menu, Model, PartGoal, choose, learn};
+use chladni_core::steer::{Correction, Menu, Model, PartGoal, choose, learn};
 
 #[path = "support/steer_rig.rs"]
 mod steer_rig;
-use steer_rig::{true_corrections, twelve_modes};
+use steer_rig::{record, true_corrections, twelve_modes};
 
 /// The parts: the hex key steers alone (85 mm long, across the plate), three u-channels
 /// (40 × 30 mm) together; the u-channel, the keyed gear and the spring clip are the learning
@@ -171,51 +169,6 @@ fn main() {
     if on("ten-learned") {
         trials_section(&plate, &load(U_CHANNEL), 10, trials, learned.as_ref());
     }
-}
-
-/// Bursts recorded by the learning policy until each mode has `per_mode`.
-/// The policy's predictions come from a model corrected online from the recorded bursts (as
-/// the steering loop corrects its own), so later bursts and recoveries are chosen on a
-/// plate closer to the true one; the fit itself starts from the given plate.
-fn record(
-    truth: &mut Truth,
-    model: &mut Model,
-    pieces: &[Piece],
-    per_mode: usize,
-) -> (Vec<Burst>, f64, usize) {
-    let menu = Menu {
-        bursts_s: vec![0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.5],
-        lookahead: 0,
-        to_go_mm_per_s: None,
-    };
-    let mut corrector = Corrector::new(model.mode_count());
-    let rules = Rules::default();
-    let mut poses: Vec<Pose> = pieces.iter().map(|p| truth.random_pose(&p.body, 10.0)).collect();
-    let mut counts = vec![0usize; model.mode_count()];
-    let (mut bursts, mut drive_s, mut recovers) = (Vec::new(), 0.0, 0);
-    while counts.iter().any(|c| *c < per_mode) && drive_s < 3600.0 {
-        let parts: Vec<(&Piece, Pose)> = pieces.iter().zip(&poses).map(|(p, q)| (p, *q)).collect();
-        let bodies: Vec<(&Body, Pose)> = parts.iter().map(|(p, q)| (&p.body, *q)).collect();
-        let (mode, burst_s, recorded) =
-            match next_learning_step(model, &parts, &counts, &menu, &rules).unwrap() {
-                LearnStep::Burst { mode, burst_s } => (mode, burst_s, true),
-                LearnStep::Recover(cmd) => (cmd.mode, cmd.burst_s, false),
-            };
-        let after = truth.burst(&bodies, mode, burst_s).unwrap();
-        if recorded {
-            counts[mode] += 1;
-            let seen =
-                poses.iter().zip(&after).enumerate().map(|(i, (b, a))| (i, *b, *a)).collect();
-            let burst = Burst { mode, burst_s, parts: seen };
-            corrector.observe(model, pieces, burst.clone()).unwrap();
-            bursts.push(burst);
-        } else {
-            recovers += 1;
-        }
-        drive_s += burst_s;
-        poses = after;
-    }
-    (bursts, drive_s, recovers)
 }
 
 /// Learns the rig of seed 44; returns its true corrections and the learned plate.
